@@ -1,0 +1,4 @@
+"""Event-driven simulation: compiled Runge-Kutta kernel, events, chattering, sticking, sliding."""
+
+from .simulate import simulate as simulate
+from .trajectory import EventRecord as EventRecord, Trajectory as Trajectory

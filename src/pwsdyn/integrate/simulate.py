@@ -1,0 +1,223 @@
+"""`simulate`: the one entry point to event-driven simulation."""
+
+from __future__ import annotations
+
+import math
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from .. import __version__
+from ..errors import SolveError, Status
+from ..model import compile_model, load_model
+from ..model.codegen import CompiledModel
+from ._kernel import run_kernel
+from .tableaus import METHODS
+from .trajectory import EVENT_KINDS, EventRecord, Trajectory
+
+#: Default options of :func:`simulate` (each documented there).
+DEFAULTS = dict(method="RK45", rtol=1e-10, atol=1e-12, first_step=None, max_step=math.inf,
+                max_steps=1_000_000, max_events=100_000, chatter=True, chatter_ratio=1e-4,
+                chatter_velocity=1e-10, sliding_gain=0.0, variational=False, dense=True,
+                mode=None, throw=True)
+
+
+def state_vector(model, x0, *, name: str = "x0") -> np.ndarray:
+    """``x0`` as a float vector: a sequence in state order or a dict by state name."""
+    n = model.n_states
+    if isinstance(x0, Mapping):
+        unknown = sorted(set(x0) - set(model.states))
+        if unknown:
+            raise ValueError(f"`{name}` names unknown state(s) {unknown}; states are "
+                             f"{list(model.states)}")
+        missing = [s for s in model.states if s not in x0]
+        if missing:
+            raise ValueError(f"`{name}` is missing state(s) {missing}")
+        vec = np.array([float(x0[s]) for s in model.states])
+    else:
+        try:
+            vec = np.asarray(x0, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise ValueError(f"`{name}` must be a sequence of numbers or a dict by state name, "
+                             f"got {x0!r}") from None
+        if vec.shape != (n,):
+            raise ValueError(f"`{name}` must have {n} entries (states {list(model.states)}), "
+                             f"got {vec.size}")
+    if not np.all(np.isfinite(vec)):
+        raise ValueError(f"`{name}` must be finite, got {vec}")
+    return vec
+
+
+def _state_name(model, kind: int, idx: int, mode: int) -> str:
+    if kind == 0:
+        return model.modes[mode].name
+    if kind == 1:
+        return f"stick:{model.events[idx].name}"
+    return f"slide:{model.switches[idx].name}"
+
+
+def simulate(model, x0, t_span, params: Mapping[str, float] | None = None, **options
+             ) -> Trajectory:
+    """Simulate a piecewise-smooth model with events located to near machine precision.
+
+    Parameters
+    ----------
+    model : Model, str, path or dict
+        A model or anything :func:`pwsdyn.load_model` accepts.
+    x0 : sequence or dict
+        Initial state, in state order or by state name.
+    t_span : (float, float) or float
+        ``(t0, t_end)``, or ``t_end`` with ``t0 = 0``.
+    params : dict, optional
+        Parameter values overriding the model defaults, by name.
+    method : {'RK45', 'DOP853'}
+        Dormand-Prince 5(4) (default) or the 8th-order Dormand-Prince pair.
+    rtol, atol : float
+        Local error tolerances (defaults 1e-10, 1e-12).
+    first_step, max_step : float
+        Initial step (default: estimated) and largest step.
+    max_steps, max_events : int
+        Budgets; exhausting one ends the run with a status naming time, state and mode.
+    chatter : bool
+        Detect chattering on ``impact`` events and jump over its accumulation point with the
+        complete-chattering map (default True); without it a Zeno sequence exhausts
+        ``max_events``.
+    chatter_ratio, chatter_velocity : float
+        Apply the chattering map once the impact velocity falls below ``chatter_ratio`` times
+        the largest one of the current sequence of impacts, or below ``chatter_velocity``.
+        The map is first order in the impact velocity (Nordmark & Piiroinen 2009), so its error
+        is of the order of the square of that velocity.
+    sliding_gain : float
+        The constant ``C`` of the stabilising term ``-C h grad h`` of the sliding field.
+    variational : bool
+        Integrate the variational equations with saltation matrices at every event; the
+        result then has ``jacobian``.
+    dense : bool
+        Store every step with its dense output (default). ``False`` keeps only the event log
+        and the end state (for sweeps).
+    mode : str, optional
+        Initial mode (default: the model's ``initial_mode``).
+    throw : bool
+        Raise :class:`SolveError` if the run fails (default). With ``False`` the failed
+        trajectory is returned with its ``status`` and ``message``.
+
+    Returns
+    -------
+    Trajectory
+
+    Examples
+    --------
+    >>> import pwsdyn
+    >>> traj = pwsdyn.simulate("bouncing-ball", {"y": 1.0, "v": 0.0}, (0, 5))
+    >>> traj.events[0].kind
+    'impact'
+    """
+    unknown = sorted(set(options) - set(DEFAULTS))
+    if unknown:
+        raise TypeError(f"simulate() got unexpected keyword argument(s) {unknown}; options are "
+                        f"{sorted(DEFAULTS)}")
+    opts = {**DEFAULTS, **options}
+    model = load_model(model)
+    cm = compile_model(model)
+    p = model.parameter_vector(params)
+    x = state_vector(model, x0)
+    t0, t_end = _time_span(t_span)
+    return _simulate_compiled(cm, x, t0, t_end, p, opts)
+
+
+def _time_span(t_span):
+    if np.ndim(t_span) == 0:
+        t0, t_end = 0.0, float(t_span)
+    else:
+        ts = list(t_span)
+        if len(ts) != 2:
+            raise ValueError(f"`t_span` must be (t0, t_end) or t_end, got {t_span!r}")
+        t0, t_end = float(ts[0]), float(ts[1])
+    if not (math.isfinite(t0) and math.isfinite(t_end)):
+        raise ValueError(f"`t_span` must be finite, got {t_span!r}")
+    if not t_end > t0:
+        raise ValueError(f"`t_span` must have t_end > t0, got {t_span!r}")
+    return t0, t_end
+
+
+def _check_options(opts):
+    if opts["method"] not in METHODS:
+        raise ValueError(f"`method` must be one of {sorted(METHODS)}, got {opts['method']!r}")
+    for k in ("rtol", "atol"):
+        v = opts[k]
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            raise ValueError(f"`{k}` must be a positive number, got {v!r}")
+    if opts["rtol"] < 1e-15:
+        raise ValueError("`rtol` below 1e-15 cannot be met in double precision")
+    for k in ("max_steps", "max_events"):
+        if not (isinstance(opts[k], int) and opts[k] > 0):
+            raise ValueError(f"`{k}` must be a positive integer, got {opts[k]!r}")
+    if not opts["max_step"] > 0:
+        raise ValueError(f"`max_step` must be positive, got {opts['max_step']!r}")
+
+
+def kernel_tables(cm: CompiledModel):
+    model = cm.model
+    ne = len(model.events)
+    etab = np.zeros((max(ne, 0), 6), dtype=np.int64)
+    for j in range(ne):
+        etab[j] = [cm.event_surface[j], cm.event_direction[j], cm.event_kind[j],
+                   cm.event_target[j], cm.event_terminal[j], cm.event_has_reset[j]]
+    eact = np.ascontiguousarray(cm.event_active[:ne].astype(np.int64)).reshape(ne, len(model.modes))
+    ns = len(model.switches)
+    stab = np.zeros((ns, 3), dtype=np.int64)
+    for s in range(ns):
+        stab[s] = [cm.switch_surface[s], cm.switch_above[s], cm.switch_below[s]]
+    return etab, eact, stab
+
+
+def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dkind0=None):
+    _check_options(opts)
+    model = cm.model
+    tab = METHODS[opts["method"]]
+    etab, eact, stab = kernel_tables(cm)
+    if mode0 is None:
+        mode0 = model.initial_mode if opts["mode"] is None else model.mode_index(opts["mode"])
+    iopt = np.zeros(8, dtype=np.int64)
+    iopt[:] = [mode0, len(model.modes), opts["max_steps"], opts["max_events"], tab.code,
+               1 if opts["variational"] else 0, 1 if opts["chatter"] else 0,
+               1 if opts["dense"] else 0]
+    fopt = np.array([opts["rtol"], opts["atol"], opts["first_step"] or 0.0,
+                     min(opts["max_step"], 1e300), opts["chatter_ratio"], opts["chatter_velocity"],
+                     opts["sliding_gain"]], dtype=float)
+    pv = p if p.size else np.zeros(1)
+    res = run_kernel(cm.evaluate, float(t0), float(t_end), np.ascontiguousarray(x, dtype=float),
+                     np.ascontiguousarray(pv, dtype=float), etab, eact, stab, iopt, fopt,
+                     tab.A, tab.C, tab.E, tab.P, tab.n_stages)
+    (status, t_fin, y_fin, dstate, nodes_t, nodes_y, nodes_s, dense, ikind, ev_t, ev_t2, ev_info,
+     ev_xb, ev_xa, stats) = res
+    n = model.n_states
+    status = Status(int(status))
+    states = [_state_name(model, k, i, m) for k, i, m in nodes_s]
+    events = []
+    for r in range(len(ev_t)):
+        kind, ref, ok, oi, om, nk, ni, nmode = ev_info[r]
+        kname = EVENT_KINDS[kind]
+        if kname in ("crossing", "slide_start", "slide_end"):
+            name = model.switches[ref].name
+        else:
+            name = model.events[ref].name
+        events.append(EventRecord(float(ev_t[r]), name, kname, ev_xb[r, :n].copy(),
+                                  ev_xa[r, :n].copy(), _state_name(model, ok, oi, om),
+                                  _state_name(model, nk, ni, nmode), float(ev_t2[r])))
+    stat = dict(zip(("steps", "rejected_steps", "nfev", "events", "chatter", "landing_steps"),
+                    (int(s) for s in stats)))
+    params = dict(zip(model.parameters, (float(v) for v in p)))
+    jac = y_fin[n:].reshape(n, n).copy() if opts["variational"] else None
+    traj = Trajectory(
+        t=nodes_t, x=nodes_y[:, :n].copy(), state=states, events=events, status=status,
+        message=status.message, stats=stat, model=model, params=params,
+        options={k: v for k, v in opts.items() if k != "throw"}, t0=t0, t_end=t_end,
+        jacobian=jac, _dense=dense if opts["dense"] else None, _ikind=ikind, _y=nodes_y,
+        provenance={"model": model.name, "model_hash": model.hash, "pwsdyn_version": __version__},
+    )
+    if status.failed and opts["throw"]:
+        mode_name = _state_name(model, *dstate)
+        raise SolveError(status, float(t_fin), dict(zip(model.states, y_fin[:n])), mode_name,
+                         result=traj)
+    return traj

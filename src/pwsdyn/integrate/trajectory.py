@@ -1,0 +1,240 @@
+"""The result of a simulation: a :class:`Trajectory` with dense output and its event log."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import Status
+
+#: Event kinds of the log, indexed by the kernel's codes.
+EVENT_KINDS = ("impact", "transition", "chatter", "stick", "release", "crossing", "slide_start",
+               "slide_end")
+#: Discrete states of the kernel: a regular mode, sticking on an impact surface, sliding.
+STATE_KINDS = ("mode", "stick", "slide")
+
+
+@dataclass(frozen=True)
+class EventRecord:
+    """One event of a trajectory.
+
+    Attributes
+    ----------
+    t : float
+        Time of the event. For ``chatter`` the time the chattering sequence starts; the
+        accumulation time is ``t_after``.
+    name : str
+        The model event (or switch) that fired; ``release``/``slide_end`` name the surface's
+        event or switch.
+    kind : str
+        One of ``impact``, ``transition``, ``chatter``, ``stick``, ``release``, ``crossing``,
+        ``slide_start``, ``slide_end``.
+    x_before, x_after : numpy.ndarray
+        State just before and just after the event.
+    mode_before, mode_after : str
+        The discrete state before and after: a mode name, ``stick:<event>`` or
+        ``slide:<switch>``.
+    t_after : float
+        Time after the event (differs from ``t`` only for ``chatter``).
+    """
+
+    t: float
+    name: str
+    kind: str
+    x_before: np.ndarray
+    x_after: np.ndarray
+    mode_before: str
+    mode_after: str
+    t_after: float
+
+    def __repr__(self):
+        return (f"EventRecord(t={self.t:.12g}, name={self.name!r}, kind={self.kind!r}, "
+                f"{self.mode_before} -> {self.mode_after})")
+
+
+@dataclass(eq=False)
+class Trajectory:
+    """A simulated hybrid trajectory.
+
+    Attributes
+    ----------
+    t : numpy.ndarray, shape (N,)
+        Times of the stored nodes (accepted steps, and both sides of every event: an event
+        time appears twice, before and after the jump).
+    x : numpy.ndarray, shape (N, n)
+        States at those times.
+    state : list[str]
+        Discrete state (mode name, ``stick:<event>`` or ``slide:<switch>``) at each node.
+    events : list[EventRecord]
+        The event log, in time order. It is the hybrid orbit's segment signature.
+    status : Status
+    message : str
+    stats : dict
+        ``steps``, ``rejected_steps``, ``nfev``, ``events``, ``chatter``, ``landing_steps``.
+    model : Model
+    params : dict
+        Parameter values used.
+    options : dict
+        Integrator options used.
+    jacobian : numpy.ndarray or None
+        With ``variational=True``: derivative of the final state with respect to the initial
+        state (n x n), including every saltation matrix.
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    state: list
+    events: list
+    status: Status
+    message: str
+    stats: dict
+    model: object
+    params: dict
+    options: dict
+    t0: float
+    t_end: float
+    jacobian: np.ndarray | None = None
+    # dense output: per interval between consecutive nodes
+    _dense: np.ndarray | None = field(default=None, repr=False)
+    _ikind: np.ndarray | None = field(default=None, repr=False)
+    _y: np.ndarray | None = field(default=None, repr=False)  # full nodes incl. variational part
+    provenance: dict = field(default_factory=dict)
+
+    # ------------------------------------------------------------------------------------
+    @property
+    def success(self) -> bool:
+        return not self.status.failed
+
+    @property
+    def n_states(self) -> int:
+        return self.x.shape[1]
+
+    @property
+    def state_names(self) -> tuple:
+        return self.model.states
+
+    @property
+    def x_final(self) -> np.ndarray:
+        return self.x[-1]
+
+    @property
+    def t_final(self) -> float:
+        return float(self.t[-1])
+
+    def __len__(self):
+        return len(self.t)
+
+    def __repr__(self):
+        counts = self.event_counts()
+        c = ", ".join(f"{k}={v}" for k, v in counts.items()) or "none"
+        return (f"Trajectory(model={self.model.name!r}, t=[{self.t0:.6g}, {self.t_final:.6g}], "
+                f"nodes={len(self.t)}, events: {c}, status={self.status.name})")
+
+    def event_counts(self) -> dict:
+        out: dict = {}
+        for e in self.events:
+            out[e.kind] = out.get(e.kind, 0) + 1
+        return out
+
+    def events_of(self, kind: str | None = None, name: str | None = None) -> list:
+        """Events filtered by kind and/or name."""
+        return [e for e in self.events
+                if (kind is None or e.kind == kind) and (name is None or e.name == name)]
+
+    def event_times(self, kind: str | None = None, name: str | None = None) -> np.ndarray:
+        return np.array([e.t for e in self.events_of(kind, name)])
+
+    # ------------------------------------------------------------------------------------
+    def __call__(self, t, side: str = "left", variational: bool = False):
+        """Evaluate the dense output at time(s) ``t``.
+
+        Parameters
+        ----------
+        t : float or array_like
+        side : {'left', 'right'}
+            At an event time, the state before (``left``) or after (``right``) the jump.
+        variational : bool
+            Also return the variational part (only with ``variational=True`` simulations).
+
+        Returns
+        -------
+        numpy.ndarray, shape (n,) for scalar ``t`` or (len(t), n)
+        """
+        if self._dense is None:
+            raise ValueError("this trajectory has no dense output (simulated with "
+                             "`dense=False`); only its nodes `t`, `x` are stored")
+        if side not in ("left", "right"):
+            raise ValueError(f"`side` must be 'left' or 'right', got {side!r}")
+        ts = np.atleast_1d(np.asarray(t, dtype=float))
+        lo, hi = self.t[0], self.t[-1]
+        if np.any((ts < lo - 1e-12 * max(1, abs(lo))) | (ts > hi + 1e-12 * max(1, abs(hi)))):
+            raise ValueError(f"`t` outside the simulated interval [{lo}, {hi}]")
+        ny = self._y.shape[1]
+        nout = ny if variational else self.n_states
+        out = np.empty((len(ts), nout))
+        nint = len(self._ikind)
+        idx = np.searchsorted(self.t, ts, side="left" if side == "left" else "right") - 1
+        idx = np.clip(idx, 0, max(nint - 1, 0))
+        for r, (tt, i) in enumerate(zip(ts, idx)):
+            # skip zero-length jump intervals toward the requested side
+            while self._ikind[i] == 1 and self.t[i + 1] == self.t[i]:
+                if side == "left" and i > 0:
+                    i -= 1
+                elif side == "right" and i < nint - 1:
+                    i += 1
+                else:
+                    break
+            t0, t1 = self.t[i], self.t[i + 1]
+            y0 = self._y[i]
+            kind = self._ikind[i]
+            if kind == 0 and t1 > t0:
+                theta = (tt - t0) / (t1 - t0)
+                Q = self._dense[i]
+                acc = np.zeros(ny)
+                for k in range(Q.shape[1] - 1, -1, -1):
+                    acc = (acc + Q[:, k]) * theta
+                val = y0 + acc
+            elif t1 > t0:
+                # a chattering gap (or an interval without dense output): linear between nodes
+                theta = (tt - t0) / (t1 - t0)
+                val = (1 - theta) * y0 + theta * self._y[i + 1]
+            else:
+                val = self._y[i + 1] if side == "right" else y0
+            out[r] = val[:nout]
+        return out[0] if np.ndim(t) == 0 else out
+
+    def sample(self, num: int = 2000):
+        """Times and states on a uniform grid plus both sides of every event (for plots)."""
+        if self._dense is None:
+            return self.t, self.x
+        grid = np.linspace(self.t[0], self.t[-1], num)
+        evt = np.array([e.t for e in self.events] + [e.t_after for e in self.events])
+        ts = np.sort(np.concatenate([grid, evt]))
+        left = self(ts, side="left")
+        right = self(ts, side="right")
+        T = np.repeat(ts, 2)
+        X = np.empty((2 * len(ts), self.n_states))
+        X[0::2] = left
+        X[1::2] = right
+        return T, X
+
+    # ------------------------------------------------------------------------------------
+    def to_dataset(self):
+        """The trajectory as an :class:`xarray.Dataset` (nodes, events, dense output,
+        provenance in attributes). Inverse: :meth:`from_dataset`."""
+        from ..io import trajectory_to_dataset
+
+        return trajectory_to_dataset(self)
+
+    @classmethod
+    def from_dataset(cls, ds):
+        from ..io import trajectory_from_dataset
+
+        return trajectory_from_dataset(ds)
+
+    def save(self, path):
+        """Write the trajectory to a NetCDF file."""
+        from ..io import save_dataset
+
+        save_dataset(self.to_dataset(), path)

@@ -1,0 +1,5 @@
+"""Models: definition as data, safe parsing, symbolic derivatives, compiled code, the zoo."""
+
+from .codegen import CompiledModel as CompiledModel, compile_model as compile_model
+from .spec import (Event as Event, Mode as Mode, Model as Model, Surface as Surface,
+                   Switch as Switch, load_model as load_model, zoo_names as zoo_names)

@@ -1,0 +1,256 @@
+"""Symbolic derivatives and compiled code for a :class:`~pwsdyn.model.spec.Model`.
+
+Every function the numerical kernels need is produced from the model's SymPy expressions:
+the vector fields ``f`` and their derivatives ``f_x``, ``f_t``; the surfaces ``h``, ``h_x``,
+``h_t``; the normal velocity of each surface in each mode ``hdot = h_t + h_x f`` with its
+derivatives ``hdot_x``, ``hdot_t`` (for chattering, sticking and grazing); the resets ``g``,
+``g_x``, ``g_t``; and the guards.
+
+They are emitted as one Python module with a single numba function
+
+    evaluate(which, idx, t, x, p, out)
+
+where ``which`` selects the quantity (the ``W_*`` constants below) and ``idx`` the mode,
+surface, event or (surface, mode) pair. The module is written to a cache directory named by the
+model hash and compiled by numba with ``cache=True``, so a second process loads machine code
+from disk. All models share this one signature, so the integrator kernel is compiled once for
+all models (it receives ``evaluate`` as a first-class function) and a new model costs only the
+compilation of its own small function.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import sympy as sp
+from numba import types
+from sympy.printing.pycode import PythonCodePrinter
+
+from .spec import Model
+
+# quantity selectors (the ``which`` argument); the kernel uses the same numbers
+W_F, W_FX, W_FT = 0, 1, 2
+W_H, W_HX, W_HT = 3, 4, 5
+W_HD, W_HDX, W_HDT = 6, 7, 8
+W_G, W_GX, W_GT = 9, 10, 11
+W_GUARD = 12
+
+#: Signature of the generated function: evaluate(which, idx, t, x, p, out) -> None
+EVALUATE_SIGNATURE = types.void(types.int64, types.int64, types.float64, types.float64[::1],
+                                types.float64[::1], types.float64[::1])
+EVALUATE_TYPE = types.FunctionType(EVALUATE_SIGNATURE)
+
+_CODEGEN_VERSION = "1"
+
+
+def cache_dir() -> Path:
+    """Directory of generated model modules and their numba caches.
+
+    ``$PWSDYN_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/pwsdyn`` or ``~/.cache/pwsdyn``.
+    """
+    env = os.environ.get("PWSDYN_CACHE_DIR")
+    if env:
+        d = Path(env)
+    else:
+        base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
+        d = base / "pwsdyn"
+    d = d / "models"
+    d.mkdir(parents=True, exist_ok=True)
+    return d
+
+
+class _Printer(PythonCodePrinter):
+    def __init__(self):
+        super().__init__({"fully_qualified_modules": True, "inline": True})
+
+    def _print_Heaviside(self, expr):
+        a = self._print(expr.args[0])
+        return f"(1.0 if {a} > 0 else (0.0 if {a} < 0 else 0.5))"
+
+    def _print_DiracDelta(self, expr):
+        # derivative of sign/Heaviside: zero away from the surface; the surface is an event
+        return "0.0"
+
+    def _print_BooleanTrue(self, expr):
+        return "True"
+
+    def _print_BooleanFalse(self, expr):
+        return "False"
+
+
+def _clean(e):
+    """Replace Dirac deltas (derivatives of sign/Heaviside) by 0: they live on surfaces."""
+    if isinstance(e, sp.Basic) and e.has(sp.DiracDelta):
+        e = e.replace(sp.DiracDelta, lambda *a: sp.Integer(0))
+    return e
+
+
+@dataclass
+class Derivatives:
+    """All symbolic quantities of a model, flattened per ``(which, idx)`` case."""
+
+    cases: dict  # (which, idx) -> list of expressions (flat)
+
+
+def derivatives(model: Model) -> Derivatives:
+    """Differentiate the model symbolically (SymPy)."""
+    t = model.t
+    X = sp.Matrix(model.state_symbols)
+    n = model.n_states
+    cases = {}
+    for i, mode in enumerate(model.modes):
+        f = sp.Matrix(mode.rhs)
+        cases[(W_F, i)] = list(f)
+        cases[(W_FX, i)] = [_clean(e) for e in f.jacobian(X)]
+        cases[(W_FT, i)] = [_clean(e) for e in f.diff(t)]
+    nm = len(model.modes)
+    for k, surf in enumerate(model.surfaces):
+        h = surf.expr
+        hx = sp.Matrix([h]).jacobian(X)
+        ht = sp.diff(h, t)
+        cases[(W_H, k)] = [h]
+        cases[(W_HX, k)] = [_clean(e) for e in hx]
+        cases[(W_HT, k)] = [_clean(ht)]
+        for i, mode in enumerate(model.modes):
+            f = sp.Matrix(mode.rhs)
+            hd = _clean(ht + (hx * f)[0])
+            cases[(W_HD, k * nm + i)] = [hd]
+            cases[(W_HDX, k * nm + i)] = [_clean(e) for e in sp.Matrix([hd]).jacobian(X)]
+            cases[(W_HDT, k * nm + i)] = [_clean(sp.diff(hd, t))]
+    for j, ev in enumerate(model.events):
+        g = sp.Matrix(ev.reset if ev.reset is not None else model.state_symbols)
+        cases[(W_G, j)] = list(g)
+        cases[(W_GX, j)] = [_clean(e) for e in g.jacobian(X)]
+        cases[(W_GT, j)] = [_clean(e) for e in g.diff(t)]
+        cases[(W_GUARD, j)] = [ev.guard if ev.guard is not None else sp.true]
+    assert all(len(v) in (1, n, n * n) for v in cases.values())
+    return Derivatives(cases)
+
+
+def generate_source(model: Model) -> str:
+    """Python/numba source of the model's ``evaluate`` function."""
+    der = derivatives(model)
+    pr = _Printer()
+    lines = [
+        f"# Generated by pwsdyn codegen v{_CODEGEN_VERSION} for model {model.name!r}"
+        f" (hash {model.hash}). Do not edit.",
+        "import math",
+        "import numba",
+        "from pwsdyn.model.codegen import EVALUATE_SIGNATURE",
+        "",
+        "",
+        "@numba.njit(EVALUATE_SIGNATURE, cache=True, fastmath=False, error_model='numpy')",
+        "def evaluate(which, idx, t, x, p, out):",
+    ]
+    for i, s in enumerate(model.states):
+        lines.append(f"    {s} = x[{i}]")
+    for i, s in enumerate(model.parameters):
+        lines.append(f"    {s} = p[{i}]")
+    by_which: dict = {}
+    for (which, idx), exprs in der.cases.items():
+        by_which.setdefault(which, []).append((idx, exprs))
+    for which in sorted(by_which):
+        lines.append(f"    if which == {which}:")
+        for idx, exprs in sorted(by_which[which], key=lambda c: c[0]):
+            lines.append(f"        if idx == {idx}:")
+            if which == W_GUARD:
+                e = exprs[0]
+                code = pr.doprint(e)
+                lines.append(f"            out[0] = 1.0 if ({code}) else 0.0")
+                lines.append("            return")
+                continue
+            subs, reduced = sp.cse([sp.sympify(e) for e in exprs], symbols=sp.numbered_symbols("_c"))
+            for sym, val in subs:
+                lines.append(f"            {sym} = {pr.doprint(val)}")
+            for k, e in enumerate(reduced):
+                code = pr.doprint(e)
+                lines.append(f"            out[{k}] = {code}")
+            lines.append("            return")
+    lines.append("    return")
+    return "\n".join(lines) + "\n"
+
+
+@dataclass
+class CompiledModel:
+    """A model with its compiled ``evaluate`` function and the tables the kernel reads."""
+
+    model: Model
+    evaluate: object
+    compile_seconds: float
+    source_path: Path
+    # kernel tables (numpy arrays)
+    event_surface: np.ndarray
+    event_direction: np.ndarray
+    event_kind: np.ndarray
+    event_target: np.ndarray
+    event_terminal: np.ndarray
+    event_active: np.ndarray  # (n_events, n_modes) bool -> int8
+    event_has_reset: np.ndarray
+    switch_surface: np.ndarray
+    switch_above: np.ndarray
+    switch_below: np.ndarray
+
+
+_COMPILED: dict[str, CompiledModel] = {}
+
+EVENT_KIND_CODES = {"impact": 0, "transition": 1}
+
+
+def compile_model(model: Model) -> CompiledModel:
+    """Generate, cache and compile the model's functions (once per process and per disk cache).
+
+    The generated module is ``<cache_dir>/m_<hash>.py``; numba keeps its machine code next to
+    it, so a second process loads it without compiling.
+    """
+    key = model.hash
+    if key in _COMPILED:
+        return _COMPILED[key]
+    t0 = time.perf_counter()
+    d = cache_dir()
+    path = d / f"m_{key}_v{_CODEGEN_VERSION}.py"
+    if not path.exists():
+        src = generate_source(model)
+        tmp = path.with_suffix(f".tmp{os.getpid()}")
+        tmp.write_text(src)
+        os.replace(tmp, path)
+    modname = f"pwsdyn_models.m_{key}_v{_CODEGEN_VERSION}"
+    if modname in sys.modules:
+        module = sys.modules[modname]
+    else:
+        spec = importlib.util.spec_from_file_location(modname, path)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[modname] = module
+        spec.loader.exec_module(module)
+    evaluate = module.evaluate
+    # force compilation/cache load now so that its cost is measured here
+    n = model.n_states
+    evaluate(W_F, 0, 0.0, np.zeros(n), np.zeros(max(1, len(model.parameters))), np.zeros(n * n))
+    elapsed = time.perf_counter() - t0
+
+    ne, nm = len(model.events), len(model.modes)
+    active = np.zeros((max(ne, 1), nm), dtype=np.int8)
+    for j, ev in enumerate(model.events):
+        for m in ev.modes:
+            active[j, m] = 1
+    cm = CompiledModel(
+        model=model, evaluate=evaluate, compile_seconds=elapsed, source_path=path,
+        event_surface=np.array([e.surface for e in model.events], dtype=np.int64),
+        event_direction=np.array([e.direction for e in model.events], dtype=np.int64),
+        event_kind=np.array([EVENT_KIND_CODES[e.kind] for e in model.events], dtype=np.int64),
+        event_target=np.array([-1 if e.target is None else e.target for e in model.events],
+                              dtype=np.int64),
+        event_terminal=np.array([e.terminal for e in model.events], dtype=np.int64),
+        event_active=active,
+        event_has_reset=np.array([e.reset is not None for e in model.events], dtype=np.int64),
+        switch_surface=np.array([s.surface for s in model.switches], dtype=np.int64),
+        switch_above=np.array([s.above for s in model.switches], dtype=np.int64),
+        switch_below=np.array([s.below for s in model.switches], dtype=np.int64),
+    )
+    _COMPILED[key] = cm
+    return cm

@@ -1,0 +1,152 @@
+"""Safe parsing of user expressions into SymPy.
+
+User text is never passed to ``eval`` (SymPy's ``sympify``/``parse_expr`` do call ``eval``).
+Instead the text is parsed with :mod:`ast` and the tree is walked node by node; only numbers,
+known names, arithmetic, comparisons, boolean connectives and calls of the whitelisted
+functions below are accepted. Anything else -- attribute access, subscripts, lambdas,
+comprehensions, strings, unknown names -- raises :class:`ExpressionError` naming the offending
+construct.
+"""
+
+from __future__ import annotations
+
+import ast
+import operator
+
+import sympy as sp
+
+from ..errors import ExpressionError
+
+#: Functions an expression may call, by the name users write.
+FUNCTIONS = {
+    "sin": sp.sin, "cos": sp.cos, "tan": sp.tan,
+    "asin": sp.asin, "acos": sp.acos, "atan": sp.atan, "atan2": sp.atan2,
+    "arcsin": sp.asin, "arccos": sp.acos, "arctan": sp.atan, "arctan2": sp.atan2,
+    "sinh": sp.sinh, "cosh": sp.cosh, "tanh": sp.tanh,
+    "exp": sp.exp, "log": sp.log, "sqrt": sp.sqrt,
+    "abs": sp.Abs, "Abs": sp.Abs,
+    "sign": sp.sign, "Heaviside": sp.Heaviside, "heaviside": sp.Heaviside,
+    "Max": sp.Max, "Min": sp.Min, "max": sp.Max, "min": sp.Min,
+}
+
+#: Constants an expression may use.
+CONSTANTS = {"pi": sp.pi, "e_const": sp.E, "inf": sp.oo}
+
+_BINOPS = {
+    ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul,
+    ast.Div: operator.truediv, ast.Pow: operator.pow,
+}
+_CMPOPS = {
+    ast.Lt: sp.StrictLessThan, ast.LtE: sp.LessThan,
+    ast.Gt: sp.StrictGreaterThan, ast.GtE: sp.GreaterThan,
+}
+
+
+def parse_expression(text, names: dict, *, field: str = "", source: str | None = None,
+                     line: int | None = None, boolean: bool = False) -> sp.Expr:
+    """Parse ``text`` into a SymPy expression using only ``names``.
+
+    Parameters
+    ----------
+    text : str, int, float or sympy.Basic
+        The expression. Numbers pass through; SymPy objects are checked for unknown symbols.
+    names : dict[str, sympy.Basic]
+        The names the expression may use (states, parameters, definitions, time).
+    field, source, line :
+        Where the expression comes from, for error messages.
+    boolean : bool
+        Accept comparisons and ``and``/``or``/``not`` (guards).
+
+    Raises
+    ------
+    ExpressionError
+        On a syntax error, a forbidden construct or an unknown name.
+    """
+    def fail(msg):
+        raise ExpressionError(msg, source=source, field=field, line=line)
+
+    if isinstance(text, bool):
+        fail(f"expected an expression, got the boolean {text!r}")
+    if isinstance(text, (int, float)):
+        return sp.Float(text) if isinstance(text, float) else sp.Integer(text)
+    if isinstance(text, sp.Basic):
+        allowed = set(names.values())
+        unknown = sorted(str(s) for s in text.free_symbols if s not in allowed)
+        if unknown:
+            fail(f"unknown name(s) {', '.join(repr(u) for u in unknown)} in expression")
+        return text
+    if not isinstance(text, str):
+        fail(f"expected an expression string, got {type(text).__name__}")
+    src = text.strip()
+    if not src:
+        fail("empty expression")
+    if len(src) > 20_000:
+        fail("expression longer than 20000 characters")
+    src = src.replace("^", "**")
+    try:
+        tree = ast.parse(src, mode="eval")
+    except SyntaxError as exc:
+        fail(f"invalid expression {text!r}: {exc.msg}")
+
+    def walk(node, depth=0):
+        if depth > 200:
+            fail("expression nested too deeply")
+        if isinstance(node, ast.Expression):
+            return walk(node.body, depth + 1)
+        if isinstance(node, ast.Constant):
+            if isinstance(node.value, bool) or not isinstance(node.value, (int, float)):
+                fail(f"only numeric literals are allowed, not {node.value!r}")
+            return sp.Integer(node.value) if isinstance(node.value, int) else sp.Float(node.value)
+        if isinstance(node, ast.Name):
+            if node.id in names:
+                return names[node.id]
+            if node.id in CONSTANTS:
+                return CONSTANTS[node.id]
+            if node.id in FUNCTIONS:
+                fail(f"function {node.id!r} used without arguments")
+            fail(f"unknown name {node.id!r} in expression {text!r}; known names are "
+                 f"{', '.join(sorted(names))}")
+        if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
+            return _BINOPS[type(node.op)](walk(node.left, depth + 1), walk(node.right, depth + 1))
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+            val = walk(node.operand, depth + 1)
+            return -val if isinstance(node.op, ast.USub) else val
+        if isinstance(node, ast.Call):
+            if not isinstance(node.func, ast.Name) or node.func.id not in FUNCTIONS:
+                what = node.func.id if isinstance(node.func, ast.Name) else ast.unparse(node.func)
+                fail(f"call of {what!r} is not allowed; allowed functions are "
+                     f"{', '.join(sorted(FUNCTIONS))}")
+            if node.keywords:
+                fail(f"keyword arguments are not allowed in a call of {node.func.id!r}")
+            args = [walk(a, depth + 1) for a in node.args]
+            try:
+                return FUNCTIONS[node.func.id](*args)
+            except TypeError as exc:
+                fail(f"bad call of {node.func.id!r}: {exc}")
+        if boolean:
+            if isinstance(node, ast.Compare):
+                parts = []
+                left = walk(node.left, depth + 1)
+                for op, comp in zip(node.ops, node.comparators):
+                    if type(op) not in _CMPOPS:
+                        fail(f"comparison {type(op).__name__} is not allowed (use <, <=, >, >=)")
+                    right = walk(comp, depth + 1)
+                    parts.append(_CMPOPS[type(op)](left, right))
+                    left = right
+                return sp.And(*parts) if len(parts) > 1 else parts[0]
+            if isinstance(node, ast.BoolOp):
+                vals = [walk(v, depth + 1) for v in node.values]
+                return sp.And(*vals) if isinstance(node.op, ast.And) else sp.Or(*vals)
+            if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.Not):
+                return sp.Not(walk(node.operand, depth + 1))
+        fail(f"construct {type(node).__name__} is not allowed in expression {text!r}")
+
+    expr = walk(tree)
+    is_condition = isinstance(expr, (sp.core.relational.Relational,
+                                     sp.logic.boolalg.BooleanFunction,
+                                     sp.logic.boolalg.BooleanAtom)) and not isinstance(expr, sp.Expr)
+    if boolean and not is_condition:
+        fail(f"a guard must be a condition such as 'v < 0', got {text!r}")
+    if not boolean and not isinstance(expr, sp.Expr):
+        fail(f"expected a value, got the condition {text!r}")
+    return expr

@@ -1,0 +1,500 @@
+"""Hybrid models as data: definition, loading from TOML / dict / zoo name, validation.
+
+A model is states, parameters with defaults, optional named definitions, modes with vector
+fields, and events. An event has a surface ``h(t, x, p)``, a crossing direction, the modes it is
+active in, an optional guard, an optional reset map ``g(t, x, p)`` and a target mode, and a kind:
+``impact`` marks a unilateral constraint (``h >= 0`` is the admissible side), so chattering and
+sticking apply to it; ``transition`` is any other switch of mode or state.
+
+Filippov switching surfaces between two modes are ``switches``: a surface ``h`` with the mode
+used where ``h > 0`` and the mode used where ``h < 0``.
+
+The model is symbolic (SymPy). :mod:`pwsdyn.model.codegen` turns it into compiled functions.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any, Mapping
+
+import sympy as sp
+
+from ..errors import ModelError
+from .expressions import parse_expression
+
+#: Name of the independent variable in expressions.
+TIME = "t"
+EVENT_KINDS = ("impact", "transition")
+_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_RESERVED = {TIME, "pi", "e_const", "inf"}
+
+
+@dataclass(frozen=True)
+class Mode:
+    """A smooth mode: its name and vector field ``f(t, x, p)`` (one expression per state)."""
+
+    name: str
+    rhs: tuple
+
+
+@dataclass(frozen=True)
+class Surface:
+    """A scalar event function ``h(t, x, p)``; its zero set is a discontinuity surface."""
+
+    name: str
+    expr: Any
+
+
+@dataclass(frozen=True)
+class Event:
+    """A transition fired when ``h`` crosses zero in ``direction`` while in one of ``modes``.
+
+    Attributes
+    ----------
+    name : str
+    kind : {'impact', 'transition'}
+    surface : int
+        Index into ``Model.surfaces``.
+    direction : int
+        -1: ``h`` decreasing through zero; +1 increasing; 0 either.
+    modes : tuple[int, ...]
+        Modes in which the event is active.
+    guard : sympy Boolean or None
+        The event fires only where the guard holds.
+    reset : tuple or None
+        The new state ``g(t, x, p)``, one expression per state (identity where not given).
+    target : int or None
+        The mode after the event (``None``: the same mode).
+    terminal : bool
+        Stop the simulation after this event.
+    """
+
+    name: str
+    kind: str
+    surface: int
+    direction: int
+    modes: tuple
+    guard: Any = None
+    reset: tuple | None = None
+    target: int | None = None
+    terminal: bool = False
+
+
+@dataclass(frozen=True)
+class Switch:
+    """A Filippov switching surface: mode ``above`` where ``h > 0``, ``below`` where ``h < 0``."""
+
+    name: str
+    surface: int
+    above: int
+    below: int
+
+
+@dataclass(frozen=True, eq=False)
+class Model:
+    """A piecewise-smooth hybrid model (symbolic). Create it with :func:`load_model`."""
+
+    name: str
+    states: tuple
+    parameters: dict
+    modes: tuple
+    surfaces: tuple
+    events: tuple
+    switches: tuple = ()
+    description: str = ""
+    reference: str = ""
+    definitions: dict = field(default_factory=dict)
+    forcing_period: Any = None
+    initial_mode: int = 0
+    origin: str = "<dict>"
+    spec: dict = field(default_factory=dict, repr=False)
+
+    # --- symbols -------------------------------------------------------------------------
+    @property
+    def t(self) -> sp.Symbol:
+        return sp.Symbol(TIME, real=True)
+
+    @property
+    def state_symbols(self) -> tuple:
+        return tuple(sp.Symbol(s, real=True) for s in self.states)
+
+    @property
+    def parameter_symbols(self) -> tuple:
+        return tuple(sp.Symbol(p, real=True) for p in self.parameters)
+
+    @property
+    def n_states(self) -> int:
+        return len(self.states)
+
+    @property
+    def mode_names(self) -> tuple:
+        return tuple(m.name for m in self.modes)
+
+    def mode_index(self, name: str) -> int:
+        try:
+            return self.mode_names.index(name)
+        except ValueError:
+            raise ValueError(f"unknown mode {name!r}; modes are {list(self.mode_names)}") from None
+
+    def event_index(self, name: str) -> int:
+        for i, ev in enumerate(self.events):
+            if ev.name == name:
+                return i
+        raise ValueError(f"unknown event {name!r}; events are {[e.name for e in self.events]}")
+
+    # --- parameters ----------------------------------------------------------------------
+    def parameter_vector(self, params: Mapping[str, float] | None = None):
+        """Default parameter values overridden by ``params`` (by name), as a float array.
+
+        Raises ``ValueError`` naming an unknown parameter or a non-finite value.
+        """
+        import numpy as np
+
+        values = dict(self.parameters)
+        for k, v in (params or {}).items():
+            if k not in values:
+                raise ValueError(f"unknown parameter {k!r} for model {self.name!r}; parameters "
+                                 f"are {list(self.parameters)}")
+            try:
+                values[k] = float(v)
+            except (TypeError, ValueError):
+                raise ValueError(f"parameter {k!r} must be a number, got {v!r}") from None
+        p = np.array([values[k] for k in self.parameters], dtype=float)
+        bad = [k for k, v in zip(self.parameters, p) if not math.isfinite(v)]
+        if bad:
+            raise ValueError(f"parameter(s) {', '.join(bad)} of model {self.name!r} must be "
+                             f"finite, got {[values[k] for k in bad]}")
+        return p
+
+    def forcing_period_value(self, params: Mapping[str, float] | None = None) -> float | None:
+        """The forcing period for these parameters, or ``None`` for an autonomous model."""
+        if self.forcing_period is None:
+            return None
+        p = self.parameter_vector(params)
+        val = float(self.forcing_period.subs(dict(zip(self.parameter_symbols, p))))
+        return val
+
+    # --- identity ------------------------------------------------------------------------
+    @property
+    def hash(self) -> str:
+        """A hash of everything that defines the compiled model (not its description)."""
+        parts = [self.name, repr(self.states), repr(list(self.parameters))]
+        parts += [f"mode {m.name}: " + sp.srepr(m.rhs) for m in self.modes]
+        parts += [f"surface {s.name}: " + sp.srepr(s.expr) for s in self.surfaces]
+        for e in self.events:
+            parts.append(f"event {e.name} {e.kind} {e.surface} {e.direction} {e.modes} "
+                         f"{e.target} {e.terminal} {sp.srepr(e.guard)} {sp.srepr(e.reset)}")
+        for s in self.switches:
+            parts.append(f"switch {s.name} {s.surface} {s.above} {s.below}")
+        return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:16]
+
+    def __repr__(self):
+        return (f"Model({self.name!r}, states={list(self.states)}, modes={list(self.mode_names)}, "
+                f"events={[e.name for e in self.events]}, "
+                f"switches={[s.name for s in self.switches]})")
+
+
+# ======================================================================================
+# loading
+# ======================================================================================
+
+def zoo_names() -> list[str]:
+    """Names of the built-in models."""
+    root = resources.files("pwsdyn.model") / "zoo"
+    return sorted(p.name[:-5] for p in root.iterdir() if p.name.endswith(".toml"))
+
+
+def zoo_path(name: str) -> Path:
+    return Path(str(resources.files("pwsdyn.model") / "zoo" / f"{name}.toml"))
+
+
+def load_model(source, **kwargs) -> Model:
+    """Load a model from a TOML file path, a built-in name, a TOML string or a dict.
+
+    Parameters
+    ----------
+    source : str, pathlib.Path, dict or Model
+        A path to a ``.toml`` file; the name of a built-in model (``pwsdyn.zoo_names()``); a
+        dict with the same structure as the TOML file; or a ``Model`` (returned as is).
+
+    Returns
+    -------
+    Model
+
+    Raises
+    ------
+    ModelError
+        A malformed model; the message names the file, line and field.
+
+    Examples
+    --------
+    >>> m = load_model("bouncing-ball")
+    >>> m.states
+    ('y', 'v')
+    """
+    if kwargs:
+        raise TypeError(f"load_model() got unexpected keyword argument(s) {sorted(kwargs)}")
+    if isinstance(source, Model):
+        return source
+    if isinstance(source, Mapping):
+        return model_from_dict(dict(source), origin="<dict>")
+    if isinstance(source, (str, Path)):
+        text_source = str(source)
+        path = Path(text_source)
+        if "\n" not in text_source and text_source in zoo_names():
+            path = zoo_path(text_source)
+        if "\n" in text_source or (not path.exists() and "=" in text_source):
+            return _model_from_toml_text(text_source, "<string>")
+        if not path.exists():
+            raise ModelError(f"no model file {text_source!r} and no built-in model of that name; "
+                             f"built-in models are {', '.join(zoo_names())}", source=text_source)
+        try:
+            text = path.read_text()
+        except OSError as exc:
+            raise ModelError(f"cannot read model file: {exc}", source=str(path)) from None
+        return _model_from_toml_text(text, str(path))
+    raise TypeError(f"`source` must be a path, a model name, a dict or a Model, "
+                    f"got {type(source).__name__}")
+
+
+def _model_from_toml_text(text: str, origin: str) -> Model:
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        line = getattr(exc, "lineno", None)
+        raise ModelError(f"malformed TOML: {exc}", source=origin, line=line) from None
+    return model_from_dict(data, origin=origin, text=text)
+
+
+class _Where:
+    """Finds the line of a field in the TOML text for error messages (best effort)."""
+
+    def __init__(self, origin: str, text: str | None):
+        self.origin = origin
+        self.lines = text.splitlines() if text else []
+
+    def line(self, key: str, value: Any = None) -> int | None:
+        key = key.split(".")[-1]
+        key = re.sub(r"\[\d+\]$", "", key)
+        pat = re.compile(rf"^\s*(\[+\s*)?[\"']?{re.escape(key)}[\"']?\s*(=|\]|\.)")
+        hits = [i + 1 for i, ln in enumerate(self.lines) if pat.search(ln)]
+        if value is not None and isinstance(value, str):
+            sharp = [h for h in hits if value in self.lines[h - 1]]
+            if sharp:
+                return sharp[0]
+            anywhere = [i + 1 for i, ln in enumerate(self.lines) if value in ln]
+            if anywhere:
+                return anywhere[0]
+        return hits[0] if hits else None
+
+    def error(self, msg: str, fieldname: str, value: Any = None) -> ModelError:
+        return ModelError(msg, source=self.origin, field=fieldname,
+                          line=self.line(fieldname, value))
+
+
+_TOP_KEYS = {"name", "description", "source", "reference", "states", "parameters",
+             "definitions", "modes", "events", "switches", "forcing_period", "initial_mode",
+             "notes", "defaults"}
+_EVENT_KEYS = {"name", "kind", "surface", "direction", "modes", "mode", "guard", "reset",
+               "target", "terminal", "description"}
+
+
+def model_from_dict(data: dict, origin: str = "<dict>", text: str | None = None) -> Model:
+    """Build and validate a :class:`Model` from a dict with the TOML file's structure."""
+    W = _Where(origin, text)
+    unknown = sorted(set(data) - _TOP_KEYS)
+    if unknown:
+        raise W.error(f"unknown top-level key(s) {unknown}; allowed keys are "
+                      f"{sorted(_TOP_KEYS)}", unknown[0])
+
+    def need(key, typ, where=data, prefix=""):
+        if key not in where:
+            raise W.error(f"missing required field `{prefix}{key}`", prefix + key)
+        val = where[key]
+        if not isinstance(val, typ):
+            raise W.error(f"`{prefix}{key}` must be {typ.__name__ if isinstance(typ, type) else typ}"
+                          f", got {type(val).__name__}", prefix + key)
+        return val
+
+    name = need("name", str)
+    states = need("states", list)
+    if not states:
+        raise W.error("a model needs at least one state", "states")
+    for s in states:
+        if not isinstance(s, str) or not _NAME_RE.match(s) or s in _RESERVED:
+            raise W.error(f"invalid state name {s!r}", "states", str(s))
+    if len(set(states)) != len(states):
+        raise W.error("duplicate state names", "states")
+
+    params_raw = data.get("parameters", {})
+    if not isinstance(params_raw, dict):
+        raise W.error("`parameters` must be a table of name = default value", "parameters")
+    parameters = {}
+    for k, v in params_raw.items():
+        if not _NAME_RE.match(k) or k in _RESERVED or k in states:
+            raise W.error(f"invalid or clashing parameter name {k!r}", f"parameters.{k}")
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise W.error(f"parameter {k!r} must have a numeric default, got {v!r}",
+                          f"parameters.{k}")
+        if not math.isfinite(float(v)):
+            raise W.error(f"parameter {k!r} must be finite, got {v!r}", f"parameters.{k}")
+        parameters[k] = float(v)
+
+    t = sp.Symbol(TIME, real=True)
+    names = {TIME: t}
+    names.update({s: sp.Symbol(s, real=True) for s in states})
+    names.update({p: sp.Symbol(p, real=True) for p in parameters})
+
+    # definitions: substituted into every expression that uses them, in order
+    defs_raw = data.get("definitions", {})
+    if not isinstance(defs_raw, dict):
+        raise W.error("`definitions` must be a table of name = expression", "definitions")
+    definitions = {}
+    for k, v in defs_raw.items():
+        if not _NAME_RE.match(k) or k in names or k in _RESERVED:
+            raise W.error(f"invalid or clashing definition name {k!r}", f"definitions.{k}")
+        expr = parse_expression(v, names, field=f"definitions.{k}", source=origin,
+                                line=W.line(k, v if isinstance(v, str) else None))
+        definitions[k] = expr
+        names[k] = expr
+
+    def expr(val, fieldname, boolean=False):
+        return parse_expression(val, names, field=fieldname, source=origin,
+                                line=W.line(fieldname, val if isinstance(val, str) else None),
+                                boolean=boolean)
+
+    # modes
+    modes_raw = need("modes", dict)
+    if not modes_raw:
+        raise W.error("a model needs at least one mode", "modes")
+    modes = []
+    for mname, rhs in modes_raw.items():
+        if not _NAME_RE.match(mname):
+            raise W.error(f"invalid mode name {mname!r}", f"modes.{mname}")
+        if not isinstance(rhs, dict):
+            raise W.error(f"mode {mname!r} must be a table of state = derivative", f"modes.{mname}")
+        extra = sorted(set(rhs) - set(states))
+        if extra:
+            raise W.error(f"mode {mname!r} gives a derivative for unknown state(s) {extra}; states "
+                          f"are {states}", f"modes.{mname}.{extra[0]}")
+        missing = [s for s in states if s not in rhs]
+        if missing:
+            raise W.error(f"mode {mname!r} has no derivative for state(s) {missing}",
+                          f"modes.{mname}")
+        modes.append(Mode(mname, tuple(expr(rhs[s], f"modes.{mname}.{s}") for s in states)))
+    mode_names = [m.name for m in modes]
+
+    def mode_ref(val, fieldname):
+        if val not in mode_names:
+            raise W.error(f"unknown mode {val!r}; modes are {mode_names}", fieldname, val)
+        return mode_names.index(val)
+
+    surfaces: list[Surface] = []
+
+    def add_surface(val, fieldname, sname):
+        e = expr(val, fieldname)
+        for i, s in enumerate(surfaces):
+            if s.expr == e:
+                return i
+        surfaces.append(Surface(sname, e))
+        return len(surfaces) - 1
+
+    # events
+    events_raw = data.get("events", [])
+    if not isinstance(events_raw, list):
+        raise W.error("`events` must be an array of tables ([[events]])", "events")
+    events = []
+    seen = set()
+    for i, ev in enumerate(events_raw):
+        pre = f"events[{i}]."
+        if not isinstance(ev, dict):
+            raise W.error("each event must be a table", f"events[{i}]")
+        bad = sorted(set(ev) - _EVENT_KEYS)
+        if bad:
+            raise W.error(f"unknown key(s) {bad} in event; allowed keys are {sorted(_EVENT_KEYS)}",
+                          pre + bad[0])
+        ename = ev.get("name", f"event{i}")
+        if not isinstance(ename, str) or not _NAME_RE.match(ename.replace("-", "_")):
+            raise W.error(f"invalid event name {ename!r}", pre + "name")
+        if ename in seen:
+            raise W.error(f"duplicate event name {ename!r}", pre + "name", ename)
+        seen.add(ename)
+        kind = ev.get("kind", "transition")
+        if kind not in EVENT_KINDS:
+            raise W.error(f"event kind must be one of {EVENT_KINDS}, got {kind!r}", pre + "kind",
+                          str(kind))
+        if "surface" not in ev:
+            raise W.error(f"event {ename!r} has no `surface`", pre + "surface")
+        surf = add_surface(ev["surface"], pre + "surface", ename)
+        direction = ev.get("direction", -1 if kind == "impact" else 0)
+        if direction not in (-1, 0, 1) or isinstance(direction, bool):
+            raise W.error(f"`direction` must be -1, 0 or 1, got {direction!r}", pre + "direction")
+        if kind == "impact" and direction != -1:
+            raise W.error("an impact event must have direction -1 (the admissible side is "
+                          "h >= 0)", pre + "direction")
+        mlist = ev.get("modes", ev.get("mode", mode_names))
+        if isinstance(mlist, str):
+            mlist = [mlist]
+        if not isinstance(mlist, list) or not mlist:
+            raise W.error("`modes` must be a non-empty list of mode names", pre + "modes")
+        emodes = tuple(mode_ref(m, pre + "modes") for m in mlist)
+        guard = None
+        if "guard" in ev:
+            guard = expr(ev["guard"], pre + "guard", boolean=True)
+        reset = None
+        if "reset" in ev:
+            r = ev["reset"]
+            if not isinstance(r, dict):
+                raise W.error("`reset` must be a table of state = new value", pre + "reset")
+            extra = sorted(set(r) - set(states))
+            if extra:
+                raise W.error(f"reset of unknown state(s) {extra}; states are {states}",
+                              pre + "reset", extra[0])
+            reset = tuple(expr(r[s], pre + f"reset.{s}") if s in r else names[s] for s in states)
+        target = None
+        if "target" in ev:
+            target = mode_ref(ev["target"], pre + "target")
+        if kind == "impact" and reset is None:
+            raise W.error("an impact event needs a `reset` (the impact law)", pre + "reset")
+        terminal = ev.get("terminal", False)
+        if not isinstance(terminal, bool):
+            raise W.error("`terminal` must be true or false", pre + "terminal")
+        events.append(Event(ename, kind, surf, int(direction), emodes, guard, reset, target,
+                            terminal))
+
+    switches = []
+    for i, sw in enumerate(data.get("switches", []) or []):
+        pre = f"switches[{i}]."
+        if not isinstance(sw, dict):
+            raise W.error("each switch must be a table", f"switches[{i}]")
+        sname = sw.get("name", f"switch{i}")
+        for key in ("surface", "above", "below"):
+            if key not in sw:
+                raise W.error(f"switch {sname!r} needs `{key}`", pre + key)
+        surf = add_surface(sw["surface"], pre + "surface", sname)
+        switches.append(Switch(sname, surf, mode_ref(sw["above"], pre + "above"),
+                               mode_ref(sw["below"], pre + "below")))
+
+    fp = None
+    if data.get("forcing_period") is not None:
+        pnames = {TIME: t, **{p: sp.Symbol(p, real=True) for p in parameters}}
+        fp = parse_expression(data["forcing_period"], pnames, field="forcing_period",
+                              source=origin, line=W.line("forcing_period"))
+    init = 0
+    if "initial_mode" in data:
+        init = mode_ref(data["initial_mode"], "initial_mode")
+
+    desc = data.get("description", "")
+    ref = data.get("reference", data.get("source", ""))
+    if not isinstance(desc, str) or not isinstance(ref, str):
+        raise W.error("`description` and `reference` must be strings", "description")
+    return Model(name=name, states=tuple(states), parameters=parameters, modes=tuple(modes),
+                 surfaces=tuple(surfaces), events=tuple(events), switches=tuple(switches),
+                 description=desc, reference=ref, definitions=definitions, forcing_period=fp,
+                 initial_mode=init, origin=origin, spec=data)
