@@ -42,7 +42,7 @@ import numpy as np
 from numba import njit
 
 from ..model.codegen import (W_F, W_FX, W_G, W_GUARD, W_GX, W_GT, W_H, W_HD, W_HDT, W_HDX,
-                             W_HT, W_HX)
+                             W_HHD, W_HT, W_HX)
 
 # discrete states
 REGULAR, STICK, SLIDE = 0, 1, 2
@@ -58,6 +58,7 @@ EV_IMPACT, EV_TRANSITION = 0, 1
 # status codes (errors.Status)
 ST_SUCCESS, ST_TERMINAL, ST_MAX_STEPS, ST_MAX_EVENTS, ST_STEP_TOO_SMALL, ST_NONFINITE = 0, 1, 2, 3, 4, 5
 ST_INTERSECTION = 6
+ST_ZENO = 7
 # integer options
 IO_MODE0, IO_NMODES, IO_MAXSTEPS, IO_MAXEVENTS, IO_METHOD, IO_VAR, IO_CHATTER, IO_SAVE = range(8)
 IO_N = 8
@@ -232,8 +233,11 @@ def _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_la
                 if a != 0.0:
                     acc += a * K[m, i]
             ytmp[i] = y[i] + h * acc
-        _rhs(ev, p, dkind, didx, mode, nm, t + C[st] * h, ytmp, n, nvar, K[st], etab, stab,
-             slide_c, w1, w2, gx, hdx, jac, xt, ft)
+        if dkind == REGULAR and nvar == 0:
+            ev(W_F, mode, t + C[st] * h, ytmp, p, K[st])
+        else:
+            _rhs(ev, p, dkind, didx, mode, nm, t + C[st] * h, ytmp, n, nvar, K[st], etab, stab,
+                 slide_c, w1, w2, gx, hdx, jac, xt, ft)
 
 
 @njit(cache=True)
@@ -279,6 +283,24 @@ def _dense_coeffs(K, P, h, nY, s_ext, deg, out):
 
 
 @njit(cache=True)
+def _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_fsal, P, Q, ytmp,
+                etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft):
+    """Dense output of the step just taken: extra stages (DOP853) and power-form
+    coefficients. Returns the number of extra function evaluations."""
+    s_ext = A.shape[0]
+    for st in range(s_fsal + 1, s_ext):
+        for i in range(nY):
+            acc = 0.0
+            for m in range(st):
+                acc += A[st, m] * K[m, i]
+            ytmp[i] = y[i] + h * acc
+        _rhs(ev, p, dkind, didx, mode, nm, t + C[st] * h, ytmp, n, nvar, K[st], etab, stab,
+             slide_c, w1, w2, gx, hdx, jac, xt, ft)
+    _dense_coeffs(K, P, h, nY, s_ext, P.shape[1], Q)
+    return s_ext - s_fsal - 1
+
+
+@njit(cache=True)
 def _dense_eval(y0, Q, theta, nY, deg, out):
     for i in range(nY):
         acc = 0.0
@@ -307,12 +329,26 @@ def _watch_value(ev, p, wtype, widx, wmode, nm, t, x, n, buf, fbuf, hdx):
 
 
 @njit(cache=True)
+def _surface_rate(ev, p, dkind, k, mode, nm, t, x, f, n, buf, hdx):
+    """dh/dt along the current field f: one call of the compiled hdot in a regular mode."""
+    if dkind == REGULAR:
+        ev(W_HD, k * nm + mode, t, x, p, buf)
+        return buf[0]
+    ev(W_HX, k, t, x, p, hdx)
+    ev(W_HT, k, t, x, p, buf)
+    return buf[0] + _dot(hdx, f, n)
+
+
+@njit(cache=True)
 def _crosses(v0, v1, direction):
-    if direction <= 0 and v0 > 0.0 and v1 <= 0.0:
-        return True
-    if direction >= 0 and v0 < 0.0 and v1 >= 0.0:
-        return True
-    return False
+    """A zero crossing from v0 to v1 in ``direction``. A function that starts exactly at zero
+    and moves in the event direction crosses (a start on an impact surface with approaching
+    velocity is an impact at the initial time)."""
+    if direction < 0:
+        return (v0 > 0.0 and v1 <= 0.0) or (v0 == 0.0 and v1 < 0.0)
+    if direction > 0:
+        return (v0 < 0.0 and v1 >= 0.0) or (v0 == 0.0 and v1 > 0.0)
+    return (v0 > 0.0 and v1 <= 0.0) or (v0 < 0.0 and v1 >= 0.0)
 
 
 # --------------------------------------------------------------------------------------
@@ -513,7 +549,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     jac = np.zeros(n * n)
     xt = np.zeros(n)
     ft = np.zeros(n)
-    buf = np.zeros(max(n, 1))
+    buf = np.zeros(max(n, 2))
     fbuf = np.zeros(n)
     xs = np.zeros(nY)
     Kland = np.zeros((s_ext, nY))
@@ -558,6 +594,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     wact = np.zeros(_MAXW, dtype=np.int64)
     wref = np.zeros(_MAXW, dtype=np.int64)
     wforce = np.zeros(_MAXW)      # forced sign at the start of the next step (re-trigger guard)
+    wv = np.zeros(_MAXW)          # watch values at the end of the last accepted step ...
+    wd = np.zeros(_MAXW)          # ... and their time derivatives (surfaces), reused next step
+    wvalid = np.zeros(_MAXW, dtype=np.int64)
     nw = 0
     # the surface/function that just fired, to suppress an immediate re-trigger
     last_type = -1
@@ -568,11 +607,12 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     # chattering chain bookkeeping
     chain_event = -1
     chain_vmax = 0.0
+    zeno = 0
+    last_depth = 0.0
 
     noise = 0.0
     vals = np.zeros((_MAXW, 8))
     thetas = np.zeros(8)
-    v_end = np.zeros(_MAXW)
 
     # first node
     nodes_t[0] = t
@@ -634,6 +674,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     wdir[nw] = etab[j, 1]; wact[nw] = ACT_EVENT; wref[nw] = j
                     nw += 1
             for w in range(nw):
+                wvalid[w] = 0
                 wforce[w] = 0.0
                 if (t == last_t and wtype[w] == last_type and widx[w] == last_idx
                         and (wtype[w] == WF_SURFACE or wmode[w] == last_mode)):
@@ -668,20 +709,40 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             status = ST_STEP_TOO_SMALL
             break
 
-        # ---- one RK step
-        _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_fsal, ytmp,
-                   etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
+        # ---- one RK step (stages written out here: this is the hot loop)
+        fast = dkind == REGULAR and nvar == 0
+        for st in range(1, s_fsal + 1):
+            cst = t + C[st] * h
+            for i in range(nY):
+                acc = 0.0
+                for m in range(st):
+                    acc += A[st, m] * K[m, i]
+                ytmp[i] = y[i] + h * acc
+            if fast:
+                ev(W_F, mode, cst, ytmp, p, K[st])
+            else:
+                _rhs(ev, p, dkind, didx, mode, nm, cst, ytmp, n, nvar, K[st], etab, stab,
+                     slide_c, w1, w2, gx, hdx, jac, xt, ft)
         stats[2] += s_fsal
-        for i in range(nY):
-            acc = 0.0
-            for m in range(s_fsal):
-                acc += A[s_fsal, m] * K[m, i]
-            ynew[i] = y[i] + h * acc
+        # the FSAL stage was evaluated at y + h sum B K = the new solution
         finite = True
         for i in range(nY):
-            if not np.isfinite(K[s_fsal, i]) or not np.isfinite(ynew[i]):
+            ynew[i] = ytmp[i]
+            if not (np.isfinite(K[s_fsal, i]) and np.isfinite(ynew[i])):
                 finite = False
-        err = _error_norm(K, E, method, s_fsal, y, ynew, h, n, rtol, atol) if finite else np.inf
+        if not finite:
+            err = np.inf
+        elif method == 0:
+            err = 0.0
+            for i in range(n):
+                e = 0.0
+                for m in range(s_fsal + 1):
+                    e += E[0, m] * K[m, i]
+                sc = atol + rtol * max(abs(y[i]), abs(ynew[i]))
+                err += (h * e / sc) ** 2
+            err = np.sqrt(err / n)
+        else:
+            err = _error_norm(K, E, method, s_fsal, y, ynew, h, n, rtol, atol)
         if not (err <= 1.0):
             stats[1] += 1
             if not finite:
@@ -693,73 +754,104 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 h *= max(0.2, 0.9 * err ** (-1.0 / order))
             continue
         stats[0] += 1
-        # extra stages for dense output (DOP853)
-        if s_ext > s_fsal + 1:
-            for st in range(s_fsal + 1, s_ext):
-                for i in range(nY):
-                    acc = 0.0
-                    for m in range(st):
-                        acc += A[st, m] * K[m, i]
-                    ytmp[i] = y[i] + h * acc
-                _rhs(ev, p, dkind, didx, mode, nm, t + C[st] * h, ytmp, n, nvar, K[st], etab,
-                     stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
-                stats[2] += 1
-        _dense_coeffs(K, P, h, nY, s_ext, deg, Q)
+        # dense output coefficients are made only when needed (stored steps, interior samples)
+        q_ready = False
+        if save_all:
+            stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C,
+                                    s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx,
+                                    jac, xt, ft)
+            q_ready = True
         t_new = t + h
 
         # ---- event detection on [t, t_new]
         best = -1
         best_th = 2.0
         best_sign = 0.0
-        thetas[0] = 0.0
-        thetas[1] = 0.5
-        thetas[2] = 1.0
         for w in range(nw):
-            # samples: 0, 1/2, 1, plus extrema of the Hermite cubic for surfaces
-            ns = 3
+            # Samples in increasing theta. Surfaces: the ends and the interior extrema of the
+            # cubic Hermite fit built from h and hdot at the ends (where a graze hides);
+            # other watch functions: the ends and the midpoint.
             if wtype[w] == WF_SURFACE:
-                # hdot at both ends from the stage values K[0] = f(t, y), K[s] = f(t_new, ynew)
-                ev(W_HX, widx[w], t, y, p, hdx)
-                ev(W_HT, widx[w], t, y, p, buf)
-                d0 = (buf[0] + _dot(hdx, K[0], n)) * h
-                ev(W_HX, widx[w], t_new, ynew, p, hdx)
-                ev(W_HT, widx[w], t_new, ynew, p, buf)
-                d1 = (buf[0] + _dot(hdx, K[s_fsal], n)) * h
-                v0 = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t, y, n, buf, fbuf, hdx)
-                v1 = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t_new, ynew, n, buf,
-                                  fbuf, hdx)
-                # cubic Hermite H(th) = a th^3 + b th^2 + d0 th + v0; H'(th) = 3a th^2 + 2b th + d0
+                if wvalid[w] == 1:
+                    v0 = wv[w]
+                    r0 = wd[w]
+                else:
+                    v0 = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t, y, n, buf,
+                                      fbuf, hdx)
+                    r0 = _surface_rate(ev, p, dkind, widx[w], mode, nm, t, y, K[0], n, buf, hdx)
+                if dkind == REGULAR:
+                    ev(W_HHD, widx[w] * nm + mode, t_new, ynew, p, buf)
+                    v1 = buf[0]
+                    r1 = buf[1]
+                else:
+                    v1 = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t_new, ynew, n,
+                                      buf, fbuf, hdx)
+                    r1 = _surface_rate(ev, p, dkind, widx[w], mode, nm, t_new, ynew, K[s_fsal],
+                                       n, buf, hdx)
+                wv[w] = v1
+                wd[w] = r1
+                d0 = r0 * h
+                d1 = r1 * h
+                # H(th) = ca th^3 + cb th^2 + d0 th + v0;  H'(th) = 3 ca th^2 + 2 cb th + d0
                 ca = 2.0 * v0 - 2.0 * v1 + d0 + d1
                 cb = -3.0 * v0 + 3.0 * v1 - 2.0 * d0 - d1
                 qa = 3.0 * ca
                 qb = 2.0 * cb
+                ns = 1
+                thetas[0] = 0.0
+                vals[w, 0] = v0
                 if abs(qa) > 1e-300:
                     disc = qb * qb - 4.0 * qa * d0
                     if disc >= 0.0:
                         sq = np.sqrt(disc)
-                        for r in ((-qb - sq) / (2.0 * qa), (-qb + sq) / (2.0 * qa)):
-                            if 0.0 < r < 1.0:
-                                thetas[ns] = r
-                                ns += 1
+                        ra = (-qb - sq) / (2.0 * qa)
+                        rb = (-qb + sq) / (2.0 * qa)
+                        if ra > rb:
+                            ra, rb = rb, ra
+                        if 0.0 < ra < 1.0:
+                            thetas[ns] = ra
+                            ns += 1
+                        if 0.0 < rb < 1.0 and rb > ra:
+                            thetas[ns] = rb
+                            ns += 1
                 elif abs(qb) > 1e-300:
-                    r = -d0 / qb
-                    if 0.0 < r < 1.0:
-                        thetas[ns] = r
+                    ra = -d0 / qb
+                    if 0.0 < ra < 1.0:
+                        thetas[ns] = ra
                         ns += 1
-                vals[w, 0] = v0
-                vals[w, 2] = v1
+                if ns > 1 and not q_ready:
+                    stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K,
+                                            A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2,
+                                            gx, hdx, jac, xt, ft)
+                    q_ready = True
+                for q in range(1, ns):
+                    _dense_eval(y, Q, thetas[q], nY, deg, xs)
+                    vals[w, q] = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm,
+                                              t + thetas[q] * h, xs, n, buf, fbuf, hdx)
+                thetas[ns] = 1.0
+                vals[w, ns] = v1
+                ns += 1
             else:
-                vals[w, 0] = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t, y, n, buf,
-                                          fbuf, hdx)
+                thetas[0] = 0.0
+                thetas[1] = 0.5
+                thetas[2] = 1.0
+                ns = 3
+                if wvalid[w] == 1:
+                    vals[w, 0] = wv[w]
+                else:
+                    vals[w, 0] = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t, y, n,
+                                              buf, fbuf, hdx)
+                if not q_ready:
+                    stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K,
+                                            A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2,
+                                            gx, hdx, jac, xt, ft)
+                    q_ready = True
+                _dense_eval(y, Q, 0.5, nY, deg, xs)
+                vals[w, 1] = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t + 0.5 * h,
+                                          xs, n, buf, fbuf, hdx)
                 vals[w, 2] = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t_new, ynew,
                                           n, buf, fbuf, hdx)
-            # interior samples on the dense output
-            for q in range(1, ns):
-                if q == 2:
-                    continue
-                _dense_eval(y, Q, thetas[q], nY, deg, xs)
-                vals[w, q] = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm,
-                                          t + thetas[q] * h, xs, n, buf, fbuf, hdx)
+                wv[w] = vals[w, 2]
             forced = wforce[w] != 0.0 and t == last_t
             if forced:
                 vals[w, 0] = wforce[w] * max(abs(vals[w, 0]), 1e-300)
@@ -767,14 +859,11 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 noise = 0.0
                 for i in range(n):
                     noise = max(noise, abs(y[i]))
-                noise = 1e3 * _EPS * (1.0 + noise)
-            v_end[w] = vals[w, 2]
-            # order samples in theta and look for the first crossing in the event direction
-            order_idx = np.argsort(thetas[:ns])
-            prev_th = thetas[order_idx[0]]
-            prev_v = vals[w, order_idx[0]]
-            for qq in range(1, ns):
-                q = order_idx[qq]
+                noise = max(1e3 * _EPS * (1.0 + noise), last_depth)
+            # the first crossing in the event direction between consecutive samples
+            prev_th = thetas[0]
+            prev_v = vals[w, 0]
+            for q in range(1, ns):
                 th = thetas[q]
                 vq = vals[w, q]
                 if th >= best_th:
@@ -783,16 +872,28 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     prev_th = th
                     continue
                 if _crosses(prev_v, vq, wdir[w]):
+                    if not q_ready:
+                        stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n,
+                                                nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab,
+                                                slide_c, w1, w2, gx, hdx, jac, xt, ft)
+                        q_ready = True
                     # locate by Illinois on the dense output within [prev_th, th]
                     a_th = prev_th
                     b_th = th
                     fa = prev_v
                     fb = vq
                     side = 0
-                    for it in range(200):
+                    width_check = b_th - a_th
+                    for it in range(400):
                         if (b_th - a_th) * h <= 2.0 * _ulp(t + b_th * h):
                             break
                         m_th = (a_th * fb - b_th * fa) / (fb - fa) if fb != fa else 0.5 * (a_th + b_th)
+                        # safeguard: bisect when two secant steps did not halve the bracket
+                        # (Illinois stalls when one end value is tiny, e.g. right after an event)
+                        if it % 2 == 1:
+                            if b_th - a_th > 0.5 * width_check:
+                                m_th = 0.5 * (a_th + b_th)
+                            width_check = b_th - a_th
                         if not (a_th < m_th < b_th):
                             m_th = 0.5 * (a_th + b_th)
                         _dense_eval(y, Q, m_th, nY, deg, xs)
@@ -824,15 +925,18 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
         if best < 0:
             # accept the whole step
             if save_all:
-                nodes_t = _grow1(nodes_t, n_nodes + 1)
-                nodes_y = _grow2(nodes_y, n_nodes + 1)
-                nodes_s = _grow2(nodes_s, n_nodes + 1)
-                dense = _grow3(dense, n_nodes + 1)
-                ikind = _grow1(ikind, n_nodes + 1)
-                dense[n_nodes - 1, :, :] = Q
+                if n_nodes + 1 > nodes_t.shape[0]:
+                    nodes_t = _grow1(nodes_t, n_nodes + 1)
+                    nodes_y = _grow2(nodes_y, n_nodes + 1)
+                    nodes_s = _grow2(nodes_s, n_nodes + 1)
+                    dense = _grow3(dense, n_nodes + 1)
+                    ikind = _grow1(ikind, n_nodes + 1)
+                for i in range(nY):
+                    for k in range(deg):
+                        dense[n_nodes - 1, i, k] = Q[i, k]
+                    nodes_y[n_nodes, i] = ynew[i]
                 ikind[n_nodes - 1] = 0
                 nodes_t[n_nodes] = t_new
-                nodes_y[n_nodes, :] = ynew
                 nodes_s[n_nodes, 0] = dkind
                 nodes_s[n_nodes, 1] = didx
                 nodes_s[n_nodes, 2] = mode
@@ -841,6 +945,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             for i in range(nY):
                 y[i] = ynew[i]
                 K[0, i] = K[s_fsal, i]
+            for ww in range(nw):
+                wvalid[ww] = 1
             fac = 10.0 if err == 0.0 else min(10.0, max(0.2, 0.9 * err ** (-1.0 / order)))
             h = h * fac
             continue
@@ -851,27 +957,25 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
         h_ev = best_th * h
         for i in range(nY):
             Kland[0, i] = K[0, i]
-        for polish in range(3):
+        for polish in range(8):
             _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, nvar, Kland, A, C, s_fsal,
                        ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
             stats[2] += s_fsal
             stats[5] += 1
             for i in range(nY):
-                acc = 0.0
-                for m in range(s_fsal):
-                    acc += A[s_fsal, m] * Kland[m, i]
-                ynew[i] = y[i] + h_ev * acc
-            if wtype[w] != WF_SURFACE:
+                ynew[i] = ytmp[i]
+            if wtype[w] != WF_SURFACE or polish == 7:
                 break
+            # Newton on h(t + h_ev) with the landing step as the flow: quadratic, so a few
+            # iterations bring h to round-off even for slow (near-grazing) arrivals
             hv = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t + h_ev, ynew, n, buf,
                               fbuf, hdx)
-            ev(W_HX, widx[w], t + h_ev, ynew, p, hdx)
-            ev(W_HT, widx[w], t + h_ev, ynew, p, buf)
-            hd = buf[0] + _dot(hdx, Kland[s_fsal], n)
-            if hd == 0.0:
+            hd = _surface_rate(ev, p, dkind, widx[w], mode, nm, t + h_ev, ynew, Kland[s_fsal], n,
+                               buf, hdx)
+            if hd == 0.0 or hv == 0.0:
                 break
             dt = -hv / hd
-            if abs(dt) <= 2.0 * _ulp(t + h_ev) or abs(dt) > 0.01 * h_ev or h_ev + dt <= 0.0:
+            if abs(dt) <= 2.0 * _ulp(t + h_ev) or h_ev + dt <= 0.0 or h_ev + dt > h:
                 break
             h_ev += dt
         # landing-step dense output (extra stages for DOP853)
@@ -918,10 +1022,22 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
         if act == ACT_EVENT:
             j = wref[w]
             ev(W_GUARD, j, t, y, p, buf)
-            if buf[0] == 0.0:
-                # guard does not hold: no event; continue past this crossing
+            guard_ok = buf[0] != 0.0
+            # a crossing whose normal velocity points against the event direction is
+            # round-off around a previous event (the state is already leaving): not an event
+            ev(W_HD, widx[w] * nm + mode, t, y, p, buf)
+            vn = buf[0]
+            moving_away = etab[j, 1] != 0 and vn * etab[j, 1] < 0.0
+            if not guard_ok or moving_away:
+                # no event: continue past this crossing
                 last_type = wtype[w]; last_idx = widx[w]; last_mode = wmode[w]
                 last_sign = new_sign
+                if moving_away:
+                    last_sign = 1.0 if vn > 0.0 else -1.0
+                    # the state sits a little on the far side (round-off of an earlier event)
+                    # and is moving back: values within that depth are not a new crossing
+                    ev(W_H, widx[w], t, y, p, buf)
+                    last_depth = 4.0 * abs(buf[0])
                 last_t = t
                 # the interval [t_ev, ...] continues smoothly: mark the stored interval as step
                 ikind[n_nodes - 2] = 0 if save_all else 1
@@ -1093,7 +1209,17 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
         if stats[3] >= max_events:
             status = ST_MAX_EVENTS
             break
+        # Zeno: events on the same function closer than the resolution of t, repeatedly
+        if (last_type == wtype[w] and last_idx == widx[w]
+                and t - last_t <= 64.0 * _ulp(t)):
+            zeno += 1
+            if zeno >= 3:
+                status = ST_ZENO
+                break
+        else:
+            zeno = 0
         # re-trigger guard: the side of the function after the event
+        last_depth = 0.0
         last_type = wtype[w]
         last_idx = widx[w]
         last_mode = wmode[w]

@@ -193,7 +193,16 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
      ev_xb, ev_xa, stats) = res
     n = model.n_states
     status = Status(int(status))
-    states = [_state_name(model, k, i, m) for k, i, m in nodes_s]
+    # discrete state per node, mapped through the few distinct codes (vectorised: runs can
+    # have millions of nodes)
+    key = (nodes_s[:, 0] << 40) + ((nodes_s[:, 1] + 1) << 20) + nodes_s[:, 2]
+    starts = np.concatenate(([0], np.flatnonzero(np.diff(key)) + 1)) if len(key) else key
+    label = {}
+    for i in starts:
+        if key[i] not in label:
+            label[key[i]] = _state_name(model, *nodes_s[i])
+    run_names = np.array([label[key[i]] for i in starts], dtype=str)
+    states = np.repeat(run_names, np.diff(np.append(starts, len(key))))
     events = []
     for r in range(len(ev_t)):
         kind, ref, ok, oi, om, nk, ni, nmode = ev_info[r]
