@@ -40,13 +40,14 @@ W_H, W_HX, W_HT = 3, 4, 5
 W_HD, W_HDX, W_HDT = 6, 7, 8
 W_G, W_GX, W_GT = 9, 10, 11
 W_GUARD = 12
+W_HHD = 13  # h and hdot together (one call per step in the event detection hot loop)
 
 #: Signature of the generated function: evaluate(which, idx, t, x, p, out) -> None
 EVALUATE_SIGNATURE = types.void(types.int64, types.int64, types.float64, types.float64[::1],
                                 types.float64[::1], types.float64[::1])
 EVALUATE_TYPE = types.FunctionType(EVALUATE_SIGNATURE)
 
-_CODEGEN_VERSION = "1"
+_CODEGEN_VERSION = "3"
 
 
 def cache_dir() -> Path:
@@ -123,13 +124,14 @@ def derivatives(model: Model) -> Derivatives:
             cases[(W_HD, k * nm + i)] = [hd]
             cases[(W_HDX, k * nm + i)] = [_clean(e) for e in sp.Matrix([hd]).jacobian(X)]
             cases[(W_HDT, k * nm + i)] = [_clean(sp.diff(hd, t))]
+            cases[(W_HHD, k * nm + i)] = [h, hd]
     for j, ev in enumerate(model.events):
         g = sp.Matrix(ev.reset if ev.reset is not None else model.state_symbols)
         cases[(W_G, j)] = list(g)
         cases[(W_GX, j)] = [_clean(e) for e in g.jacobian(X)]
         cases[(W_GT, j)] = [_clean(e) for e in g.diff(t)]
         cases[(W_GUARD, j)] = [ev.guard if ev.guard is not None else sp.true]
-    assert all(len(v) in (1, n, n * n) for v in cases.values())
+    assert all(len(v) in (1, 2, n, n * n) for v in cases.values())
     return Derivatives(cases)
 
 
@@ -148,10 +150,16 @@ def generate_source(model: Model) -> str:
         "@numba.njit(EVALUATE_SIGNATURE, cache=True, fastmath=False, error_model='numpy')",
         "def evaluate(which, idx, t, x, p, out):",
     ]
+    # User names become locals with a prefix (``s_`` states, ``p_`` parameters), so that no
+    # state or parameter (``x``, ``p``, ``out``, ``math``, ...) can shadow an argument of
+    # ``evaluate``, a module global or a CSE temporary (``_c0``, ...).
+    rename = {sym: sp.Symbol(f"s_{sym.name}", real=True) for sym in model.state_symbols}
+    rename.update({sym: sp.Symbol(f"p_{sym.name}", real=True)
+                   for sym in model.parameter_symbols})
     for i, s in enumerate(model.states):
-        lines.append(f"    {s} = x[{i}]")
+        lines.append(f"    s_{s} = x[{i}]")
     for i, s in enumerate(model.parameters):
-        lines.append(f"    {s} = p[{i}]")
+        lines.append(f"    p_{s} = p[{i}]")
     by_which: dict = {}
     for (which, idx), exprs in der.cases.items():
         by_which.setdefault(which, []).append((idx, exprs))
@@ -159,13 +167,14 @@ def generate_source(model: Model) -> str:
         lines.append(f"    if which == {which}:")
         for idx, exprs in sorted(by_which[which], key=lambda c: c[0]):
             lines.append(f"        if idx == {idx}:")
+            exprs = [sp.sympify(e).xreplace(rename) for e in exprs]
             if which == W_GUARD:
                 e = exprs[0]
                 code = pr.doprint(e)
                 lines.append(f"            out[0] = 1.0 if ({code}) else 0.0")
                 lines.append("            return")
                 continue
-            subs, reduced = sp.cse([sp.sympify(e) for e in exprs], symbols=sp.numbered_symbols("_c"))
+            subs, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("_c"))
             for sym, val in subs:
                 lines.append(f"            {sym} = {pr.doprint(val)}")
             for k, e in enumerate(reduced):

@@ -11,6 +11,7 @@ construct.
 from __future__ import annotations
 
 import ast
+import math
 import operator
 
 import sympy as sp
@@ -28,6 +29,15 @@ FUNCTIONS = {
     "sign": sp.sign, "Heaviside": sp.Heaviside, "heaviside": sp.Heaviside,
     "Max": sp.Max, "Min": sp.Min, "max": sp.Max, "min": sp.Min,
 }
+
+#: Number of arguments each function takes: (min, max); max None = any number.
+ARITY = {name: (1, 1) for name in FUNCTIONS}
+ARITY.update({"atan2": (2, 2), "arctan2": (2, 2), "log": (1, 2), "Max": (1, None),
+              "Min": (1, None), "max": (1, None), "min": (1, None)})
+
+#: Largest exponent allowed in a power of two numbers (``9**9**9`` would be computed exactly
+#: by SymPy and never finish).
+MAX_NUMERIC_EXPONENT = 1000
 
 #: Constants an expression may use.
 CONSTANTS = {"pi": sp.pi, "e_const": sp.E, "inf": sp.oo}
@@ -87,6 +97,9 @@ def parse_expression(text, names: dict, *, field: str = "", source: str | None =
         tree = ast.parse(src, mode="eval")
     except SyntaxError as exc:
         fail(f"invalid expression {text!r}: {exc.msg}")
+    except (MemoryError, RecursionError):
+        # CPython's parser gives up on very deep nesting ('-' * 10000 + '1')
+        fail("expression nested too deeply (or too long a chain of operators) to parse")
 
     def walk(node, depth=0):
         if depth > 200:
@@ -96,6 +109,8 @@ def parse_expression(text, names: dict, *, field: str = "", source: str | None =
         if isinstance(node, ast.Constant):
             if isinstance(node.value, bool) or not isinstance(node.value, (int, float)):
                 fail(f"only numeric literals are allowed, not {node.value!r}")
+            if isinstance(node.value, float) and not math.isfinite(node.value):
+                fail(f"the number in {text!r} is not finite in double precision")
             return sp.Integer(node.value) if isinstance(node.value, int) else sp.Float(node.value)
         if isinstance(node, ast.Name):
             if node.id in names:
@@ -106,8 +121,26 @@ def parse_expression(text, names: dict, *, field: str = "", source: str | None =
                 fail(f"function {node.id!r} used without arguments")
             fail(f"unknown name {node.id!r} in expression {text!r}; known names are "
                  f"{', '.join(sorted(names))}")
-        if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
-            return _BINOPS[type(node.op)](walk(node.left, depth + 1), walk(node.right, depth + 1))
+        if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS \
+                and not isinstance(node.op, ast.Pow):
+            # a long sum or product 'a + b + c + ...' is a deep left spine: walk it iteratively
+            # so that its length does not count as nesting depth
+            spine = []
+            while isinstance(node, ast.BinOp) and type(node.op) in _BINOPS \
+                    and not isinstance(node.op, ast.Pow):
+                spine.append(node)
+                node = node.left
+            val = walk(node, depth + 1)
+            for op_node in reversed(spine):
+                val = _BINOPS[type(op_node.op)](val, walk(op_node.right, depth + 1))
+            return val
+        if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Pow):
+            base, expo = walk(node.left, depth + 1), walk(node.right, depth + 1)
+            if (base.is_number and expo.is_number and expo.is_real
+                    and abs(float(expo)) > MAX_NUMERIC_EXPONENT and base not in (0, 1, -1)):
+                fail(f"the power in {text!r} has a numeric exponent larger than "
+                     f"{MAX_NUMERIC_EXPONENT}; write the number as a literal")
+            return base ** expo
         if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
             val = walk(node.operand, depth + 1)
             return -val if isinstance(node.op, ast.USub) else val
@@ -118,6 +151,14 @@ def parse_expression(text, names: dict, *, field: str = "", source: str | None =
                      f"{', '.join(sorted(FUNCTIONS))}")
             if node.keywords:
                 fail(f"keyword arguments are not allowed in a call of {node.func.id!r}")
+            lo, hi = ARITY[node.func.id]
+            if len(node.args) < lo or (hi is not None and len(node.args) > hi):
+                want = f"{lo}" if lo == hi else (f"at least {lo}" if hi is None
+                                                 else f"{lo} to {hi}")
+                fail(f"{node.func.id!r} takes {want} argument(s), got {len(node.args)} in "
+                     f"{text!r}")
+            if any(isinstance(a, ast.Starred) for a in node.args):
+                fail(f"starred arguments are not allowed in a call of {node.func.id!r}")
             args = [walk(a, depth + 1) for a in node.args]
             try:
                 return FUNCTIONS[node.func.id](*args)

@@ -14,6 +14,7 @@ The model is symbolic (SymPy). :mod:`pwsdyn.model.codegen` turns it into compile
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 import re
@@ -178,10 +179,13 @@ class Model:
             return None
         p = self.parameter_vector(params)
         val = float(self.forcing_period.subs(dict(zip(self.parameter_symbols, p))))
+        if not (math.isfinite(val) and val > 0):
+            raise ValueError(f"the forcing period of model {self.name!r} must be a positive "
+                             f"number, got {val!r} for these parameters")
         return val
 
     # --- identity ------------------------------------------------------------------------
-    @property
+    @functools.cached_property
     def hash(self) -> str:
         """A hash of everything that defines the compiled model (not its description)."""
         parts = [self.name, repr(self.states), repr(list(self.parameters))]
@@ -267,7 +271,15 @@ def _model_from_toml_text(text: str, origin: str) -> Model:
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
+        # Python < 3.14 has no ``lineno`` attribute: the position is only in the message,
+        # '... (at line 3, column 20)' or '... (at end of document)'
         line = getattr(exc, "lineno", None)
+        if line is None:
+            m = re.search(r"at line (\d+)", str(exc))
+            if m:
+                line = int(m.group(1))
+            elif "end of document" in str(exc):
+                line = max(1, len(text.splitlines()))
         raise ModelError(f"malformed TOML: {exc}", source=origin, line=line) from None
     return model_from_dict(data, origin=origin, text=text)
 
@@ -483,12 +495,15 @@ def model_from_dict(data: dict, origin: str = "<dict>", text: str | None = None)
 
     fp = None
     if data.get("forcing_period") is not None:
-        pnames = {TIME: t, **{p: sp.Symbol(p, real=True) for p in parameters}}
+        # a function of the parameters only (not of time or state)
+        pnames = {p: sp.Symbol(p, real=True) for p in parameters}
         fp = parse_expression(data["forcing_period"], pnames, field="forcing_period",
                               source=origin, line=W.line("forcing_period"))
     init = 0
     if "initial_mode" in data:
         init = mode_ref(data["initial_mode"], "initial_mode")
+
+    _check_defaults(data.get("defaults"), states, parameters, W)
 
     desc = data.get("description", "")
     ref = data.get("reference", data.get("source", ""))
@@ -498,3 +513,64 @@ def model_from_dict(data: dict, origin: str = "<dict>", text: str | None = None)
                  surfaces=tuple(surfaces), events=tuple(events), switches=tuple(switches),
                  description=desc, reference=ref, definitions=definitions, forcing_period=fp,
                  initial_mode=init, origin=origin, spec=data)
+
+
+_DEFAULTS_KEYS = {"x0", "t0", "t_end", "params"}
+
+
+def _check_defaults(d, states, parameters, W: _Where) -> None:
+    """Validate the optional ``[defaults]`` table: ``x0`` (by state name or in state order),
+    ``t0`` (a number, default 0), ``t_end`` (a number after ``t0``) and ``params`` (known
+    parameter names, finite values)."""
+    if d is None:
+        return
+    if not isinstance(d, dict):
+        raise W.error("`defaults` must be a table with x0, t_end and optionally t0, params",
+                      "defaults")
+    bad = sorted(set(d) - _DEFAULTS_KEYS)
+    if bad:
+        raise W.error(f"unknown key(s) {bad} in `defaults`; allowed keys are "
+                      f"{sorted(_DEFAULTS_KEYS)}", f"defaults.{bad[0]}")
+
+    def number(v):
+        return not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
+
+    if "x0" in d:
+        x0 = d["x0"]
+        if isinstance(x0, dict):
+            unknown = sorted(set(x0) - set(states))
+            if unknown:
+                raise W.error(f"`defaults.x0` names unknown state(s) {unknown}; states are "
+                              f"{states}", "defaults.x0")
+            missing = [s for s in states if s not in x0]
+            if missing:
+                raise W.error(f"`defaults.x0` is missing state(s) {missing}", "defaults.x0")
+            vals = list(x0.values())
+        elif isinstance(x0, list):
+            if len(x0) != len(states):
+                raise W.error(f"`defaults.x0` must have {len(states)} entries (states "
+                              f"{states}), got {len(x0)}", "defaults.x0")
+            vals = x0
+        else:
+            raise W.error("`defaults.x0` must be a table by state name or an array",
+                          "defaults.x0")
+        if not all(number(v) for v in vals):
+            raise W.error(f"`defaults.x0` must hold finite numbers, got {x0!r}", "defaults.x0")
+    if "t0" in d and not number(d["t0"]):
+        raise W.error(f"`defaults.t0` must be a finite number, got {d['t0']!r}", "defaults.t0")
+    t0 = d.get("t0", 0.0)
+    if "t_end" in d and not (number(d["t_end"]) and d["t_end"] > t0):
+        raise W.error(f"`defaults.t_end` must be a number after t0 = {t0!r}, got "
+                      f"{d['t_end']!r}", "defaults.t_end")
+    if "params" in d:
+        ps = d["params"]
+        if not isinstance(ps, dict):
+            raise W.error("`defaults.params` must be a table of parameter = value",
+                          "defaults.params")
+        for k, v in ps.items():
+            if k not in parameters:
+                raise W.error(f"`defaults.params` sets unknown parameter {k!r}; parameters "
+                              f"are {list(parameters)}", "defaults.params", k)
+            if not number(v):
+                raise W.error(f"`defaults.params.{k}` must be a finite number, got {v!r}",
+                              "defaults.params", k)
