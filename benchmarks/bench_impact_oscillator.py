@@ -385,7 +385,11 @@ def main(argv=None):
     tm_nd = Timer(lambda: pwsdyn_run(model, N * T, rtol, atol, False, meth))
     tm_d = Timer(lambda: pwsdyn_run(model, N * T, rtol, atol, True, meth))
     tm_sp = Timer(lambda: scipy_run(params, Ns * T, rtol, atol, meth))
-    time_interleaved([(tm_nd, args.repeats), (tm_d, args.repeats), (tm_sp, args.scipy_repeats)])
+    # the 8th-order pair at the same tolerances: what a user gets by switching `method`
+    pwsdyn_run(model, T, rtol, atol, False, "DOP853")
+    tm_8 = Timer(lambda: pwsdyn_run(model, N * T, rtol, atol, False, "DOP853"))
+    time_interleaved([(tm_nd, args.repeats), (tm_d, args.repeats), (tm_8, args.repeats),
+                      (tm_sp, args.scipy_repeats)])
     exact = ExactImpactOscillator(params)
     tm_ex = Timer(lambda: exact.impacts(Ns * T))
     tm_ex.run()
@@ -394,6 +398,7 @@ def main(argv=None):
     ti_ex, vp_ex = tm_ex.result
     ti_nd, vp_nd, vm_nd = pwsdyn_impacts(traj_nd)
     ti_d, vp_d, _ = pwsdyn_impacts(traj_d)
+    ti_8, vp_8, _ = pwsdyn_impacts(tm_8.result)
     other = sorted({e.kind for e in traj_nd.events if e.kind != "impact"})
     dense_same = len(ti_d) == len(ti_nd) and bool(np.all(ti_d == ti_nd) and np.all(vp_d == vp_nd))
 
@@ -422,7 +427,8 @@ def main(argv=None):
     d_t_ps, k_ps = max_abs_diff(ti_nd, ti_sp, n_sp)
     d_v_ps, _ = max_abs_diff(vp_nd, vp_sp, n_sp)
     err = {}
-    for name, (ti, vp) in {"pwsdyn": (ti_nd, vp_nd), "scipy": (ti_sp, vp_sp)}.items():
+    for name, (ti, vp) in {"pwsdyn": (ti_nd, vp_nd), "scipy": (ti_sp, vp_sp),
+                           "pwsdyn_dop853": (ti_8, vp_8)}.items():
         et, k_ex = max_abs_diff(ti, ti_ex, K)
         ev, _ = max_abs_diff(vp, vp_ex, K)
         et_all, _ = max_abs_diff(ti, ti_ex, len(ti_ex))
@@ -446,6 +452,7 @@ def main(argv=None):
     rows = [
         ("pwsdyn dense=False", N, tm_nd, err["pwsdyn"]),
         ("pwsdyn dense=True", N, tm_d, err["pwsdyn"]),
+        ("pwsdyn DOP853 dense=F", N, tm_8, err["pwsdyn_dop853"]),
         (f"scipy solve_ivp {meth}*", Ns, tm_sp, err["scipy"]),
         ("exact (closed form)", Ns, tm_ex, None),
     ]
@@ -468,6 +475,10 @@ def main(argv=None):
           f"single-threaded.")
     print(f"scipy / pwsdyn per period: {ratio_nd:.0f}x (dense=False), {ratio_d:.0f}x "
           f"(dense=True); by CPU time {ratio_cpu:.0f}x (dense=False). Target >= 300x.")
+    ratio_8 = us(tm_sp.wall, Ns) / us(tm_8.wall, N)
+    print(f"scipy {meth} / pwsdyn DOP853 at the same rtol/atol (dense=False): {ratio_8:.0f}x, "
+          f"with errors vs exact {err['pwsdyn_dop853']['t']:.1e} (scipy "
+          f"{err['scipy']['t']:.1e})")
     print(f"pwsdyn start-up in this process (excluded above): import {IMPORT_S:.2f} s (loads the "
           f"kernel from numba's cache), first simulate {first_call:.2f} s (of which loading the "
           f"model's generated function {cm.compile_seconds:.2f} s)")
@@ -514,6 +525,7 @@ def main(argv=None):
             "exact": {"periods": Ns, "seconds": tm_ex.wall, "us_per_period": us(tm_ex.wall, Ns),
                       "impacts": len(ti_ex)},
             "ratio_scipy_over_pwsdyn": {"dense_false": ratio_nd, "dense_true": ratio_d,
+                                        "pwsdyn_dop853_dense_false": ratio_8,
                                         "dense_false_cpu_time": ratio_cpu},
             "agreement": {"tolerance": tol, "ok": agree, "impact_counts_match": count_ok,
                           "pwsdyn_vs_scipy": {"impacts": k_ps, "max_dt": d_t_ps,

@@ -11,3 +11,10 @@ from .errors import (ExpressionError as ExpressionError, ModelError as ModelErro
 from .integrate import EventRecord as EventRecord, Trajectory as Trajectory, simulate as simulate
 from .model import Model as Model, compile_model as compile_model, load_model as load_model
 from .model import zoo_names as zoo_names
+from .orbits import (OrbitError as OrbitError, PeriodicOrbit as PeriodicOrbit,
+                     find_periodic_orbit as find_periodic_orbit)
+from .stability import (SectionNotReachedError as SectionNotReachedError,
+                        floquet_multipliers as floquet_multipliers, monodromy as monodromy,
+                        poincare_map as poincare_map, saltation_matrix as saltation_matrix)
+from .explore import (basins as basins, lyapunov_spectrum as lyapunov_spectrum,
+                      sweep as sweep)

@@ -1,7 +1,10 @@
 """The ``pwsdyn`` command line.
 
 ``pwsdyn models`` lists the built-in models; ``pwsdyn simulate MODEL`` simulates a built-in
-model or a model file and writes the trajectory (NetCDF) and a figure (PNG).
+model or a model file and writes the trajectory (NetCDF) and a figure (PNG); ``pwsdyn sweep``
+and ``pwsdyn basins`` compute bifurcation diagrams and basins of attraction (parallel on Dask,
+resumable) and write their datasets and figures; ``pwsdyn orbit MODEL`` finds a periodic
+orbit by Newton shooting and prints its period, signature and Floquet multipliers.
 
 Errors in the arguments or the model, and failed simulations, are reported as one line
 ``Error: ...`` without a traceback: exit code 2 for a bad argument (click's convention for
@@ -212,11 +215,14 @@ def models_cmd():
 @click.option("--method", type=click.Choice(["RK45", "DOP853"], case_sensitive=False),
               default=None, help="Runge-Kutta pair (default RK45).")
 @click.option("--mode", default=None, metavar="NAME", help="Initial mode.")
+@click.option("--sliding", type=click.Choice(["convex", "utkin"], case_sensitive=False),
+              default=None, help="Sliding vector field on Filippov surfaces: Filippov's convex "
+                                 "combination (default) or Utkin's equivalent control.")
 @click.option("--out", "out", type=click.Path(dir_okay=False), default=None,
               help="Write the trajectory to this NetCDF file.")
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
               help="Write a figure of the trajectory to this PNG file.")
-def simulate_cmd(model, params, x0, t0, t_end, rtol, atol, method, mode, out, plot):
+def simulate_cmd(model, params, x0, t0, t_end, rtol, atol, method, mode, sliding, out, plot):
     """Simulate MODEL (a built-in name, see `pwsdyn models`, or a TOML file).
 
     Prints a summary; with --out and --plot also writes the trajectory and a figure.
@@ -255,6 +261,8 @@ def simulate_cmd(model, params, x0, t0, t_end, rtol, atol, method, mode, out, pl
         options["method"] = method.upper()
     if mode is not None:
         options["mode"] = mode
+    if sliding is not None:
+        options["sliding"] = sliding.lower()
 
     try:
         traj = pwsdyn.simulate(mdl, x0_val, (t0, t_end), params=all_params, throw=False,
@@ -282,6 +290,361 @@ def simulate_cmd(model, params, x0, t0, t_end, rtol, atol, method, mode, out, pl
               f"{traj.state[-1]}: {traj.message}")
 
 
+def _explore_common(model, sets, x0, method, rtol, atol):
+    """Load MODEL, check ``--set`` and ``--x0`` and collect integrator options."""
+    import pwsdyn
+    from .errors import ModelError
+
+    params = _parse_params(sets)
+    cli_x0 = _parse_x0(x0)
+    try:
+        mdl = pwsdyn.load_model(model)
+        defaults = _model_defaults(mdl)
+    except ModelError as exc:
+        _fail(exc)
+    unknown = [k for k in params if k not in mdl.parameters]
+    if unknown:
+        raise click.BadParameter(f"unknown parameter(s) {unknown} for model {mdl.name!r}; "
+                                 f"parameters are {list(mdl.parameters)}", param_hint="--set")
+    if cli_x0 is not None:
+        _check_x0(mdl, cli_x0)
+    all_params = dict(defaults.get("params", {}) or {})
+    all_params.update(params)
+    if cli_x0 is None:
+        cli_x0 = defaults.get("x0")
+    options = {}
+    for k, v in (("rtol", rtol), ("atol", atol), ("method", method.upper() if method else None)):
+        if v is not None:
+            options[k] = v
+    return mdl, all_params, cli_x0, options
+
+
+def _run_store(out, store):
+    """The store directory: ``--store``, else ``<out>.store`` (removed after success)."""
+    from pathlib import Path
+
+    if store is not None:
+        return Path(store), False
+    if out is not None:
+        return Path(str(out) + ".store"), True
+    return None, False
+
+
+_EXPLORE_OPTIONS = [
+    click.option("--set", "-s", "sets", multiple=True, metavar="NAME=VALUE",
+                 help="Value of another parameter (repeatable); default: the model's."),
+    click.option("--x0", "x0", multiple=True, metavar="VALUES",
+                 help="Initial state (as for `simulate`); default: the model's [defaults]."),
+    click.option("--transient", type=int, default=200, show_default=True,
+                 help="Forcing periods (maps: iterations) discarded."),
+    click.option("--samples", type=int, default=None,
+                 help="Forcing periods (maps: iterations) recorded [sweep 100, basins 32]."),
+    click.option("--section", default="stroboscopic", show_default=True,
+                 help="'stroboscopic' or the name of an event (e.g. impact)."),
+    click.option("--workers", type=int, default=None,
+                 help="1: in this process; N: local Dask cluster of N processes "
+                      "(default: one per core)."),
+    click.option("--scheduler", default=None, metavar="ADDRESS",
+                 help="Run on the Dask cluster of this scheduler instead."),
+    click.option("--chunk-size", "chunk_size", type=int, default=None,
+                 help="Values (basins: grid rows) per chunk (default: 1/16 of them)."),
+    click.option("--store", default=None, type=click.Path(file_okay=False),
+                 help="Resumable store directory (default: OUT.store, removed when done)."),
+    click.option("--rtol", type=float, default=None, help="Relative tolerance (1e-10)."),
+    click.option("--atol", type=float, default=None, help="Absolute tolerance (1e-12)."),
+    click.option("--method", type=click.Choice(["RK45", "DOP853"], case_sensitive=False),
+                 default=None, help="Runge-Kutta pair (default RK45)."),
+    click.option("--no-progress", "no_progress", is_flag=True, help="No progress bar."),
+    click.option("--out", type=click.Path(dir_okay=False), default=None,
+                 help="Write the dataset to this NetCDF file (never overwritten)."),
+    click.option("--plot", type=click.Path(dir_okay=False), default=None,
+                 help="Write the figure to this PNG file."),
+]
+
+
+def _explore_options(fn):
+    for opt in reversed(_EXPLORE_OPTIONS):
+        fn = opt(fn)
+    return fn
+
+
+def _finish_explore(ds, out, store_path, remove_store, plot, plot_fn):
+    import shutil
+
+    if out is not None:
+        click.echo(f"wrote       {out}")
+        if remove_store and store_path is not None and store_path.is_dir():
+            shutil.rmtree(store_path, ignore_errors=True)
+    if plot is not None:
+        try:
+            plot_fn(ds, path=plot)
+        except (OSError, ValueError) as exc:
+            _fail(exc)
+        click.echo(f"wrote       {plot}")
+
+
+def _explore_errors():
+    from .errors import ModelError, SolveError
+    from .explore import StoreMismatchError
+
+    return (ModelError, SolveError, StoreMismatchError, ValueError, TypeError,
+            FileExistsError, OSError)
+
+
+@main.command("sweep")
+@click.argument("model", metavar="MODEL|FILE")
+@click.option("--param", "param", required=True, metavar="NAME", help="Parameter swept.")
+@click.option("--from", "start", type=float, required=True, help="First value.")
+@click.option("--to", "stop", type=float, required=True, help="Last value.")
+@click.option("--num", type=int, required=True, help="Number of values (evenly spaced).")
+@click.option("--direction", type=click.Choice(["up", "down", "both"]), default="both",
+              show_default=True, help="Sweep up, down or both (hysteresis).")
+@click.option("--lyapunov", is_flag=True, help="Also compute Lyapunov exponents (slower).")
+@click.option("--state", default=None, help="State plotted (default: first, or last for an "
+              "event section).")
+@_explore_options
+def sweep_cmd(model, param, start, stop, num, direction, lyapunov, state, sets, x0, transient,
+              samples, section, workers, scheduler, chunk_size, store, rtol, atol, method,
+              no_progress, out, plot):
+    """Brute-force bifurcation diagram of MODEL in parameter --param.
+
+    For each of --num values from --from to --to, run --transient forcing periods, record
+    --samples periods at the section and continue the final state into the next value.
+
+    \b
+    Examples:
+      pwsdyn sweep impact-oscillator --param omega --from 2 --to 3.6 --num 400 \\
+          --out diagram.nc --plot diagram.png
+      pwsdyn sweep sqrt-map --param mu --from 0.001 --to 0.05 --num 200 --set lam=0.8 \\
+          --lyapunov --plot sqrt.png
+    """
+    import numpy as np
+
+    import pwsdyn
+    from .plot import plot_bifurcation, plot_lyapunov
+
+    if num < 1:
+        raise click.BadParameter(f"must be at least 1, got {num}", param_hint="--num")
+    mdl, params, x0v, options = _explore_common(model, sets, x0, method, rtol, atol)
+    if param not in mdl.parameters:
+        raise click.BadParameter(f"unknown parameter {param!r} for model {mdl.name!r}; "
+                                 f"parameters are {list(mdl.parameters)}", param_hint="--param")
+    params.pop(param, None)
+    store_path, remove_store = _run_store(out, store)
+    values = np.linspace(start, stop, num) if num > 1 else np.array([start])
+    try:
+        ds = pwsdyn.sweep(mdl, param, values, x0v, params=params, transient=transient,
+                          samples=100 if samples is None else samples, section=section,
+                          direction=direction, lyapunov=lyapunov, workers=workers,
+                          scheduler=scheduler, chunk_size=chunk_size, store=store_path,
+                          out=out, progress=not no_progress, **options)
+    except _explore_errors() as exc:
+        _fail(exc)
+    per = ds.period.values
+    click.echo(f"model       {mdl.name} (hash {mdl.hash})")
+    click.echo(f"swept       {param} from {_fmt(values[0])} to {_fmt(values[-1])} "
+               f"({num} values, {', '.join(map(str, ds.direction.values))})")
+    click.echo(f"periods     " + ", ".join(
+        f"{k if k else 'none'}: {int(np.sum(per == k))}" for k in np.unique(per)))
+    nbad = int(np.sum(ds.status.values != 0))
+    if nbad:
+        click.echo(f"failed      {nbad} value(s) failed or diverged (status != 0)")
+
+    def both(d, path):
+        fig = plot_bifurcation(d, state=state, path=path)
+        if lyapunov:
+            from pathlib import Path as _P
+
+            p = _P(path)
+            plot_lyapunov(d, path=p.with_name(p.stem + "-lyapunov" + p.suffix))
+        return fig
+
+    _finish_explore(ds, out, store_path, remove_store, plot, both)
+
+
+@main.command("basins")
+@click.argument("model", metavar="MODEL|FILE")
+@click.option("--x", "xname", required=True, metavar="STATE", help="State on the first axis.")
+@click.option("--x-from", "x_from", type=float, required=True)
+@click.option("--x-to", "x_to", type=float, required=True)
+@click.option("--x-num", "x_num", type=int, required=True)
+@click.option("--y", "yname", default=None, metavar="STATE",
+              help="State on the second axis (flows: required; 1-D maps: omit).")
+@click.option("--y-from", "y_from", type=float, default=None)
+@click.option("--y-to", "y_to", type=float, default=None)
+@click.option("--y-num", "y_num", type=int, default=None)
+@_explore_options
+def basins_cmd(model, xname, x_from, x_to, x_num, yname, y_from, y_to, y_num, sets, x0,
+               transient, samples, section, workers, scheduler, chunk_size, store, rtol,
+               atol, method, no_progress, out, plot):
+    """Basins of attraction of MODEL on a grid of initial conditions.
+
+    \b
+    Example:
+      pwsdyn basins bouncing-ball --x y --x-from 0.1 --x-to 2 --x-num 100 \\
+          --y v --y-from -4 --y-to 4 --y-num 100 --set A=0.2236 --set omega=6.2832 \\
+          --out basins.nc --plot basins.png
+    """
+    import numpy as np
+
+    import pwsdyn
+    from .plot import plot_basins
+
+    mdl, params, x0v, options = _explore_common(model, sets, x0, method, rtol, atol)
+    grid = {}
+    for name, a, b, n, hint in ((xname, x_from, x_to, x_num, "--x"),
+                                (yname, y_from, y_to, y_num, "--y")):
+        if name is None:
+            if any(v is not None for v in (a, b, n)) and hint == "--y":
+                raise click.BadParameter("--y-from/--y-to/--y-num need --y", param_hint="--y")
+            continue
+        if a is None or b is None or n is None:
+            raise click.BadParameter(f"{hint} needs {hint}-from, {hint}-to and {hint}-num",
+                                     param_hint=hint)
+        if n < 1:
+            raise click.BadParameter(f"{hint}-num must be at least 1, got {n}",
+                                     param_hint=f"{hint}-num")
+        if name not in mdl.states:
+            raise click.BadParameter(f"unknown state {name!r}; states are "
+                                     f"{list(mdl.states)}", param_hint=hint)
+        grid[name] = np.linspace(a, b, n) if n > 1 else np.array([a])
+    store_path, remove_store = _run_store(out, store)
+    try:
+        ds = pwsdyn.basins(mdl, grid, x0v, params=params, transient=transient,
+                           samples=32 if samples is None else samples, section=section,
+                           workers=workers, scheduler=scheduler, chunk_size=chunk_size,
+                           store=store_path, out=out, progress=not no_progress, **options)
+    except _explore_errors() as exc:
+        _fail(exc)
+    click.echo(f"model       {mdl.name} (hash {mdl.hash})")
+    click.echo(f"grid        " + " x ".join(f"{k}: {len(v)}" for k, v in grid.items()))
+    for b, f in zip(ds.basin.values, ds.fraction.values):
+        if f == 0:
+            continue
+        if b >= 0:
+            k = int(ds.attractor_period.values[b])
+            what = f"period {k}" if k else "non-periodic"
+            what += f", {float(ds.attractor_events_per_period.values[b]):.3g} events/period"
+        else:
+            what = "diverged" if b == -1 else "failed"
+        click.echo(f"basin {int(b):>3}   {100 * f:6.2f}%  {what}")
+    _finish_explore(ds, out, store_path, remove_store, plot, plot_basins)
+
+
+@main.command("orbit")
+@click.argument("model", metavar="MODEL|FILE")
+@click.option("--param", "-p", "params", multiple=True, metavar="NAME=VALUE",
+              help="Parameter value (repeatable); overrides the model's defaults.")
+@click.option("--x0", "x0", multiple=True, metavar="VALUES",
+              help="Guess of the state at t0: values in state order (--x0 1,0) or NAME=VALUE "
+                   "pairs. Default: the model's [defaults] x0.")
+@click.option("--t0", type=float, default=None,
+              help="Time of x0 (the phase of a forced orbit; default the model's defaults.t0, "
+                   "else 0).")
+@click.option("--period", type=float, default=None,
+              help="Forced models: the period, a multiple of the forcing period (default "
+                   "--periods forcing periods). Autonomous models: a guess (default: from the "
+                   "recurrence of the events of a transient run).")
+@click.option("--periods", type=int, default=1, show_default=True,
+              help="Forced models: the period in forcing periods.")
+@click.option("--transient", type=float, default=None,
+              help="Simulate this long from x0 first and take the guess from the end of the "
+                   "run (default: none for forced models and autonomous ones given --period; "
+                   "else the model's defaults.t_end).")
+@click.option("--mode", default=None, metavar="STATE",
+              help="Discrete state at t0: a mode, stick:<event> or slide:<switch>.")
+@click.option("--nodes", default="auto", show_default=True,
+              help="Shooting nodes: 'auto' (one per smooth segment) or a number (1: single "
+                   "shooting).")
+@click.option("--tol", type=float, default=1e-10, show_default=True,
+              help="Newton tolerance on the shooting residual (relative).")
+@click.option("--rtol", type=float, default=None, help="Relative tolerance (default 1e-12).")
+@click.option("--atol", type=float, default=None, help="Absolute tolerance (default 1e-12).")
+@click.option("--method", type=click.Choice(["RK45", "DOP853"], case_sensitive=False),
+              default=None, help="Runge-Kutta pair (default DOP853).")
+@click.option("--out", "out", type=click.Path(dir_okay=False), default=None,
+              help="Write one period with its monodromy and multipliers to this NetCDF file.")
+@click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
+              help="Write a figure of the orbit with its events and multipliers (PNG).")
+def orbit_cmd(model, params, x0, t0, period, periods, transient, mode, nodes, tol, rtol, atol,
+              method, out, plot):
+    """Find a periodic orbit of MODEL by Newton shooting and print its Floquet multipliers.
+
+    Prints the period, the signature (the events over one period) and the multipliers; with
+    --out and --plot also writes the orbit and a figure. Unstable orbits are found as well as
+    stable ones, from a guess near them.
+
+    \b
+    Examples:
+      pwsdyn orbit impact-oscillator -p sigma=-0.5 -p eps=0.1 -p omega=2.8 --x0 -0.7,0 --plot o.png
+      pwsdyn orbit one-legged-jumper --transient 400 --out gait.nc
+    """
+    import pwsdyn
+    from .errors import ModelError, SolveError
+    from .orbits import OrbitError, PeriodicOrbit, find_periodic_orbit
+
+    cli_params = _parse_params(params)
+    cli_x0 = _parse_x0(x0)
+    try:
+        mdl = pwsdyn.load_model(model)
+        defaults = _model_defaults(mdl)
+    except ModelError as exc:
+        _fail(exc)
+    _check_params(mdl, cli_params)
+    if cli_x0 is not None:
+        _check_x0(mdl, cli_x0)
+    if periods < 1:
+        raise click.BadParameter("must be a positive integer", param_hint="--periods")
+    if nodes != "auto":
+        try:
+            nodes = int(nodes)
+        except ValueError:
+            raise click.BadParameter(f"'auto' or a positive integer, got {nodes!r}",
+                                     param_hint="--nodes") from None
+    try:
+        x0_val, t0, t_end, all_params = _resolve_defaults(mdl, defaults, cli_x0, t0, None,
+                                                          cli_params)
+    except (TypeError, ValueError) as exc:
+        _fail(f"model {mdl.name!r}: bad `defaults` table: {exc}")
+    options = {"tol": tol, "nodes": nodes}
+    for key, val in (("rtol", rtol), ("atol", atol),
+                     ("method", method.upper() if method else None)):
+        if val is not None:
+            options[key] = val
+    autonomous = mdl.forcing_period is None
+    if transient is None and autonomous and period is None:
+        transient = t_end
+    try:
+        if transient:
+            sim_opts = {k: options[k] for k in ("rtol", "atol", "method") if k in options}
+            traj = pwsdyn.simulate(mdl, x0_val, (t0, t0 + transient), params=all_params,
+                                   mode=mode, **sim_opts)
+            orbit = PeriodicOrbit.from_trajectory(traj, period=period, periods=periods,
+                                                  **options)
+        else:
+            orbit = find_periodic_orbit(mdl, x0_val, params=all_params, period=period, t0=t0,
+                                        periods=periods, mode=mode, **options)
+    except OrbitError as exc:
+        if exc.history:
+            click.echo("newton residuals: " + " ".join(f"{r:.2e}" for r in exc.history),
+                       err=True)
+        _fail(f"no periodic orbit ({exc.reason}): {exc}")
+    except (ModelError, SolveError, ValueError, TypeError) as exc:
+        _fail(exc)
+    click.echo(orbit.summary())
+    try:
+        if out is not None:
+            orbit.save(out)
+            click.echo(f"wrote       {out}")
+        if plot is not None:
+            from .plot import plot_orbit
+
+            plot_orbit(orbit, path=plot)
+            click.echo(f"wrote       {plot}")
+    except (OSError, ValueError) as exc:
+        _fail(exc)
+
+
 def _print_summary(traj):
     model = traj.model
     counts = traj.event_counts()
@@ -296,6 +659,16 @@ def _print_summary(traj):
         f"steps       {st.get('steps', '?')} accepted, {st.get('rejected_steps', '?')} rejected, "
         f"{st.get('nfev', '?')} function evaluations",
         f"events      {ev}",
+    ]
+    if model.switches:
+        # switching surfaces: crossings, sliding segments and the time spent sliding
+        slides = traj.sliding_intervals()
+        total = sum(b - a for a, b, _ in slides)
+        span = max(traj.t_final - traj.t0, 1e-300)
+        lines.append(f"switching   {counts.get('crossing', 0)} crossings, {len(slides)} sliding "
+                     f"segments, total sliding time {_fmt(total)} "
+                     f"({100.0 * total / span:.3g}% of the run)")
+    lines += [
         f"final       t={_fmt(traj.t_final)}: {final} (in {traj.state[-1]})",
         f"status      {traj.status.name}: {traj.message}",
     ]

@@ -394,6 +394,73 @@ def plot_trajectory(traj, path=None, states=None, phase=None, *, num: int = 4000
     return fig
 
 
+def plot_orbit(orbit, path=None, states=None, phase=None, *, num: int = 4000) -> Figure:
+    """A figure of a periodic orbit: one period with its events, and its Floquet multipliers.
+
+    The panels of :func:`plot_trajectory` for ``orbit.trajectory`` (time series, phase plane,
+    events marked by kind, event surfaces), the period and stability in the title, and an inset
+    in the phase plane (or the first time series) with the multipliers and the unit circle.
+
+    Parameters
+    ----------
+    orbit : PeriodicOrbit
+        A result of :func:`pwsdyn.find_periodic_orbit`.
+    path : str or pathlib.Path, optional
+        Also save the figure there.
+    states, phase, num
+        As for :func:`plot_trajectory`.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    for attr in ("trajectory", "multipliers", "period", "events"):
+        if not hasattr(orbit, attr):
+            raise TypeError(f"`orbit` must be a PeriodicOrbit, got {type(orbit).__name__}")
+    if orbit.trajectory is None:
+        raise ValueError("the orbit has no trajectory to plot")
+    mult = np.atleast_1d(np.asarray(orbit.multipliers if orbit.multipliers is not None else [],
+                                    dtype=complex))
+    stab = "stable" if orbit.stable else "unstable"
+    head = _title(orbit.trajectory).split("\n")[0]
+    title = (f"{head}\nperiodic orbit: $T = {orbit.period:.10g}$, {len(orbit.events)} events "
+             f"per period, {stab}"
+             + ("" if orbit.converged else " (NOT converged)"))
+    fig = plot_trajectory(orbit.trajectory, states=states, phase=phase, num=num, title=title)
+    axes = [ax for ax in fig.axes if ax.get_title() == "phase plane"] or fig.axes[:1]
+    ins = axes[0].inset_axes(_emptiest_corner(axes[0], 0.28))
+    th = np.linspace(0.0, 2.0 * np.pi, 200)
+    ins.plot(np.cos(th), np.sin(th), color=SURFACE_COLOR, lw=0.8)
+    ins.scatter(mult.real, mult.imag, s=18, marker="x", color="#D55E00", zorder=3)
+    lim = max(1.15, 1.1 * float(np.max(np.abs(mult)))) if mult.size else 1.15
+    ins.set_xlim(-lim, lim)
+    ins.set_ylim(-lim, lim)
+    ins.set_aspect("equal")
+    ins.axhline(0.0, color="0.8", lw=0.5, zorder=0)
+    ins.axvline(0.0, color="0.8", lw=0.5, zorder=0)
+    ins.tick_params(labelsize="x-small")
+    ins.set_title("Floquet multipliers", fontsize="x-small")
+    if path is not None:
+        _save_figure(fig, path)
+    return fig
+
+
+def _emptiest_corner(ax, size: float) -> list:
+    """Axes-fraction bounds of the corner square of ``ax`` holding the fewest data points."""
+    pts = [np.asarray(line.get_xydata(), dtype=float) for line in ax.get_lines()]
+    pts = np.concatenate(pts) if pts else np.zeros((0, 2))
+    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+    u = (pts[:, 0] - x0) / (x1 - x0) if len(pts) else np.zeros(0)
+    v = (pts[:, 1] - y0) / (y1 - y0) if len(pts) else np.zeros(0)
+    m = 0.02
+    corners = [[1 - size - m, 1 - size - m], [m, 1 - size - m], [1 - size - m, m], [m, m]]
+    counts = [np.count_nonzero((u >= a) & (u <= a + size) & (v >= b) & (v <= b + size))
+              for a, b in corners]
+    a, b = corners[int(np.argmin(counts))]
+    return [a, b, size, size]
+
+
 def _segments(xpairs, ypairs):
     """Many two-point segments as one NaN-separated polyline (one artist, fast to draw)."""
     m = len(xpairs)
@@ -468,3 +535,170 @@ def _save_figure(fig: Figure, path) -> Path:
             pass
         raise
     return path
+
+
+# ======================================================================================
+# global analysis: bifurcation diagrams, basins, Lyapunov exponents (pwsdyn.explore)
+# ======================================================================================
+
+#: Colours of the up and down sweeps (Okabe-Ito blue and vermillion).
+SWEEP_COLORS = {"up": "#0072B2", "down": "#D55E00"}
+#: Colours of the basin labels -2 (run failed) and -1 (diverged); attractors use BASIN_COLORS.
+BASIN_SPECIAL_COLORS = {-2: "#7F7F7F", -1: "#000000"}
+BASIN_COLORS = ("#0072B2", "#E69F00", "#009E73", "#CC79A7", "#56B4E9", "#D55E00", "#F0E442",
+                "#8C564B", "#9467BD", "#BCBD22", "#17BECF", "#FF9896")
+
+
+def _tex(name: str) -> str:
+    return f"${_latex_name(name)}$"
+
+
+def _sweep_param(ds):
+    if ds.attrs.get("kind") != "sweep":
+        raise ValueError("expected the dataset of pwsdyn.sweep (attribute kind = 'sweep')")
+    return ds.attrs["parameter"]
+
+
+def plot_bifurcation(ds, state=None, path=None, *, markersize: float = 1.0) -> Figure:
+    """Bifurcation diagram of a :func:`pwsdyn.sweep` result.
+
+    Top: the section points of ``state`` against the parameter, the up and down sweeps in
+    two colours (down drawn over up with smaller markers, so hysteresis shows both). Bottom:
+    events per period (maps: border crossings per iteration).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        The result of :func:`pwsdyn.sweep` (or the NetCDF file it wrote, opened by xarray).
+    state : str or int, optional
+        The state plotted (default: the first state for a stroboscopic section, the last --
+        the velocity of the zoo's mechanical models -- for an event section).
+    path : str or Path, optional
+        Also save the figure there (PNG, PDF, SVG by extension).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    pname = _sweep_param(ds)
+    states = [str(s) for s in ds.state.values]
+    if state is None:
+        state = states[0] if ds.attrs.get("section") == "stroboscopic" else states[-1]
+    if isinstance(state, (int, np.integer)):
+        if not 0 <= state < len(states):
+            raise ValueError(f"`state` index {state} out of range for states {states}")
+        state = states[state]
+    if state not in states:
+        raise ValueError(f"unknown state {state!r}; states are {states}")
+    fig = Figure(figsize=(8.0, 6.0), layout="constrained")
+    ax, ax2 = fig.subplots(2, 1, sharex=True, height_ratios=(3, 1))
+    pv = ds[pname].values
+    for d in [str(x) for x in ds.direction.values]:
+        sec = ds.section.sel(direction=d, state=state).values  # (param, sample)
+        X = np.repeat(pv[:, None], sec.shape[1], axis=1)
+        ok = np.isfinite(sec)
+        ms = markersize if d == "up" else markersize * 0.6
+        ax.plot(X[ok], sec[ok], marker="o", ms=ms, mew=0, ls="none", color=SWEEP_COLORS[d],
+                alpha=0.7, label=f"sweep {d}", rasterized=True)
+        ax2.plot(pv, ds.events_per_period.sel(direction=d).values, drawstyle="steps-mid",
+                 color=SWEEP_COLORS[d], lw=1.0, label=f"sweep {d}")
+        bad = ds.status.sel(direction=d).values != 0
+        if bad.any():
+            ax.plot(pv[bad], np.full(bad.sum(), np.nanmin(sec) if ok.any() else 0.0), "x",
+                    color=SWEEP_COLORS[d], ms=4, label=f"failed / diverged ({d})")
+    section = ds.attrs.get("section", "stroboscopic")
+    what = "stroboscopic section" if section == "stroboscopic" else f"before each {section}"
+    if ds.attrs.get("model_kind") == "map":
+        what = "iterates"
+    ax.set_ylabel(f"{_tex(state)} ({what})")
+    ax2.set_ylabel("iterate crossings" if ds.attrs.get("model_kind") == "map"
+                   else "events / period")
+    ax2.set_xlabel(_tex(pname))
+    ax.set_title(f"{ds.attrs.get('model', '')}: bifurcation diagram in {pname}")
+    ax.legend(loc="best", fontsize=8, markerscale=6)
+    ax2.grid(True, lw=0.3)
+    if path is not None:
+        _save_figure(fig, path)
+    return fig
+
+
+def plot_lyapunov(ds, path=None) -> Figure:
+    """Lyapunov exponents against the parameter (a :func:`pwsdyn.sweep` run with
+    ``lyapunov=True``): every exponent, up and down sweeps in two colours, zero marked."""
+    pname = _sweep_param(ds)
+    if "lyapunov" not in ds:
+        raise ValueError("the sweep has no Lyapunov exponents: run it with lyapunov=True")
+    fig = Figure(figsize=(8.0, 4.0), layout="constrained")
+    ax = fig.subplots()
+    pv = ds[pname].values
+    ax.axhline(0.0, color="0.5", lw=0.8)
+    for d in [str(x) for x in ds.direction.values]:
+        ly = ds.lyapunov.sel(direction=d).values
+        for i in range(ly.shape[1]):
+            ax.plot(pv, ly[:, i], color=SWEEP_COLORS[d], lw=1.0, marker=".", ms=3,
+                    ls="-" if i == 0 else "--",
+                    label=f"$\\lambda_{{{i + 1}}}$ ({d})")
+    unit = "per iteration" if ds.attrs.get("model_kind") == "map" else "per unit time"
+    ax.set_xlabel(_tex(pname))
+    ax.set_ylabel(f"Lyapunov exponents ({unit})")
+    ax.set_title(f"{ds.attrs.get('model', '')}: Lyapunov spectrum")
+    ax.legend(fontsize=8, ncols=2)
+    ax.grid(True, lw=0.3)
+    if path is not None:
+        _save_figure(fig, path)
+    return fig
+
+
+def plot_basins(ds, path=None) -> Figure:
+    """Basins of attraction of a :func:`pwsdyn.basins` result: one categorical colour per
+    attractor, black for divergence, grey for failed runs, and a legend with each attractor's
+    period, events per period and basin fraction."""
+    from matplotlib.colors import BoundaryNorm, ListedColormap
+    from matplotlib.patches import Patch
+
+    if ds.attrs.get("kind") != "basins":
+        raise ValueError("expected the dataset of pwsdyn.basins (attribute kind = 'basins')")
+    lab = ds.label
+    dims = lab.dims
+    K = ds.sizes["attractor"]
+    ids = [-2, -1] + list(range(K))
+    colors = [BASIN_SPECIAL_COLORS[-2], BASIN_SPECIAL_COLORS[-1]] + [
+        BASIN_COLORS[k % len(BASIN_COLORS)] for k in range(K)]
+    cmap = ListedColormap(colors)
+    norm = BoundaryNorm(np.arange(-2.5, K, 1.0), cmap.N)
+    fig = Figure(figsize=(7.5, 6.0), layout="constrained")
+    ax = fig.subplots()
+    frac = dict(zip(ds.basin.values.tolist(), ds.fraction.values.tolist()))
+    if len(dims) == 2:
+        x, y = ds[dims[0]].values, ds[dims[1]].values
+        ax.pcolormesh(x, y, lab.values.T, cmap=cmap, norm=norm, shading="nearest",
+                      rasterized=True)
+        ax.set_xlabel(_tex(dims[0]))
+        ax.set_ylabel(_tex(dims[1]))
+    else:
+        x = ds[dims[0]].values
+        ax.pcolormesh(x, [0, 1], np.vstack([lab.values, lab.values]), cmap=cmap, norm=norm,
+                      shading="nearest", rasterized=True)
+        ax.set_yticks([])
+        ax.set_xlabel(_tex(dims[0]))
+    handles = []
+    for b, c in zip(ids, colors):
+        f = frac.get(b, 0.0)
+        if b >= 0:
+            k = int(ds.attractor_period.values[b])
+            ev = float(ds.attractor_events_per_period.values[b])
+            text = (f"{b}: non-periodic" if k == 0 else f"{b}: period {k}") + \
+                f", {ev:.3g} events/period"
+            if float(ds.attractor_stick_time.values[b]) > 0:
+                text += ", sticks"
+        elif f == 0:
+            continue
+        else:
+            text = "diverged" if b == -1 else "failed (budget)"
+        handles.append(Patch(color=c, label=f"{text} ({100 * f:.1f}%)"))
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8,
+              title="attractor")
+    ax.set_title(f"{ds.attrs.get('model', '')}: basins of attraction")
+    if path is not None:
+        _save_figure(fig, path)
+    return fig

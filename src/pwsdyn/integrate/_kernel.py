@@ -14,8 +14,23 @@ Discrete state
 * ``STICK``: sticking on the surface of impact event ``didx`` after a complete chattering
   sequence: constrained motion ``f - lambda W`` (slides "Simulation: Chattering");
 * ``SLIDE``: Filippov sliding on switch ``didx`` with the convex field
-  ``f12 = (1 - alpha) f_above + alpha f_below - C h h_x^T`` (thesis eq. 2.7-2.8 with the
-  stabilising term of the slides).
+  ``f12 = (1 - alpha) f_above + alpha f_below`` (thesis eq. 2.7-2.8) or Utkin's equivalent
+  control ``f(t, x, u_eq)`` (slides; switch table column 4), optionally with the stabilising
+  term ``-C h h_x^T`` of the slides; each accepted sliding step is projected back onto
+  ``h = 0``.
+
+Switching surfaces
+------------------
+At the start, and after every reset, release or change of mode by an event, the mode is made
+consistent with the side of every switching surface (:func:`_resolve`); a state on a Filippov
+surface starts sliding if both fields point into it. An arrival at a surface crosses or starts
+sliding according to the signs of ``h_t + h_x f`` of the two modes (thesis eq. 2.6-2.8);
+switches of kind ``SW_CONTINUOUS`` (kinks of ``Abs``/``Max``/``Min``) always cross. Sliding
+ends (``slide_end``) where ``hdot`` of the mode above turns positive (``alpha = 0``) or that of
+the mode below turns negative (``alpha = 1``), located by Newton on that ``hdot``. Reaching
+another switching surface while sliding crosses it if the sliding motion continues on its far
+side; if the sliding fields on both sides point into it (sliding on the intersection) the run
+ends with ``ST_INTERSECTION``.
 
 Watch functions
 ---------------
@@ -26,14 +41,26 @@ sampled on the dense output (ends, midpoint and, for surfaces, the extremum of t
 Hermite fit from ``h`` and ``hdot`` at the ends) so a crossing and re-crossing inside one step
 (near grazing) is still found. The earliest crossing is bracketed and located by the Illinois
 method on the dense output to a few ulps, then the step is re-taken exactly to that time
-("landing step") and the time is polished with Newton steps on ``h`` so the event state comes
-from the integrator itself, not from the interpolant.
+("landing step") and the time is polished with Newton steps on ``h`` (or ``hdot`` for a
+sliding exit) so the event state comes from the integrator itself, not from the interpolant.
+A surface that depends on ``t`` explicitly (a moving constraint) must also be resolved by the
+step: where the Hermite fit misses ``h`` at the step's midpoint by more than 1% the step is
+retaken shorter, so a state at rest cannot step over an oscillating wall.
 
 Variational equations
 ---------------------
 With ``variational`` the state is augmented by the n x n matrix ``Phi`` (row-major), integrated
-with ``Phi' = J Phi`` and updated at every event by the saltation matrix (slides, "Saltation
-matrices"; Adolfsson et al. 2001) with the ``h_t`` terms of time-dependent surfaces.
+with ``Phi' = J Phi`` and updated at every event by the full saltation matrix (slides,
+"Saltation matrices"; Adolfsson et al. 2001) with the ``h_t`` and ``g_t`` terms of
+time-dependent surfaces and resets: :func:`_event_saltation` (impacts, transitions),
+:func:`_switch_saltation` (Filippov crossing, sliding entry), :func:`_chatter_saltation`
+(complete chattering, the slides' ``G = C + (f_out - C f_in) h_x / (h_x f_in)`` with the time
+derivatives of the map); release and sliding exit leave the field continuous (``S = I``).
+``J`` is symbolic in a regular mode and a central difference (step ~ eps^(1/3)) of the
+sticking or sliding field. Steps are accepted only when ``Phi`` meets the tolerances too.
+With ``iopt[IO_VAR] == VAR_SEGMENTS`` ``Phi`` restarts at the identity after every event and
+each event record carries the segment's ``Phi`` and ``S`` (the per-segment transfer matrices;
+see :mod:`pwsdyn.integrate._variational`).
 """
 
 from __future__ import annotations
@@ -41,8 +68,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..model.codegen import (W_F, W_FX, W_G, W_GUARD, W_GX, W_GT, W_H, W_HD, W_HDT, W_HDX,
-                             W_HHD, W_HT, W_HX)
+from ..model.codegen import (W_F, W_FU, W_FX, W_G, W_GUARD, W_GX, W_GT, W_H, W_HD, W_HDT,
+                             W_HDU, W_HDUD, W_HDX, W_HHD, W_HT, W_HX)
 
 # discrete states
 REGULAR, STICK, SLIDE = 0, 1, 2
@@ -61,12 +88,27 @@ ST_INTERSECTION = 6
 ST_ZENO = 7
 # integer options
 IO_MODE0, IO_NMODES, IO_MAXSTEPS, IO_MAXEVENTS, IO_METHOD, IO_VAR, IO_CHATTER, IO_SAVE = range(8)
-IO_N = 8
+# optional integer options, read only when ``iopt`` is long enough: stop after the
+# IO_STOP_COUNT-th logged event whose kind K_* has its bit set in IO_STOP_MASK and whose event
+# (or switch) index is IO_STOP_REF (-1: any); the initial discrete state kind and index
+IO_STOP_MASK, IO_STOP_REF, IO_STOP_COUNT, IO_DKIND0, IO_DIDX0 = range(8, 13)
+IO_N = 13
+# values of iopt[IO_VAR]: no variational equations; Phi = dx(t)/dx0 through every event; or per
+# segment: Phi restarts at the identity after each event and each event record carries the
+# segment's Phi (variational part of x_before) and the saltation matrix S (of x_after)
+VAR_NONE, VAR_GLOBAL, VAR_SEGMENTS = 0, 1, 2
 # float options
 FO_RTOL, FO_ATOL, FO_H0, FO_HMAX, FO_CHAT_REL, FO_CHAT_ABS, FO_SLIDE_C = range(7)
 FO_N = 7
+# switch table columns: surface, above mode, below mode, and optionally the kind (SW_FILIPPOV:
+# cross or slide; SW_CONTINUOUS: only a derivative jumps, always cross) and the sliding method
+# (SLIDE_CONVEX: Filippov's convex combination; SLIDE_UTKIN: Utkin's equivalent control)
+SW_FILIPPOV, SW_CONTINUOUS = 0, 1
+SLIDE_CONVEX, SLIDE_UTKIN = 0, 1
 
 _EPS = np.finfo(np.float64).eps
+#: Relative step of the central differences of the variational code (cube root of eps).
+_FD_STEP = 6e-6
 _MAXW = 64
 
 
@@ -157,23 +199,199 @@ def _field(ev, p, dkind, didx, mode, nm, t, x, n, out, etab, stab, slide_c, w1, 
         for i in range(n):
             out[i] -= lam * w1[i]
         return
-    # SLIDE: Filippov convex combination (thesis eq. 2.7-2.8) + stabilisation -C h grad h
+    # SLIDE on switch didx: Filippov's convex combination (thesis eq. 2.7-2.8)
+    #     f12 = (1 - alpha) f_above + alpha f_below,
+    #     alpha = (h_t + h_x f_above) / (h_x (f_above - f_below)),
+    # (eq. 2.8 with the h_t of a time-dependent surface) or Utkin's equivalent control
+    # f(t, x, u_eq) with h_t + h_x f(t, x, u_eq) = 0 (slides, "Simulation: Filippov systems"),
+    # plus the stabilising term of the slides, -C h h_x^T, scaled by 1/|h_x|^2 so that the
+    # drift obeys hdot = -C h whatever the scale of h (C is a rate, 1/time; default 0: the
+    # kernel projects each accepted sliding step back onto h = 0 instead)
     s = didx
     k = stab[s, 0]
-    a = stab[s, 1]
-    b = stab[s, 2]
-    ev(W_F, a, t, x, p, w1)
-    ev(W_F, b, t, x, p, w2)
     ev(W_HX, k, t, x, p, hdx)
-    ev(W_HT, k, t, x, p, out)
-    ht = out[0]
     ev(W_H, k, t, x, p, out)
     hval = out[0]
-    num = ht + _dot(hdx, w1, n)
-    den = _dot(hdx, w1, n) - _dot(hdx, w2, n)
-    alpha = num / den if den != 0.0 else 0.5
+    if stab.shape[1] > 4 and stab[s, 4] == SLIDE_UTKIN:
+        u = _equivalent_control(ev, p, s, t, x, out)
+        out[0] = u
+        ev(W_FU, s, t, x, p, out)
+    else:
+        ev(W_F, stab[s, 1], t, x, p, w1)
+        ev(W_F, stab[s, 2], t, x, p, w2)
+        ev(W_HT, k, t, x, p, out)
+        ha = out[0] + _dot(hdx, w1, n)
+        den = _dot(hdx, w1, n) - _dot(hdx, w2, n)
+        alpha = ha / den if den != 0.0 else 0.5
+        for i in range(n):
+            out[i] = (1.0 - alpha) * w1[i] + alpha * w2[i]
+    # h_t + h_x f12 = 0 holds by construction up to round-off; remove that round-off along h_x
+    # (a linear surface, e.g. v = V, is then conserved exactly by the Runge-Kutta stages even
+    # over very long sliding steps)
+    nrm2 = _dot(hdx, hdx, n)
+    if nrm2 > 0.0:
+        ev(W_HT, k, t, x, p, w2)
+        res = (w2[0] + _dot(hdx, out, n)) / nrm2
+        for i in range(n):
+            out[i] -= res * hdx[i]
+    if slide_c != 0.0 and hval != 0.0:
+        nrm2 = _dot(hdx, hdx, n)
+        if nrm2 > 0.0:
+            g = slide_c * hval / nrm2
+            for i in range(n):
+                out[i] -= g * hdx[i]
+
+
+@njit(cache=True)
+def _equivalent_control(ev, p, s, t, x, buf):
+    """Utkin's equivalent control on switch ``s``: the root ``u`` of
+    ``g(u) = h_t + h_x f(t, x, u)`` in ``[-1, 1]`` (``u = +1`` is the field above the surface,
+    ``-1`` below), by Newton's method safeguarded by bisection on the bracket
+    ``g(-1) > 0 > g(+1)`` that holds while sliding. The first guess is the root of the line
+    through ``g(-1)`` and ``g(+1)``: exact (the convex method) when ``f`` is affine in ``u``.
+    Outside the sliding region (stage values of a step that overshoots an exit) plain Newton
+    continues the root smoothly; ``buf[0]`` is overwritten."""
+    buf[0] = 1.0
+    ev(W_HDU, s, t, x, p, buf)
+    ga = buf[0]
+    buf[0] = -1.0
+    ev(W_HDU, s, t, x, p, buf)
+    gb = buf[0]
+    u = (ga + gb) / (gb - ga) if gb != ga else 0.0
+    lo = -1.0
+    hi = 1.0
+    bracket = ga < 0.0 < gb
+    if bracket:
+        u = min(max(u, lo), hi)
+    for it in range(60):
+        buf[0] = u
+        ev(W_HDU, s, t, x, p, buf)
+        g = buf[0]
+        if g == 0.0:
+            break
+        if bracket:
+            if g > 0.0:
+                lo = u
+            else:
+                hi = u
+        buf[0] = u
+        ev(W_HDUD, s, t, x, p, buf)
+        d = buf[0]
+        un = u - g / d if d != 0.0 else np.nan
+        if bracket and not (lo < un < hi):
+            un = 0.5 * (lo + hi)
+        if not np.isfinite(un):
+            break
+        if abs(un - u) <= 4.0 * _EPS * max(1.0, abs(u)):
+            u = un
+            break
+        u = un
+    return u
+
+
+@njit(cache=True)
+def _project_surface(ev, p, k, t, y, n, hdx, buf):
+    """One Newton step onto ``h = 0`` along ``h_x``: at sliding entry the state is a few ulps
+    off the surface; this removes them, so a linear ``h`` is then held to round-off."""
+    ev(W_H, k, t, y, p, buf)
+    hv = buf[0]
+    ev(W_HX, k, t, y, p, hdx)
+    nrm2 = _dot(hdx, hdx, n)
+    if nrm2 > 0.0 and hv != 0.0:
+        for i in range(n):
+            y[i] -= hv * hdx[i] / nrm2
+
+
+@njit(cache=True)
+def _partner(stab, k, m):
+    """The mode across surface ``k`` from mode ``m`` (-1 if no switch joins them)."""
+    for s in range(stab.shape[0]):
+        if stab[s, 0] == k:
+            if stab[s, 1] == m:
+                return stab[s, 2]
+            if stab[s, 2] == m:
+                return stab[s, 1]
+    return -1
+
+
+@njit(cache=True)
+def _find_switch(stab, k, a, b):
+    """The switch on surface ``k`` with mode ``a`` above and ``b`` below (-1 if none)."""
+    for s in range(stab.shape[0]):
+        if stab[s, 0] == k and stab[s, 1] == a and stab[s, 2] == b:
+            return s
+    return -1
+
+
+@njit(cache=True)
+def _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx):
+    """The discrete state that the switches impose at ``(t, y)`` starting from ``mode``.
+
+    Off every surface the mode must be the one on the side of ``h`` (a model written with
+    ``sign``, or a state given or reset by the user, may name a mode on the other side).
+    On a Filippov surface (``|h|`` within round-off of the state) the signs of
+    ``hdot`` of the two modes decide, as at an arrival (thesis eq. 2.6-2.8): both pointing
+    into the surface, sliding (the state is projected onto it); both pointing to one side,
+    that side's mode. Returns ``(dkind, didx, mode)``.
+    """
+    n_sw = stab.shape[0]
+    xmax = 1.0
     for i in range(n):
-        out[i] = (1.0 - alpha) * w1[i] + alpha * w2[i] - slide_c * hval * hdx[i]
+        xmax = max(xmax, abs(y[i]))
+    # 1. the side of every surface the state is off
+    for sweep in range(n_sw + 1):
+        changed = False
+        for s in range(n_sw):
+            a = stab[s, 1]
+            b = stab[s, 2]
+            if mode != a and mode != b:
+                continue
+            k = stab[s, 0]
+            ev(W_H, k, t, y, p, buf)
+            hv = buf[0]
+            ev(W_HX, k, t, y, p, hdx)
+            gmax = 1.0
+            for i in range(n):
+                gmax = max(gmax, abs(hdx[i]))
+            tol = 64.0 * _EPS * xmax * gmax
+            new = mode
+            if hv > tol:
+                new = a
+            elif hv < -tol:
+                new = b
+            if new != mode:
+                mode = new
+                changed = True
+        if not changed:
+            break
+    # 2. on a surface: slide, or take the side the flow leaves to
+    for s in range(n_sw):
+        a = stab[s, 1]
+        b = stab[s, 2]
+        if mode != a and mode != b:
+            continue
+        k = stab[s, 0]
+        ev(W_H, k, t, y, p, buf)
+        hv = buf[0]
+        ev(W_HX, k, t, y, p, hdx)
+        gmax = 1.0
+        for i in range(n):
+            gmax = max(gmax, abs(hdx[i]))
+        if abs(hv) > 64.0 * _EPS * xmax * gmax:
+            continue
+        ev(W_HD, k * nm + a, t, y, p, buf)
+        sa = buf[0]
+        ev(W_HD, k * nm + b, t, y, p, buf)
+        sb = buf[0]
+        filippov = stab.shape[1] <= 3 or stab[s, 3] == SW_FILIPPOV
+        if filippov and sa < 0.0 and sb > 0.0:
+            _project_surface(ev, p, k, t, y, n, hdx, buf)
+            return SLIDE, s, a
+        if sa >= 0.0 and sb > 0.0 or sa > 0.0 and sb >= 0.0:
+            mode = a
+        elif sa <= 0.0 and sb < 0.0 or sa < 0.0 and sb <= 0.0:
+            mode = b
+    return REGULAR, -1, mode
 
 
 @njit(cache=True)
@@ -206,7 +424,8 @@ def _jacobian(ev, p, dkind, didx, mode, nm, t, y, n, f0, etab, stab, slide_c,
     for c in range(n):
         for i in range(n):
             xt[i] = y[i]
-        dx = 1e-7 * max(1.0, abs(y[c]))
+        # step ~ eps^(1/3): truncation (dx^2) and rounding (eps/dx) errors balance near 1e-11
+        dx = _FD_STEP * max(1.0, abs(y[c]))
         xt[c] = y[c] + dx
         _field(ev, p, dkind, didx, mode, nm, t, xt, n, ft, etab, stab, slide_c, w1, w2, gx, hdx)
         for i in range(n):
@@ -238,6 +457,39 @@ def _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_la
         else:
             _rhs(ev, p, dkind, didx, mode, nm, t + C[st] * h, ytmp, n, nvar, K[st], etab, stab,
                  slide_c, w1, w2, gx, hdx, jac, xt, ft)
+
+
+@njit(cache=True)
+def _error_norm_var(K, E, method, s, y, ynew, h, n, nY, rtol, atol):
+    """Scaled error of the variational components ``y[n:nY]`` (same norm as the state's).
+
+    Steps are accepted only when both the state and ``Phi`` meet the tolerances: on a
+    sliding surface, for example, the state moves trivially while ``Phi`` contracts at the
+    stabilising rate, and a step chosen for the state alone misses that."""
+    m_var = nY - n
+    if method == 0:
+        acc = 0.0
+        for i in range(n, nY):
+            e = 0.0
+            for m in range(s + 1):
+                e += E[0, m] * K[m, i]
+            sc = atol + rtol * max(abs(y[i]), abs(ynew[i]))
+            acc += (h * e / sc) ** 2
+        return np.sqrt(acc / m_var)
+    e5 = 0.0
+    e3 = 0.0
+    for i in range(n, nY):
+        a5 = 0.0
+        a3 = 0.0
+        for m in range(s + 1):
+            a5 += E[0, m] * K[m, i]
+            a3 += E[1, m] * K[m, i]
+        sc = atol + rtol * max(abs(y[i]), abs(ynew[i]))
+        e5 += (a5 / sc) ** 2
+        e3 += (a3 / sc) ** 2
+    if e5 == 0.0 and e3 == 0.0:
+        return 0.0
+    return abs(h) * e5 / np.sqrt((e5 + 0.01 * e3) * m_var)
 
 
 @njit(cache=True)
@@ -340,6 +592,15 @@ def _surface_rate(ev, p, dkind, k, mode, nm, t, x, f, n, buf, hdx):
 
 
 @njit(cache=True)
+def _hdot_rate(ev, p, k, wm, nm, t, x, f, n, buf, hdx):
+    """d/dt of ``hdot`` of mode ``wm`` on surface ``k`` along the current field ``f``:
+    ``hdot_t + hdot_x f`` (to polish a sliding exit, where that ``hdot`` reaches zero)."""
+    ev(W_HDX, k * nm + wm, t, x, p, hdx)
+    ev(W_HDT, k * nm + wm, t, x, p, buf)
+    return buf[0] + _dot(hdx, f, n)
+
+
+@njit(cache=True)
 def _crosses(v0, v1, direction):
     """A zero crossing from v0 to v1 in ``direction``. A function that starts exactly at zero
     and moves in the event direction crosses (a start on an impact surface with approaching
@@ -381,15 +642,19 @@ def _project_stick(ev, p, k, mode, nm, t, x, n, hdx, w2, buf):
 
 @njit(cache=True)
 def _event_saltation(ev, p, j, k, mode_in, mode_out, nm, t, x_in, x_out, n, S, gx, hx, buf,
-                     f_in, f_out, gt, etab, stab, slide_c, old_kind, old_idx, tmp):
+                     f_in, f_out, gt, etab, stab, slide_c, old_kind, old_idx, tmp, new_kind,
+                     new_idx):
     """S = g_x + (f_out - g_x f_in - g_t) h_x / (h_t + h_x f_in)  (slides, "Saltation
-    matrices", with the time derivatives of time-dependent surfaces and resets)."""
+    matrices", with the time derivatives of time-dependent surfaces and resets): the full
+    saltation matrix, ``Phi+ = S Phi-``. ``f_in`` is the field of the discrete state before the
+    event at ``x_in``, ``f_out`` the field of the state after it at ``x_out = g(x_in)``."""
     w1 = np.zeros(n)
     w2 = np.zeros(n)
     hdx = np.zeros(n)
     _field(ev, p, old_kind, old_idx, mode_in, nm, t, x_in, n, f_in, etab, stab, slide_c,
            w1, w2, gx, hdx)
-    ev(W_F, mode_out, t, x_out, p, f_out)
+    _field(ev, p, new_kind, new_idx, mode_out, nm, t, x_out, n, f_out, etab, stab, slide_c,
+           w1, w2, gx, hdx)
     ev(W_GX, j, t, x_in, p, gx)
     ev(W_GT, j, t, x_in, p, gt)
     ev(W_HX, k, t, x_in, p, hx)
@@ -406,11 +671,15 @@ def _event_saltation(ev, p, j, k, mode_in, mode_out, nm, t, x_in, x_out, n, S, g
 
 @njit(cache=True)
 def _switch_saltation(ev, p, dkind, didx, mode_in, mode_out, nm, k, t, x, n, S, hx, buf,
-                      f_in, w1, w2, gx, etab, stab, slide_c):
-    """Crossing or sliding entry: S = I + (f_out - f_in) h_x / (h_t + h_x f_in)."""
+                      f_in, w1, w2, gx, etab, stab, slide_c, old_kind, old_idx):
+    """Crossing or sliding entry: S = I + (f_out - f_in) h_x / (h_t + h_x f_in), with f_in
+    the field of the discrete state before (``old_kind``, ``old_idx``, ``mode_in``) and f_out
+    that of the state after (the sliding field at sliding entry). At sliding entry
+    ``h_x S = 0``: the normal perturbation is lost (a zero multiplier)."""
     f_out = np.zeros(n)
     hdx = np.zeros(n)
-    ev(W_F, mode_in, t, x, p, f_in)
+    _field(ev, p, old_kind, old_idx, mode_in, nm, t, x, n, f_in, etab, stab, slide_c, w1, w2, gx,
+           hdx)
     _field(ev, p, dkind, didx, mode_out, nm, t, x, n, f_out, etab, stab, slide_c, w1, w2, gx, hdx)
     ev(W_HX, k, t, x, p, hx)
     ev(W_HT, k, t, x, p, buf)
@@ -439,46 +708,109 @@ def _chatter_map(ev, p, j, k, mode, nm, t, x, n, out, W, gx, hdx, f, buf):
 
 
 @njit(cache=True)
-def _chatter_saltation(ev, p, j, k, mode, nm, t, x_in, n, S, W, w2, gx, hdx, f_in, xt, ft, buf,
-                       etab, stab, slide_c, jac):
-    """G = C + (f_out - C f_in) h_x / (h_x f_in),  C = Q_x - f_out q_x  (slides, "Saltation
-    matrices", chattering). Q_x and q_x by central differences of the closed-form map."""
-    qo = np.zeros(n)
-    qp = np.zeros(n)
-    qm = np.zeros(n)
+def _chatter_event_map(ev, p, j, k, mode, nm, t, x, n, out, W, gx, hdx, f, buf, hx):
+    """The complete-chattering event map as the kernel applies it: ``(t_in, x_in) -> (t_out,
+    x_out)`` with ``t_out = q(t_in, x_in)`` and ``x_out`` the map ``Q(t_in, x_in)`` (slides,
+    "Local mapping at complete chattering") projected onto the sticking manifold
+    ``{h = 0, hdot = 0}`` at ``t_out``. Returns ``t_out``; writes ``x_out`` into ``out``."""
+    dur = _chatter_map(ev, p, j, k, mode, nm, t, x, n, out, W, gx, hdx, f, buf)
+    t_out = t + dur
+    _project_stick(ev, p, k, mode, nm, t_out, out, n, hdx, hx, buf)
+    return t_out
+
+
+@njit(cache=True)
+def _chatter_saltation(ev, p, j, k, mode, nm, t, x_in, n, S, etab, stab, slide_c):
+    """Saltation matrix of a complete chattering sequence (the full form, ``Phi+ = S Phi-``).
+
+    For an event map ``(t_in, x_in) -> (tau, X)`` applied where the flow reaches
+    ``h(t, x) = 0``, a perturbation ``dx`` before the event reaches the surface ``dt = -h_x dx /
+    (h_t + h_x f_in)`` later, at ``x_in + dx + f_in dt``; comparing the two solutions at a common
+    time after the event gives
+
+        S = C - (X_t + C f_in - f_out tau_t) h_x / (h_t + h_x f_in),   C = X_x - f_out tau_x.
+
+    For a time-independent map ``tau = t + q``, ``X = Q`` this is the slides' chattering
+    saltation ``G = C + (f_out - C f_in) h_x / (h_x f_in)``, ``C = Q_x - f_out q_x`` (Nordmark &
+    Piiroinen 2009); for ``tau = t``, ``X = g`` it is the impact saltation of
+    :func:`_event_saltation`. Here ``(tau, X)`` is :func:`_chatter_event_map` (with the projection
+    onto the sticking manifold, so S is the derivative of the map the kernel applies), ``f_out``
+    the sticking field at ``(tau, X)``; ``X_x, X_t, tau_x, tau_t`` are central differences.
+    """
+    W = np.zeros(n)
+    gx = np.zeros(n * n)
+    hdx = np.zeros(n)
     f = np.zeros(n)
+    buf = np.zeros(max(n, 2))
     hx = np.zeros(n)
-    dq = np.zeros(n)
-    _chatter_map(ev, p, j, k, mode, nm, t, x_in, n, qo, W, gx, hdx, f, buf)
-    Cm = np.zeros((n, n))
-    for c in range(n):
-        for i in range(n):
-            xt[i] = x_in[i]
-        dx = 1e-7 * max(1.0, abs(x_in[c]))
-        xt[c] = x_in[c] + dx
-        tp = _chatter_map(ev, p, j, k, mode, nm, t, xt, n, qp, W, gx, hdx, f, buf)
-        xt[c] = x_in[c] - dx
-        tm = _chatter_map(ev, p, j, k, mode, nm, t, xt, n, qm, W, gx, hdx, f, buf)
-        for i in range(n):
-            Cm[i, c] = (qp[i] - qm[i]) / (2.0 * dx)
-        dq[c] = (tp - tm) / (2.0 * dx)
-    # f_out: the sticking field at Q(x_in)
+    xo = np.zeros(n)
+    xp = np.zeros(n)
+    xm = np.zeros(n)
+    xt = np.zeros(n)
+    fi = np.zeros(n)
+    fo = np.zeros(n)
     w1 = np.zeros(n)
-    _field(ev, p, STICK, j, mode, nm, t, qo, n, ft, etab, stab, slide_c, w1, w2, gx, hdx)
+    w2 = np.zeros(n)
+    Cm = np.zeros((n, n))
+    taux = np.zeros(n)
+    Xt = np.zeros(n)
+    for i in range(n):
+        xt[i] = x_in[i]
+    t_out = _chatter_event_map(ev, p, j, k, mode, nm, t, xt, n, xo, W, gx, hdx, f, buf, hx)
+    for c in range(n):
+        dx = _FD_STEP * max(1.0, abs(x_in[c]))
+        xt[c] = x_in[c] + dx
+        tp = _chatter_event_map(ev, p, j, k, mode, nm, t, xt, n, xp, W, gx, hdx, f, buf, hx)
+        xt[c] = x_in[c] - dx
+        tm = _chatter_event_map(ev, p, j, k, mode, nm, t, xt, n, xm, W, gx, hdx, f, buf, hx)
+        xt[c] = x_in[c]
+        for i in range(n):
+            Cm[i, c] = (xp[i] - xm[i]) / (2.0 * dx)
+        taux[c] = (tp - tm) / (2.0 * dx)
+    # rounding of t itself is eps |t|: the step grows like |t|^(1/3) to keep eps |t| / dt small
+    dt = _FD_STEP * max(1.0, abs(t)) ** (1.0 / 3.0)
+    tp = _chatter_event_map(ev, p, j, k, mode, nm, t + dt, xt, n, xp, W, gx, hdx, f, buf, hx)
+    tm = _chatter_event_map(ev, p, j, k, mode, nm, t - dt, xt, n, xm, W, gx, hdx, f, buf, hx)
+    taut = (tp - tm) / (2.0 * dt)
+    for i in range(n):
+        Xt[i] = (xp[i] - xm[i]) / (2.0 * dt)
+    _field(ev, p, STICK, j, mode, nm, t_out, xo, n, fo, etab, stab, slide_c, w1, w2, gx, hdx)
+    ev(W_F, mode, t, xt, p, fi)
+    ev(W_HX, k, t, xt, p, hx)
+    ev(W_HT, k, t, xt, p, buf)
+    den = buf[0] + _dot(hx, fi, n)
     for i in range(n):
         for c in range(n):
-            Cm[i, c] -= ft[i] * dq[c]
-    ev(W_F, mode, t, x_in, p, f_in)
-    ev(W_HX, k, t, x_in, p, hx)
-    ev(W_HT, k, t, x_in, p, buf)
-    den = buf[0] + _dot(hx, f_in, n)
+            Cm[i, c] -= fo[i] * taux[c]
     for i in range(n):
-        cf = 0.0
+        v = Xt[i] - fo[i] * taut
         for c in range(n):
-            cf += Cm[i, c] * f_in[c]
-        v = ft[i] - cf
+            v += Cm[i, c] * fi[c]
         for c in range(n):
-            S[i, c] = Cm[i, c] + (v * hx[c] / den if den != 0.0 else 0.0)
+            S[i, c] = Cm[i, c] - (v * hx[c] / den if den != 0.0 else 0.0)
+
+
+def _state_field_signature():
+    from numba import types as nt
+
+    from ..model.codegen import EVALUATE_TYPE
+    f1 = nt.float64[::1]
+    i2 = nt.int64[:, ::1]
+    return nt.void(EVALUATE_TYPE, f1, nt.int64, nt.int64, nt.int64, nt.int64, nt.float64, f1, i2,
+                   i2, nt.float64, f1)
+
+
+@njit(_state_field_signature(), cache=True)
+def state_field(ev, p, dkind, didx, mode, nm, t, x, etab, stab, slide_c, out):
+    """The vector field of a discrete state (``dkind``: REGULAR, STICK, SLIDE; ``didx``; mode)
+    at ``(t, x)`` into ``out``: the same function the kernel integrates, for Python callers
+    (Poincaré-map projections, shooting, projected saltation matrices)."""
+    n = x.shape[0]
+    w1 = np.zeros(n)
+    w2 = np.zeros(n)
+    gx = np.zeros(n * n)
+    hdx = np.zeros(n)
+    _field(ev, p, dkind, didx, mode, nm, t, x, n, out, etab, stab, slide_c, w1, w2, gx, hdx)
 
 
 # --------------------------------------------------------------------------------------
@@ -505,9 +837,12 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
 
     Tables
     ------
-    etab : (n_events, 6) int64 -- surface, direction, kind, target, terminal, has_reset
+    etab : (n_events, 6 or 7) int64 -- surface, direction, kind, target, terminal, has_reset,
+        and optionally whether the surface depends on t explicitly
     eactive : (n_events, n_modes) int8
-    stab : (n_switches, 3) int64 -- surface, above, below
+    stab : (n_switches, 3 to 6) int64 -- surface, above, below, and optionally the kind
+        (SW_FILIPPOV / SW_CONTINUOUS), the sliding method (SLIDE_CONVEX / SLIDE_UTKIN) and
+        whether the surface depends on t explicitly
     iopt, fopt : options, indexed by the IO_* / FO_* constants
 
     Returns
@@ -517,7 +852,16 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     """
     n = x0.shape[0]
     nm = iopt[IO_NMODES]
-    nvar = iopt[IO_VAR]
+    nvar = 1 if iopt[IO_VAR] != VAR_NONE else 0
+    seg_var = iopt[IO_VAR] == VAR_SEGMENTS
+    stop_mask = 0
+    stop_ref = -1
+    stop_count = 0
+    if iopt.shape[0] > IO_STOP_COUNT:
+        stop_mask = iopt[IO_STOP_MASK]
+        stop_ref = iopt[IO_STOP_REF]
+        stop_count = iopt[IO_STOP_COUNT]
+    n_stop = 0
     nY = n + nvar * n * n
     method = iopt[IO_METHOD]
     max_steps = iopt[IO_MAXSTEPS]
@@ -566,7 +910,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     ecap = 16
     ev_t = np.empty(ecap)
     ev_t2 = np.empty(ecap)
-    ev_info = np.empty((ecap, 8), dtype=np.int64)
+    # columns: kind, ref, kind/idx/mode before, kind/idx/mode after, index of the post-event node
+    ev_info = np.empty((ecap, 9), dtype=np.int64)
     ev_xb = np.empty((ecap, nY))
     ev_xa = np.empty((ecap, nY))
     stats = np.zeros(6, dtype=np.int64)  # steps, rejected, nfev, events, chatter, landing steps
@@ -584,6 +929,12 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     dkind = REGULAR
     didx = -1
     mode = iopt[IO_MODE0]
+    if iopt.shape[0] > IO_DIDX0:
+        dkind = iopt[IO_DKIND0]
+        didx = iopt[IO_DIDX0]
+    if dkind == REGULAR and n_sw > 0:
+        # the mode on the right side of every switching surface; sliding from a start on one
+        dkind, didx, mode = _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx)
     status = ST_SUCCESS
 
     # watch list
@@ -597,6 +948,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     wv = np.zeros(_MAXW)          # watch values at the end of the last accepted step ...
     wd = np.zeros(_MAXW)          # ... and their time derivatives (surfaces), reused next step
     wvalid = np.zeros(_MAXW, dtype=np.int64)
+    wtdep = np.zeros(_MAXW, dtype=np.int64)  # surface depends on t explicitly (moving wall)
     nw = 0
     # the surface/function that just fired, to suppress an immediate re-trigger
     last_type = -1
@@ -641,13 +993,34 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 nw += 1
             for s in range(n_sw):
                 if dkind == SLIDE:
-                    if s == didx:
+                    # another surface bounding the sliding pair's modes: crossing it while
+                    # sliding, or reaching the intersection of the two surfaces
+                    if stab[s, 0] == stab[didx, 0]:
+                        continue
+                    if (stab[s, 1] != stab[didx, 1] and stab[s, 2] != stab[didx, 1]
+                            and stab[s, 1] != stab[didx, 2] and stab[s, 2] != stab[didx, 2]):
+                        continue
+                    dup = False
+                    for ww in range(nw):
+                        if wact[ww] == ACT_INTERSECTION and widx[ww] == stab[s, 0]:
+                            dup = True
+                    if dup:
                         continue
                     wtype[nw] = WF_SURFACE; widx[nw] = stab[s, 0]; wmode[nw] = mode
                     wdir[nw] = 0; wact[nw] = ACT_INTERSECTION; wref[nw] = s
                     nw += 1
                     continue
                 if stab[s, 1] == mode or stab[s, 2] == mode:
+                    if (dkind == STICK and stab.shape[1] > 3 and stab[s, 3] == SW_CONTINUOUS):
+                        # a kink surface that the sticking motion lies in (bilinear damping of
+                        # a relative velocity held at zero against a stop): the two variants
+                        # agree there, and its sign is round-off
+                        ev(W_H, stab[s, 0], t, y, p, buf)
+                        xmax = 1.0
+                        for i in range(n):
+                            xmax = max(xmax, abs(y[i]))
+                        if abs(buf[0]) <= 1e3 * _EPS * xmax:
+                            continue
                     wtype[nw] = WF_SURFACE; widx[nw] = stab[s, 0]; wmode[nw] = mode
                     wdir[nw] = -1 if stab[s, 1] == mode else 1
                     wact[nw] = ACT_SWITCH; wref[nw] = s
@@ -675,6 +1048,12 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     nw += 1
             for w in range(nw):
                 wvalid[w] = 0
+                wtdep[w] = 0
+                if wtype[w] == WF_SURFACE:
+                    if wact[w] == ACT_EVENT and etab.shape[1] > 6:
+                        wtdep[w] = etab[wref[w], 6]
+                    elif wact[w] != ACT_EVENT and stab.shape[1] > 5:
+                        wtdep[w] = stab[wref[w], 5]
                 wforce[w] = 0.0
                 if (t == last_t and wtype[w] == last_type and widx[w] == last_idx
                         and (wtype[w] == WF_SURFACE or wmode[w] == last_mode)):
@@ -743,6 +1122,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             err = np.sqrt(err / n)
         else:
             err = _error_norm(K, E, method, s_fsal, y, ynew, h, n, rtol, atol)
+        if nvar and finite:
+            err = max(err, _error_norm_var(K, E, method, s_fsal, y, ynew, h, n, nY, rtol, atol))
         if not (err <= 1.0):
             stats[1] += 1
             if not finite:
@@ -767,6 +1148,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
         best = -1
         best_th = 2.0
         best_sign = 0.0
+        unresolved = False
+        tratio = 0.0   # largest midpoint mismatch / tolerance of time-dependent surfaces
         for w in range(nw):
             # Samples in increasing theta. Surfaces: the ends and the interior extrema of the
             # cubic Hermite fit built from h and hdot at the ends (where a graze hides);
@@ -792,6 +1175,27 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 wd[w] = r1
                 d0 = r0 * h
                 d1 = r1 * h
+                if wtdep[w] == 1:
+                    # a surface that moves in time (an oscillating constraint) while the state
+                    # barely does (a mass at rest, free flight): the error control does not see
+                    # the surface, so a step may span several of its oscillations. The cubic
+                    # Hermite fit must reproduce h at the midpoint, or the step is retaken
+                    # shorter.
+                    if not q_ready:
+                        stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar,
+                                                K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c,
+                                                w1, w2, gx, hdx, jac, xt, ft)
+                        q_ready = True
+                    _dense_eval(y, Q, 0.5, nY, deg, xs)
+                    hm = _watch_value(ev, p, WF_SURFACE, widx[w], wmode[w], nm, t + 0.5 * h, xs,
+                                      n, buf, fbuf, hdx)
+                    hh = 0.5 * (v0 + v1) + 0.125 * (d0 - d1)
+                    hsc = max(abs(v0), abs(v1), abs(hm))
+                    ratio = abs(hm - hh) / (0.01 * hsc + 64.0 * _EPS * (1.0 + hsc))
+                    tratio = max(tratio, ratio)
+                    if ratio > 1.0:
+                        unresolved = True
+                        break
                 # H(th) = ca th^3 + cb th^2 + d0 th + v0;  H'(th) = 3 ca th^2 + 2 cb th + d0
                 ca = 2.0 * v0 - 2.0 * v1 + d0 + d1
                 cb = -3.0 * v0 + 3.0 * v1 - 2.0 * d0 - d1
@@ -800,24 +1204,24 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 ns = 1
                 thetas[0] = 0.0
                 vals[w, 0] = v0
-                if abs(qa) > 1e-300:
-                    disc = qb * qb - 4.0 * qa * d0
-                    if disc >= 0.0:
-                        sq = np.sqrt(disc)
-                        ra = (-qb - sq) / (2.0 * qa)
-                        rb = (-qb + sq) / (2.0 * qa)
-                        if ra > rb:
-                            ra, rb = rb, ra
-                        if 0.0 < ra < 1.0:
-                            thetas[ns] = ra
-                            ns += 1
-                        if 0.0 < rb < 1.0 and rb > ra:
-                            thetas[ns] = rb
-                            ns += 1
-                elif abs(qb) > 1e-300:
-                    ra = -d0 / qb
+                # roots of H' by the cancellation-free form (Numerical Recipes 5.6): the cubic
+                # term vanishes for parabolic h, where the textbook formula loses all digits
+                disc = qb * qb - 4.0 * qa * d0
+                ra = 2.0
+                rb = 2.0
+                if disc >= 0.0:
+                    qq = -0.5 * (qb + (np.sqrt(disc) if qb >= 0.0 else -np.sqrt(disc)))
+                    if qa != 0.0:
+                        ra = qq / qa
+                    if qq != 0.0:
+                        rb = d0 / qq
+                    if ra > rb:
+                        ra, rb = rb, ra
                     if 0.0 < ra < 1.0:
                         thetas[ns] = ra
+                        ns += 1
+                    if 0.0 < rb < 1.0 and rb > ra:
+                        thetas[ns] = rb
                         ns += 1
                 if ns > 1 and not q_ready:
                     stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K,
@@ -866,7 +1270,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             for q in range(1, ns):
                 th = thetas[q]
                 vq = vals[w, q]
-                if th >= best_th:
+                # a bracket that starts before the earliest crossing found so far may hold an
+                # earlier one (two surfaces crossed in one step: the later sample end is no bound)
+                if prev_th >= best_th:
                     break
                 if forced and abs(vq) <= noise:
                     prev_th = th
@@ -922,8 +1328,24 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 prev_th = th
                 prev_v = vq
 
+        if unresolved:
+            # retake the step shorter (the surface was not resolved); cached watch values
+            # belong to the rejected step
+            stats[1] += 1
+            # the Hermite midpoint error is O(h^4)
+            h *= max(0.2, 0.9 * tratio ** -0.25)
+            for ww in range(nw):
+                wvalid[ww] = 0
+            continue
+
         if best < 0:
             # accept the whole step
+            if dkind == SLIDE:
+                # keep the sliding state on its surface: the Runge-Kutta step conserves a
+                # linear h exactly but drifts off a curved or moving one by the local error;
+                # one Newton step along h_x removes that (projection; it leaves the sliding
+                # field non-stiff, unlike a large gain C of the -C h grad h term)
+                _project_surface(ev, p, stab[didx, 0], t_new, ynew, n, hdx, buf)
             if save_all:
                 if n_nodes + 1 > nodes_t.shape[0]:
                     nodes_t = _grow1(nodes_t, n_nodes + 1)
@@ -948,6 +1370,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             for ww in range(nw):
                 wvalid[ww] = 1
             fac = 10.0 if err == 0.0 else min(10.0, max(0.2, 0.9 * err ** (-1.0 / order)))
+            if tratio > 0.0:
+                # nor grow past the resolution of a moving surface
+                fac = min(fac, max(0.2, 0.9 * tratio ** -0.25))
             h = h * fac
             continue
 
@@ -964,14 +1389,19 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             stats[5] += 1
             for i in range(nY):
                 ynew[i] = ytmp[i]
-            if wtype[w] != WF_SURFACE or polish == 7:
+            if (wtype[w] != WF_SURFACE and wtype[w] != WF_HDOT) or polish == 7:
                 break
-            # Newton on h(t + h_ev) with the landing step as the flow: quadratic, so a few
-            # iterations bring h to round-off even for slow (near-grazing) arrivals
+            # Newton on h(t + h_ev) (or on hdot of a mode, for a sliding exit) with the
+            # landing step as the flow: quadratic, so a few iterations bring the watch function
+            # to round-off even for slow (near-grazing, tangential-exit) arrivals
             hv = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t + h_ev, ynew, n, buf,
                               fbuf, hdx)
-            hd = _surface_rate(ev, p, dkind, widx[w], mode, nm, t + h_ev, ynew, Kland[s_fsal], n,
-                               buf, hdx)
+            if wtype[w] == WF_SURFACE:
+                hd = _surface_rate(ev, p, dkind, widx[w], mode, nm, t + h_ev, ynew,
+                                   Kland[s_fsal], n, buf, hdx)
+            else:
+                hd = _hdot_rate(ev, p, widx[w], wmode[w], nm, t + h_ev, ynew, Kland[s_fsal], n,
+                                buf, hdx)
             if hd == 0.0 or hv == 0.0:
                 break
             dt = -hv / hd
@@ -1006,6 +1436,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
         n_nodes += 1
 
         # ---- handle the event
+        n_ev0 = n_ev
         for i in range(nY):
             y[i] = ynew[i]
         t = t_ev
@@ -1023,10 +1454,29 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             j = wref[w]
             ev(W_GUARD, j, t, y, p, buf)
             guard_ok = buf[0] != 0.0
+            if not guard_ok:
+                # events on one surface with complementary guards (stick or reverse at v = 0,
+                # thesis eq. 5.4): the crossing belongs to the one whose guard holds
+                for ww in range(nw):
+                    if (ww != w and wact[ww] == ACT_EVENT and wtype[ww] == WF_SURFACE
+                            and widx[ww] == widx[w]
+                            and (wdir[ww] == 0 or wdir[ww] * new_sign > 0.0)):
+                        ev(W_GUARD, wref[ww], t, y, p, buf)
+                        if buf[0] != 0.0:
+                            w = ww
+                            j = wref[ww]
+                            log_ref = j
+                            guard_ok = True
+                            break
             # a crossing whose normal velocity points against the event direction is
             # round-off around a previous event (the state is already leaving): not an event
-            ev(W_HD, widx[w] * nm + mode, t, y, p, buf)
-            vn = buf[0]
+            if dkind == REGULAR:
+                ev(W_HD, widx[w] * nm + mode, t, y, p, buf)
+                vn = buf[0]
+            else:
+                _field(ev, p, dkind, didx, mode, nm, t, y, n, fbuf, etab, stab, slide_c, w1, w2,
+                       gx, hdx)
+                vn = _surface_rate(ev, p, dkind, widx[w], mode, nm, t, y, fbuf, n, buf, hdx)
             moving_away = etab[j, 1] != 0 and vn * etab[j, 1] < 0.0
             if not guard_ok or moving_away:
                 # no event: continue past this crossing
@@ -1058,8 +1508,16 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     chain_event = j
                     chain_vmax = 0.0
                 chain_vmax = max(chain_vmax, abs(vin))
+                # velocity floor: a bounce of speed v rises v^2 / (2|a|); below the position
+                # tolerance it cannot be told from sticking (default when chat_abs < 0)
+                vfloor = chat_abs
+                if vfloor < 0.0:
+                    xmax = 0.0
+                    for i in range(n):
+                        xmax = max(xmax, abs(y[i]))
+                    vfloor = np.sqrt(2.0 * abs(acc) * (atol + rtol * xmax))
                 do_chatter = (chatter_on == 1 and acc < 0.0 and r >= 0.0 and r < 1.0
-                              and (abs(vin) <= chat_rel * chain_vmax or abs(vin) <= chat_abs
+                              and (abs(vin) <= chat_rel * chain_vmax or abs(vin) <= vfloor
                                    or r == 0.0))
                 if do_chatter:
                     # complete-chattering map (Nordmark & Piiroinen 2009; slides):
@@ -1069,8 +1527,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     for i in range(n):
                         y[i] = xs[i] + (2.0 * r * fbuf[i] / acc + w1[i]) * vin / (1.0 - r)
                     if nvar:
-                        _chatter_saltation(ev, p, j, k, mode, nm, t, xs, n, S, w1, w2, gx, hdx,
-                                           fbuf, xt, ft, buf, etab, stab, slide_c, jac)
+                        _chatter_saltation(ev, p, j, k, mode, nm, t, xs, n, S, etab, stab,
+                                           slide_c)
                     t_after = t + dtc
                     # Q is first order in hdot; the accumulation point lies on the sticking
                     # manifold {h = 0, hdot = 0} by definition, so we project onto it
@@ -1095,13 +1553,25 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 if etab[j, 3] >= 0:
                     mode = etab[j, 3]
                 chain_event = -1
+            if (log_kind != K_CHATTER and n_sw > 0
+                    and (dkind == REGULAR or etab[j, 5] == 1 or etab[j, 3] >= 0)):
+                # a reset or a new mode may put the state on the other side of a switching
+                # surface, or on one (an impact that stops the relative motion): take the
+                # variant on the right side, or slide. An event without reset or target
+                # while sliding (a section, a terminal event) leaves the sliding motion alone.
+                dkind, didx, mode = _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx)
             if nvar and log_kind != K_CHATTER:
                 _event_saltation(ev, p, j, k, old_mode, mode, nm, t, xs, y, n, S, gx, hdx, buf,
-                                 fbuf, w1, w2, etab, stab, slide_c, old_kind, old_idx, ytmp)
+                                 fbuf, w1, w2, etab, stab, slide_c, old_kind, old_idx, ytmp,
+                                 dkind, didx)
         elif act == ACT_RELEASE:
             dkind = REGULAR
             didx = -1
             log_kind = K_RELEASE
+            if n_sw > 0:
+                # the variant on the side the released motion takes (a kink surface held at
+                # zero while sticking, e.g. the relative velocity of bilinear damping)
+                dkind, didx, mode = _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx)
             if nvar:
                 for i in range(n):
                     for c in range(n):
@@ -1115,17 +1585,31 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             sa = buf[0]
             ev(W_HD, k * nm + b_m, t, y, p, buf)
             sb = buf[0]
-            if sa < 0.0 and sb > 0.0:
+            filippov = stab.shape[1] <= 3 or stab[s, 3] == SW_FILIPPOV
+            # thesis eq. 2.6-2.8: both fields pointing into the surface (h_t + h_x f_above < 0
+            # < h_t + h_x f_below) is sliding; otherwise the flow crosses. Arriving with the
+            # own field tangent (hdot = 0) while the other one points back is a graze.
+            graze = filippov and ((old_mode == a_m and sa >= 0.0 and sb > 0.0)
+                                  or (old_mode == b_m and sb <= 0.0 and sa < 0.0))
+            if graze:
+                last_type = wtype[w]; last_idx = widx[w]; last_mode = wmode[w]
+                last_sign = new_sign
+                last_t = t
+                ikind[n_nodes - 2] = 0 if save_all else 1
+                restart = True
+                continue
+            if filippov and sa < 0.0 and sb > 0.0:
                 dkind = SLIDE
                 didx = s
                 mode = a_m
                 log_kind = K_SLIDE_START
+                _project_surface(ev, p, k, t, y, n, hdx, buf)
             else:
                 log_kind = K_CROSSING
                 mode = b_m if old_mode == a_m else a_m
             if nvar:
                 _switch_saltation(ev, p, dkind, didx, old_mode, mode, nm, k, t, y, n, S, hdx,
-                                  buf, fbuf, w1, w2, gx, etab, stab, slide_c)
+                                  buf, fbuf, w1, w2, gx, etab, stab, slide_c, old_kind, old_idx)
         elif act == ACT_EXIT_ABOVE or act == ACT_EXIT_BELOW:
             s = wref[w]
             mode = stab[s, 1] if act == ACT_EXIT_ABOVE else stab[s, 2]
@@ -1137,11 +1621,59 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     for c in range(n):
                         S[i, c] = 1.0 if i == c else 0.0
         else:
+            # sliding on switch old_idx reached surface k2 = widx[w] of another switch. Across
+            # k2 the sliding pair (a, b) becomes (a2, b2): if the flow slides on the first
+            # surface there too and its sliding field carries the state away from k2, it
+            # crosses k2 while sliding; if both pairs leave the first surface to one side, the
+            # sliding ends; if the sliding field on the far side points back into k2 the motion
+            # would slide on the intersection of the two surfaces, which is not supported
             status = ST_INTERSECTION
             log_kind = -1
+            k1 = stab[old_idx, 0]
+            k2 = widx[w]
+            a2 = _partner(stab, k2, stab[old_idx, 1])
+            b2 = _partner(stab, k2, stab[old_idx, 2])
+            s_new = _find_switch(stab, k1, a2, b2) if a2 >= 0 and b2 >= 0 else -1
+            if s_new >= 0:
+                ev(W_HD, k1 * nm + a2, t, y, p, buf)
+                sa = buf[0]
+                ev(W_HD, k1 * nm + b2, t, y, p, buf)
+                sb = buf[0]
+                if sa < 0.0 and sb > 0.0:
+                    _field(ev, p, SLIDE, s_new, a2, nm, t, y, n, fbuf, etab, stab, slide_c, w1,
+                           w2, gx, hdx)
+                    rate = _surface_rate(ev, p, SLIDE, k2, a2, nm, t, y, fbuf, n, buf, hdx)
+                    if rate * new_sign > 0.0:
+                        dkind = SLIDE
+                        didx = s_new
+                        mode = a2
+                        log_kind = K_CROSSING
+                elif sa >= 0.0 and sb > 0.0:
+                    dkind = REGULAR
+                    didx = -1
+                    mode = a2
+                    log_kind = K_SLIDE_END
+                    log_ref = old_idx
+                elif sa < 0.0 and sb <= 0.0:
+                    dkind = REGULAR
+                    didx = -1
+                    mode = b2
+                    log_kind = K_SLIDE_END
+                    log_ref = old_idx
+            if log_kind >= 0:
+                status = ST_SUCCESS
+                if nvar:
+                    _switch_saltation(ev, p, dkind, didx, old_mode, mode, nm, k2, t, y, n, S,
+                                      hdx, buf, fbuf, w1, w2, gx, etab, stab, slide_c, old_kind,
+                                      old_idx)
 
         if log_kind >= 0:
-            if nvar:
+            if nvar and seg_var:
+                # per segment: the record keeps S (the segment's Phi is in x_before)
+                for i in range(n):
+                    for c in range(n):
+                        y[n + i * n + c] = S[i, c]
+            elif nvar:
                 # Phi+ = S Phi-
                 for i in range(n):
                     for c in range(n):
@@ -1164,13 +1696,21 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             ev_info[n_ev, 2] = old_kind
             ev_info[n_ev, 3] = old_idx
             ev_info[n_ev, 4] = old_mode
-            ev_info[n_ev, 5] = dkind
-            ev_info[n_ev, 6] = didx
-            ev_info[n_ev, 7] = mode
+            # the chatter record is the jump x_in -> Q(x_in); the change of discrete state
+            # to sticking is the `stick` record that follows it
+            ev_info[n_ev, 5] = old_kind if log_kind == K_CHATTER else dkind
+            ev_info[n_ev, 6] = old_idx if log_kind == K_CHATTER else didx
+            ev_info[n_ev, 7] = old_mode if log_kind == K_CHATTER else mode
+            ev_info[n_ev, 8] = n_nodes
             ev_xb[n_ev, :] = xs
             ev_xa[n_ev, :] = y
             n_ev += 1
             stats[3] += 1
+            if nvar and seg_var:
+                # the next segment's Phi starts at the identity
+                for i in range(n):
+                    for c in range(n):
+                        y[n + i * n + c] = 1.0 if i == c else 0.0
             # jump (or chatter gap) interval to the post-event node
             nodes_t[n_nodes] = t_after
             nodes_y[n_nodes, :] = y
@@ -1197,10 +1737,20 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 ev_info[n_ev, 5] = dkind
                 ev_info[n_ev, 6] = didx
                 ev_info[n_ev, 7] = mode
+                ev_info[n_ev, 8] = n_nodes - 1
                 ev_xb[n_ev, :] = y
                 ev_xa[n_ev, :] = y
                 n_ev += 1
             t = t_after
+        if stop_mask != 0:
+            # stop at the stop_count-th logged event of the requested kinds and index
+            for r in range(n_ev0, n_ev):
+                if ((stop_mask >> ev_info[r, 0]) & 1) == 1 and (stop_ref < 0
+                                                                or ev_info[r, 1] == stop_ref):
+                    n_stop += 1
+            if n_stop >= stop_count and status == ST_SUCCESS:
+                status = ST_TERMINAL
+                break
         if status != ST_SUCCESS:
             break
         if act == ACT_EVENT and etab[wref[w], 4] == 1:
@@ -1242,6 +1792,11 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 last_type = -1
             else:
                 last_sign = 1.0 if mode == stab[wref[w], 1] else -1.0
+        elif act == ACT_INTERSECTION:
+            # crossed surface widx[w] while sliding: we are on the new side of it
+            last_type = WF_SURFACE
+            last_idx = widx[w]
+            last_sign = new_sign
         else:
             # sliding exit: we leave into the mode's side of the surface
             last_type = WF_SURFACE

@@ -11,15 +11,20 @@ from .. import __version__
 from ..errors import SolveError, Status
 from ..model import compile_model, load_model
 from ..model.codegen import CompiledModel
-from ._kernel import run_kernel
+from ._kernel import (IO_DIDX0, IO_DKIND0, IO_N, IO_STOP_COUNT, IO_STOP_MASK, IO_STOP_REF,
+                      VAR_NONE, VAR_SEGMENTS, run_kernel)
+from ._variational import assemble_segments
 from .tableaus import METHODS
 from .trajectory import EVENT_KINDS, EventRecord, Trajectory
 
 #: Default options of :func:`simulate` (each documented there).
 DEFAULTS = dict(method="RK45", rtol=1e-10, atol=1e-12, first_step=None, max_step=math.inf,
                 max_steps=1_000_000, max_events=100_000, chatter=True, chatter_ratio=1e-4,
-                chatter_velocity=1e-10, sliding_gain=0.0, variational=False, dense=True,
-                mode=None, throw=True)
+                chatter_velocity=None, sliding="convex", sliding_gain=0.0, variational=False,
+                dense=True, mode=None, throw=True)
+
+#: Sliding methods (option ``sliding``) and their kernel codes.
+SLIDING_METHODS = {"convex": 0, "utkin": 1}
 
 
 def state_vector(model, x0, *, name: str = "x0") -> np.ndarray:
@@ -85,18 +90,40 @@ def simulate(model, x0, t_span, params: Mapping[str, float] | None = None, **opt
     chatter_ratio, chatter_velocity : float
         Apply the chattering map once the impact velocity falls below ``chatter_ratio`` times
         the largest one of the current sequence of impacts, or below ``chatter_velocity``.
-        The map is first order in the impact velocity (Nordmark & Piiroinen 2009), so its error
-        is of the order of the square of that velocity.
+        The default ``chatter_velocity`` is ``sqrt(2 |a| (atol + rtol |x|))`` with ``a`` the
+        normal acceleration: a bounce that rises less than the position tolerance cannot be
+        told from sticking. The map is first order in the impact velocity (Nordmark &
+        Piiroinen 2009), so its error is of the order of the square of that velocity.
+    sliding : {'convex', 'utkin'}
+        The vector field on a Filippov sliding surface: Filippov's convex combination of the
+        fields on either side (thesis eq. 2.7-2.8; default) or Utkin's equivalent control
+        (slides, "Simulation: Filippov systems"): for a model written with ``sign(s)`` the
+        field ``f(t, x, u)`` with the switching term replaced by ``u`` in ``[-1, 1]`` solving
+        ``h_t + h_x f = 0``. The two agree where ``f`` is affine in the switching term (every
+        switch written as two explicit modes, dry friction ``mu*sign(v)``, relays ``B sign(y)``)
+        and differ where it enters nonlinearly (``sign(s)**2``, a relay inside a nonlinear
+        actuator).
     sliding_gain : float
-        The constant ``C`` of the stabilising term ``-C h grad h`` of the sliding field.
+        The rate ``C`` (1/time) of the stabilising term of the sliding field, the slides'
+        ``-C h grad h`` divided by ``|grad h|^2``: a drift off the surface decays as
+        ``exp(-C t)`` whatever the scale of ``h``. Default 0: every accepted sliding step is
+        projected back onto ``h = 0`` instead (one Newton step along ``grad h``), which holds
+        the surface to round-off without making the sliding field stiff (a gain ``C`` limits
+        explicit steps to about ``3/C`` while sliding).
     variational : bool
         Integrate the variational equations with saltation matrices at every event; the
-        result then has ``jacobian``.
+        result then has ``jacobian`` (``dx(t_end)/dx0``) and ``transfer_matrices`` (the flow
+        Jacobian of each smooth segment and the full saltation matrix of each event, see
+        :mod:`pwsdyn.stability`).
     dense : bool
         Store every step with its dense output (default). ``False`` keeps only the event log
         and the end state (for sweeps).
     mode : str, optional
-        Initial mode (default: the model's ``initial_mode``).
+        Initial mode (default: the model's ``initial_mode``). Where modes are joined by
+        switching surfaces the side of each surface decides: the mode is replaced by the one
+        on the side of ``x0`` (a mode split at ``sign(...)`` may be named by its user name,
+        ``"slip"`` for ``slip[v-V>0]``), and a start on a Filippov surface into which both
+        fields point starts sliding.
     throw : bool
         Raise :class:`SolveError` if the run fails (default). With ``False`` the failed
         trajectory is returned with its ``status`` and ``message``.
@@ -154,36 +181,64 @@ def _check_options(opts):
             raise ValueError(f"`{k}` must be a positive integer, got {opts[k]!r}")
     if not opts["max_step"] > 0:
         raise ValueError(f"`max_step` must be positive, got {opts['max_step']!r}")
+    gain = opts.get("sliding_gain", 0.0)
+    if not (isinstance(gain, (int, float)) and math.isfinite(gain) and gain >= 0):
+        raise ValueError(f"`sliding_gain` must be a non-negative number, got {gain!r}")
 
 
-def kernel_tables(cm: CompiledModel):
+def kernel_tables(cm: CompiledModel, sliding: str = "convex"):
+    """The kernel's event table (surface, direction, kind, target, terminal, has_reset,
+    surface moves in time), event activity per mode and switch table (surface, above, below,
+    kind, sliding method, surface moves in time)."""
     model = cm.model
     ne = len(model.events)
-    etab = np.zeros((max(ne, 0), 6), dtype=np.int64)
+    tdep = cm.surface_time_dependent
+    if tdep is None:
+        tdep = np.zeros(len(model.surfaces), dtype=np.int64)
+    etab = np.zeros((max(ne, 0), 7), dtype=np.int64)
     for j in range(ne):
         etab[j] = [cm.event_surface[j], cm.event_direction[j], cm.event_kind[j],
-                   cm.event_target[j], cm.event_terminal[j], cm.event_has_reset[j]]
+                   cm.event_target[j], cm.event_terminal[j], cm.event_has_reset[j],
+                   tdep[cm.event_surface[j]]]
     eact = np.ascontiguousarray(cm.event_active[:ne].astype(np.int64)).reshape(ne, len(model.modes))
     ns = len(model.switches)
-    stab = np.zeros((ns, 3), dtype=np.int64)
+    if sliding not in SLIDING_METHODS:
+        raise ValueError(f"`sliding` must be one of {sorted(SLIDING_METHODS)}, got {sliding!r}")
+    stab = np.zeros((ns, 6), dtype=np.int64)
+    kinds = cm.switch_kind if cm.switch_kind is not None else np.zeros(ns, dtype=np.int64)
     for s in range(ns):
-        stab[s] = [cm.switch_surface[s], cm.switch_above[s], cm.switch_below[s]]
+        stab[s] = [cm.switch_surface[s], cm.switch_above[s], cm.switch_below[s], kinds[s],
+                   SLIDING_METHODS[sliding], tdep[cm.switch_surface[s]]]
     return etab, eact, stab
 
 
-def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dkind0=None):
+def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dkind0=None,
+                       didx0=None, stop=None):
+    """The kernel run behind :func:`simulate`, without re-validating model, state, params.
+
+    ``dkind0``, ``didx0``: initial discrete state (0 mode, 1 sticking on event ``didx0``, 2
+    sliding on switch ``didx0``; default a regular mode). ``stop = (kind_mask, ref, count)``
+    ends the run (status TERMINAL_EVENT) at the ``count``-th logged event whose kind code
+    (``EVENT_KINDS`` index) has its bit set in ``kind_mask`` and whose event or switch index is
+    ``ref`` (-1: any), so Poincaré maps on event sections run in one kernel call.
+    """
     _check_options(opts)
     model = cm.model
     tab = METHODS[opts["method"]]
-    etab, eact, stab = kernel_tables(cm)
+    etab, eact, stab = kernel_tables(cm, opts.get("sliding", "convex"))
     if mode0 is None:
         mode0 = model.initial_mode if opts["mode"] is None else model.mode_index(opts["mode"])
-    iopt = np.zeros(8, dtype=np.int64)
-    iopt[:] = [mode0, len(model.modes), opts["max_steps"], opts["max_events"], tab.code,
-               1 if opts["variational"] else 0, 1 if opts["chatter"] else 0,
-               1 if opts["dense"] else 0]
+    iopt = np.zeros(IO_N, dtype=np.int64)
+    iopt[:8] = [mode0, len(model.modes), opts["max_steps"], opts["max_events"], tab.code,
+                VAR_SEGMENTS if opts["variational"] else VAR_NONE, 1 if opts["chatter"] else 0,
+                1 if opts["dense"] else 0]
+    if stop is not None:
+        iopt[IO_STOP_MASK], iopt[IO_STOP_REF], iopt[IO_STOP_COUNT] = stop
+    iopt[IO_DKIND0] = 0 if dkind0 is None else dkind0
+    iopt[IO_DIDX0] = -1 if didx0 is None else didx0
     fopt = np.array([opts["rtol"], opts["atol"], opts["first_step"] or 0.0,
-                     min(opts["max_step"], 1e300), opts["chatter_ratio"], opts["chatter_velocity"],
+                     min(opts["max_step"], 1e300), opts["chatter_ratio"],
+                     -1.0 if opts["chatter_velocity"] is None else opts["chatter_velocity"],
                      opts["sliding_gain"]], dtype=float)
     pv = p if p.size else np.zeros(1)
     res = run_kernel(cm.evaluate, float(t0), float(t_end), np.ascontiguousarray(x, dtype=float),
@@ -192,6 +247,10 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
     (status, t_fin, y_fin, dstate, nodes_t, nodes_y, nodes_s, dense, ikind, ev_t, ev_t2, ev_info,
      ev_xb, ev_xa, stats) = res
     n = model.n_states
+    jac = transfer = None
+    if opts["variational"]:
+        # per-segment transfer matrices; Phi made global in nodes, dense output and events
+        transfer, jac = assemble_segments(n, nodes_y, dense, ev_info, ev_xb, ev_xa, y_fin)
     status = Status(int(status))
     # discrete state per node, mapped through the few distinct codes (vectorised: runs can
     # have millions of nodes)
@@ -205,7 +264,7 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
     states = np.repeat(run_names, np.diff(np.append(starts, len(key))))
     events = []
     for r in range(len(ev_t)):
-        kind, ref, ok, oi, om, nk, ni, nmode = ev_info[r]
+        kind, ref, ok, oi, om, nk, ni, nmode = ev_info[r, :8]
         kname = EVENT_KINDS[kind]
         if kname in ("crossing", "slide_start", "slide_end"):
             name = model.switches[ref].name
@@ -217,12 +276,12 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
     stat = dict(zip(("steps", "rejected_steps", "nfev", "events", "chatter", "landing_steps"),
                     (int(s) for s in stats)))
     params = dict(zip(model.parameters, (float(v) for v in p)))
-    jac = y_fin[n:].reshape(n, n).copy() if opts["variational"] else None
     traj = Trajectory(
         t=nodes_t, x=nodes_y[:, :n].copy(), state=states, events=events, status=status,
         message=status.message, stats=stat, model=model, params=params,
         options={k: v for k, v in opts.items() if k != "throw"}, t0=t0, t_end=t_end,
-        jacobian=jac, _dense=dense if opts["dense"] else None, _ikind=ikind, _y=nodes_y,
+        jacobian=jac, transfer_matrices=transfer, _dense=dense if opts["dense"] else None,
+        _ikind=ikind, _y=nodes_y,
         provenance={"model": model.name, "model_hash": model.hash, "pwsdyn_version": __version__},
     )
     if status.failed and opts["throw"]:

@@ -80,6 +80,12 @@ class Trajectory:
     jacobian : numpy.ndarray or None
         With ``variational=True``: derivative of the final state with respect to the initial
         state (n x n), including every saltation matrix.
+    transfer_matrices : list of numpy.ndarray or None
+        With ``variational=True``: ``[Phi_0, S_1, Phi_1, ..., S_m, Phi_m]`` for the ``m``
+        events of ``events``: ``Phi_k`` the Jacobian of the smooth flow over the ``k``-th
+        segment, ``S_k`` the full saltation matrix of the ``k``-th event (``Phi+ = S Phi-``), so
+        ``jacobian`` is their ordered product ``Phi_m S_m ... S_1 Phi_0`` (COCO's hspo
+        composition). See :mod:`pwsdyn.stability` for projected forms. Not saved to files.
     """
 
     t: np.ndarray
@@ -95,6 +101,7 @@ class Trajectory:
     t0: float
     t_end: float
     jacobian: np.ndarray | None = None
+    transfer_matrices: list | None = field(default=None, repr=False)
     # dense output: per interval between consecutive nodes
     _dense: np.ndarray | None = field(default=None, repr=False)
     _ikind: np.ndarray | None = field(default=None, repr=False)
@@ -145,6 +152,33 @@ class Trajectory:
     def event_times(self, kind: str | None = None, name: str | None = None) -> np.ndarray:
         return np.array([e.t for e in self.events_of(kind, name)])
 
+    def sliding_intervals(self) -> list:
+        """The Filippov sliding segments: ``[(t_start, t_end, switch name), ...]``.
+
+        Read from the discrete state of the nodes, so a run that starts on a sliding surface
+        (no ``slide_start`` event) or ends while sliding is included; consecutive segments on
+        the same surface joined by the crossing of another surface (sliding continues) count
+        as one.
+        """
+        out = []
+        cur = None
+        t = np.asarray(self.t)
+        for i in range(len(t)):
+            st = str(self.state[i])
+            if st.startswith("slide:"):
+                if cur is not None and cur[2] == st[6:]:
+                    cur[1] = float(t[i])
+                else:
+                    if cur is not None:
+                        out.append(tuple(cur))
+                    cur = [float(t[i]), float(t[i]), st[6:]]
+            elif cur is not None:
+                out.append(tuple(cur))
+                cur = None
+        if cur is not None:
+            out.append(tuple(cur))
+        return out
+
     # ------------------------------------------------------------------------------------
     def __call__(self, t, side: str = "left", variational: bool = False):
         """Evaluate the dense output at time(s) ``t``.
@@ -172,36 +206,36 @@ class Trajectory:
             raise ValueError(f"`t` outside the simulated interval [{lo}, {hi}]")
         ny = self._y.shape[1]
         nout = ny if variational else self.n_states
-        out = np.empty((len(ts), nout))
         nint = len(self._ikind)
-        idx = np.searchsorted(self.t, ts, side="left" if side == "left" else "right") - 1
-        idx = np.clip(idx, 0, max(nint - 1, 0))
-        for r, (tt, i) in enumerate(zip(ts, idx)):
-            # skip zero-length jump intervals toward the requested side
-            while self._ikind[i] == 1 and self.t[i + 1] == self.t[i]:
-                if side == "left" and i > 0:
-                    i -= 1
-                elif side == "right" and i < nint - 1:
-                    i += 1
-                else:
-                    break
-            t0, t1 = self.t[i], self.t[i + 1]
-            y0 = self._y[i]
-            kind = self._ikind[i]
-            if kind == 0 and t1 > t0:
-                theta = (tt - t0) / (t1 - t0)
-                Q = self._dense[i]
-                acc = np.zeros(ny)
-                for k in range(Q.shape[1] - 1, -1, -1):
-                    acc = (acc + Q[:, k]) * theta
-                val = y0 + acc
-            elif t1 > t0:
-                # a chattering gap (or an interval without dense output): linear between nodes
-                theta = (tt - t0) / (t1 - t0)
-                val = (1 - theta) * y0 + theta * self._y[i + 1]
-            else:
-                val = self._y[i + 1] if side == "right" else y0
-            out[r] = val[:nout]
+        if nint == 0:
+            return self._y[0, :nout].copy() if np.ndim(t) == 0 else np.tile(self._y[0, :nout],
+                                                                             (len(ts), 1))
+        # 'left': t[i] < t <= t[i+1]; 'right': t[i] <= t < t[i+1]. Either way the interval
+        # found has positive length, so zero-length jump intervals are never interpolated.
+        idx = np.searchsorted(self.t, ts, side=side) - 1
+        idx = np.clip(idx, 0, nint - 1)
+        t0 = self.t[idx]
+        t1 = self.t[idx + 1]
+        length = t1 - t0
+        theta = np.divide(ts - t0, length, out=np.zeros_like(ts), where=length > 0)
+        theta = np.clip(theta, 0.0, 1.0)
+        y0 = self._y[idx]
+        y1 = self._y[idx + 1]
+        kind = self._ikind[idx]
+        # linear between nodes: chattering gaps and intervals stored without dense output
+        out = (1.0 - theta)[:, None] * y0 + theta[:, None] * y1
+        smooth = (kind == 0) & (length > 0)
+        if np.any(smooth):
+            Q = self._dense[idx[smooth]]
+            th = theta[smooth][:, None]
+            acc = np.zeros((Q.shape[0], ny))
+            for k in range(Q.shape[2] - 1, -1, -1):
+                acc = (acc + Q[:, :, k]) * th
+            out[smooth] = y0[smooth] + acc
+        zero = length <= 0
+        if np.any(zero):
+            out[zero] = np.where((side == "right"), y1[zero].T, y0[zero].T).T
+        out = out[:, :nout]
         return out[0] if np.ndim(t) == 0 else out
 
     def sample(self, num: int = 2000):
@@ -210,7 +244,8 @@ class Trajectory:
             return self.t, self.x
         grid = np.linspace(self.t[0], self.t[-1], num)
         evt = np.array([e.t for e in self.events] + [e.t_after for e in self.events])
-        ts = np.sort(np.concatenate([grid, evt]))
+        evt = evt[(evt >= self.t[0]) & (evt <= self.t[-1])]
+        ts = np.unique(np.concatenate([grid, evt]))
         left = self(ts, side="left")
         right = self(ts, side="right")
         T = np.repeat(ts, 2)

@@ -32,6 +32,7 @@ import sympy as sp
 from numba import types
 from sympy.printing.pycode import PythonCodePrinter
 
+from .discontinuities import U_SYMBOL
 from .spec import Model
 
 # quantity selectors (the ``which`` argument); the kernel uses the same numbers
@@ -41,13 +42,16 @@ W_HD, W_HDX, W_HDT = 6, 7, 8
 W_G, W_GX, W_GT = 9, 10, 11
 W_GUARD = 12
 W_HHD = 13  # h and hdot together (one call per step in the event detection hot loop)
+# Utkin's equivalent control on switch ``idx``: the switch's family f(t, x, u) (n values),
+# hdot(u) = h_t + h_x f(t, x, u) and its u-derivative (one value each); u is read from out[0]
+W_FU, W_HDU, W_HDUD = 14, 15, 16
 
 #: Signature of the generated function: evaluate(which, idx, t, x, p, out) -> None
 EVALUATE_SIGNATURE = types.void(types.int64, types.int64, types.float64, types.float64[::1],
                                 types.float64[::1], types.float64[::1])
 EVALUATE_TYPE = types.FunctionType(EVALUATE_SIGNATURE)
 
-_CODEGEN_VERSION = "3"
+_CODEGEN_VERSION = "4"
 
 
 def cache_dir() -> Path:
@@ -125,6 +129,19 @@ def derivatives(model: Model) -> Derivatives:
             cases[(W_HDX, k * nm + i)] = [_clean(e) for e in sp.Matrix([hd]).jacobian(X)]
             cases[(W_HDT, k * nm + i)] = [_clean(sp.diff(hd, t))]
             cases[(W_HHD, k * nm + i)] = [h, hd]
+    for s, sw in enumerate(model.switches):
+        # family f(t, x, u) of Utkin's equivalent control; affine (the convex combination,
+        # thesis eq. 2.7 with alpha = (1 - u)/2) for switches written as two explicit modes
+        if sw.family is not None:
+            fu = sp.Matrix(sw.family)
+        else:
+            fu = ((1 + U_SYMBOL) / 2 * sp.Matrix(model.modes[sw.above].rhs)
+                  + (1 - U_SYMBOL) / 2 * sp.Matrix(model.modes[sw.below].rhs))
+        h = model.surfaces[sw.surface].expr
+        hdu = sp.diff(h, t) + (sp.Matrix([h]).jacobian(X) * fu)[0]
+        cases[(W_FU, s)] = list(fu)
+        cases[(W_HDU, s)] = [_clean(hdu)]
+        cases[(W_HDUD, s)] = [_clean(sp.diff(hdu, U_SYMBOL))]
     for j, ev in enumerate(model.events):
         g = sp.Matrix(ev.reset if ev.reset is not None else model.state_symbols)
         cases[(W_G, j)] = list(g)
@@ -156,6 +173,7 @@ def generate_source(model: Model) -> str:
     rename = {sym: sp.Symbol(f"s_{sym.name}", real=True) for sym in model.state_symbols}
     rename.update({sym: sp.Symbol(f"p_{sym.name}", real=True)
                    for sym in model.parameter_symbols})
+    rename[U_SYMBOL] = sp.Symbol("u_sw", real=True)
     for i, s in enumerate(model.states):
         lines.append(f"    s_{s} = x[{i}]")
     for i, s in enumerate(model.parameters):
@@ -174,6 +192,8 @@ def generate_source(model: Model) -> str:
                 lines.append(f"            out[0] = 1.0 if ({code}) else 0.0")
                 lines.append("            return")
                 continue
+            if which in (W_FU, W_HDU, W_HDUD):
+                lines.append("            u_sw = out[0]")
             subs, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("_c"))
             for sym, val in subs:
                 lines.append(f"            {sym} = {pr.doprint(val)}")
@@ -204,6 +224,11 @@ class CompiledModel:
     switch_surface: np.ndarray
     switch_above: np.ndarray
     switch_below: np.ndarray
+    #: 0 Filippov, 1 continuous (crossing only) per switch
+    switch_kind: np.ndarray | None = None
+    #: per surface: 1 if h depends on t explicitly (the kernel then checks that each step
+    #: resolves h in time, not only the state)
+    surface_time_dependent: np.ndarray | None = None
 
 
 _COMPILED: dict[str, CompiledModel] = {}
@@ -260,6 +285,10 @@ def compile_model(model: Model) -> CompiledModel:
         switch_surface=np.array([s.surface for s in model.switches], dtype=np.int64),
         switch_above=np.array([s.above for s in model.switches], dtype=np.int64),
         switch_below=np.array([s.below for s in model.switches], dtype=np.int64),
+        switch_kind=np.array([0 if s.kind == "filippov" else 1 for s in model.switches],
+                             dtype=np.int64),
+        surface_time_dependent=np.array([1 if sp.diff(s.expr, model.t) != 0 else 0
+                                         for s in model.surfaces], dtype=np.int64),
     )
     _COMPILED[key] = cm
     return cm

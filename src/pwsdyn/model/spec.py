@@ -89,12 +89,26 @@ class Event:
 
 @dataclass(frozen=True)
 class Switch:
-    """A Filippov switching surface: mode ``above`` where ``h > 0``, ``below`` where ``h < 0``."""
+    """A switching surface: mode ``above`` where ``h > 0``, ``below`` where ``h < 0``.
+
+    Attributes
+    ----------
+    kind : {'filippov', 'continuous'}
+        ``filippov``: the field jumps across the surface; the flow crosses or slides (thesis
+        eq. 2.6-2.8). ``continuous``: only a derivative jumps (``Abs``, ``Max``, ``Min``); the
+        crossing is located, there is no sliding.
+    family : tuple or None
+        The field ``f(t, x, u)`` with the switching term replaced by
+        :data:`pwsdyn.model.discontinuities.U_SYMBOL` (``u = +1`` above, ``-1`` below), for
+        Utkin's equivalent control; ``None``: ``(1 + u)/2 f_above + (1 - u)/2 f_below``.
+    """
 
     name: str
     surface: int
     above: int
     below: int
+    kind: str = "filippov"
+    family: tuple | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -141,6 +155,11 @@ class Model:
         try:
             return self.mode_names.index(name)
         except ValueError:
+            # a mode split at its discontinuous terms (``slip`` -> ``slip[v-V>0]``, ...): its
+            # first variant; the simulator picks the variant on the right side of each surface
+            for i, m in enumerate(self.mode_names):
+                if m.startswith(name + "["):
+                    return i
             raise ValueError(f"unknown mode {name!r}; modes are {list(self.mode_names)}") from None
 
     def event_index(self, name: str) -> int:
@@ -195,7 +214,8 @@ class Model:
             parts.append(f"event {e.name} {e.kind} {e.surface} {e.direction} {e.modes} "
                          f"{e.target} {e.terminal} {sp.srepr(e.guard)} {sp.srepr(e.reset)}")
         for s in self.switches:
-            parts.append(f"switch {s.name} {s.surface} {s.above} {s.below}")
+            parts.append(f"switch {s.name} {s.surface} {s.above} {s.below} {s.kind} "
+                         f"{sp.srepr(s.family)}")
         return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:16]
 
     def __repr__(self):
@@ -244,7 +264,7 @@ def load_model(source, **kwargs) -> Model:
     """
     if kwargs:
         raise TypeError(f"load_model() got unexpected keyword argument(s) {sorted(kwargs)}")
-    if isinstance(source, Model):
+    if isinstance(source, Model) or getattr(source, "is_map", False):
         return source
     if isinstance(source, Mapping):
         return model_from_dict(dict(source), origin="<dict>")
@@ -318,7 +338,14 @@ _EVENT_KEYS = {"name", "kind", "surface", "direction", "modes", "mode", "guard",
 
 
 def model_from_dict(data: dict, origin: str = "<dict>", text: str | None = None) -> Model:
-    """Build and validate a :class:`Model` from a dict with the TOML file's structure."""
+    """Build and validate a :class:`Model` from a dict with the TOML file's structure.
+
+    A dict with ``kind = "map"`` describes a piecewise-smooth map instead
+    (:mod:`pwsdyn.model.maps`)."""
+    if data.get("kind") == "map":
+        from .maps import map_model_from_dict
+
+        return map_model_from_dict(data, origin=origin, text=text)
     W = _Where(origin, text)
     unknown = sorted(set(data) - _TOP_KEYS)
     if unknown:
@@ -509,6 +536,16 @@ def model_from_dict(data: dict, origin: str = "<dict>", text: str | None = None)
     ref = data.get("reference", data.get("source", ""))
     if not isinstance(desc, str) or not isinstance(ref, str):
         raise W.error("`description` and `reference` must be strings", "description")
+    # sign / Heaviside / Abs / Max / Min in vector fields: modes split into their smooth
+    # variants joined by switching surfaces (pwsdyn.model.discontinuities)
+    from .discontinuities import expand_discontinuities
+
+    try:
+        modes, events, switches, init = expand_discontinuities(
+            modes, surfaces, events, switches, init, definitions,
+            variables=tuple(names[s] for s in states) + (t,))
+    except ModelError as exc:
+        raise W.error(exc.reason, exc.field or "modes") from None
     return Model(name=name, states=tuple(states), parameters=parameters, modes=tuple(modes),
                  surfaces=tuple(surfaces), events=tuple(events), switches=tuple(switches),
                  description=desc, reference=ref, definitions=definitions, forcing_period=fp,
