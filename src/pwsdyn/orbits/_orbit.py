@@ -1,0 +1,297 @@
+"""The :class:`PeriodicOrbit` result and the merging of shooting intervals into one trajectory."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import __version__
+from ..errors import Status
+from ..integrate.trajectory import Trajectory
+
+
+@dataclass(eq=False)
+class PeriodicOrbit:
+    """A periodic orbit of a hybrid model with its Floquet multipliers.
+
+    Create one with :func:`pwsdyn.find_periodic_orbit` (from a guess) or
+    :meth:`PeriodicOrbit.from_trajectory` (from a simulation).
+
+    Attributes
+    ----------
+    model : Model
+    params : dict
+        Parameter values.
+    t0 : float
+        Initial time of the period (the phase of a forced orbit).
+    x0 : numpy.ndarray
+        State at ``t0``.
+    state0 : str
+        Discrete state at ``t0`` (mode name, ``stick:<event>``, ``slide:<switch>``).
+    period : float
+        ``n * forcing_period`` for a forced model; found by Newton for an autonomous one.
+    events : list[EventRecord]
+        The events over one period, as in ``Trajectory.events``: the orbit's signature.
+    trajectory : Trajectory
+        One period, with dense output and the variational solution (``transfer_matrices``).
+    monodromy : numpy.ndarray, shape (n, n)
+        Jacobian of the one-period map at ``(t0, x0)``, the ordered product of the flow
+        Jacobians of the smooth segments and the **full** saltation matrices of the events
+        (``trajectory.transfer_matrices``). An autonomous orbit's monodromy has the trivial
+        multiplier 1 along the vector field.
+    multipliers : numpy.ndarray
+        Nontrivial Floquet multipliers, by decreasing modulus: all eigenvalues of
+        ``monodromy`` for a forced orbit; for an autonomous one the eigenvalues of the Poincaré
+        map on the phase-condition section (thesis eq. 2.25), ``n - 1`` of them.
+    stable : bool
+        Every multiplier inside the unit circle (modulus below ``1 - 1e-8``: a multiplier on
+        the unit circle to the accuracy of the monodromy is not asymptotic stability).
+    history : list[float]
+        Newton residual norm (max norm of the shooting residual relative to ``1 + |x|``) of each
+        iterate, the converged one last.
+    converged : bool
+    autonomous : bool
+        The period is an unknown (no ``forcing_period``).
+    trivial_multiplier : complex or None
+        Autonomous orbits: the eigenvalue of ``monodromy`` nearest 1 (1 up to the accuracy
+        of the variational solution).
+    poincare_jacobian : numpy.ndarray or None
+        Autonomous orbits: the Poincaré-map Jacobian of thesis eq. 2.25 on the phase-condition
+        section through ``x0``, ``(I - f h_x / (h_x f)) monodromy``; it has eigenvalue 0 where
+        the monodromy has the trivial 1.
+    phase_normal : numpy.ndarray or None
+        Autonomous orbits: normal ``h_x`` of the phase-condition section.
+    nodes : numpy.ndarray
+        Times of the multiple-shooting nodes (``t0`` first).
+    residual : float
+        Last entry of ``history``.
+    closure : float
+        ``|x(t0 + period) - x0|`` (max norm) of ``trajectory``: the junctions between the
+        shooting intervals, at the Newton tolerance.
+    options : dict
+        Integrator and solver options used.
+    """
+
+    model: object
+    params: dict
+    t0: float
+    x0: np.ndarray
+    state0: str
+    period: float
+    events: list
+    trajectory: Trajectory | None
+    monodromy: np.ndarray | None
+    multipliers: np.ndarray | None
+    stable: bool | None
+    history: list
+    converged: bool
+    autonomous: bool
+    trivial_multiplier: complex | None = None
+    poincare_jacobian: np.ndarray | None = None
+    phase_normal: np.ndarray | None = None
+    nodes: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    residual: float = np.nan
+    closure: float = np.nan
+    options: dict = field(default_factory=dict)
+
+    # ------------------------------------------------------------------------------------
+    @property
+    def signature(self) -> tuple:
+        """``(kind, name, mode_before, mode_after)`` of each event over one period."""
+        return tuple((e.kind, e.name, e.mode_before, e.mode_after) for e in self.events)
+
+    @property
+    def transfer_matrices(self) -> list | None:
+        """``[Phi_0, S_1, Phi_1, ..., S_m, Phi_m]`` over one period (full saltation form)."""
+        return None if self.trajectory is None else self.trajectory.transfer_matrices
+
+    @property
+    def iterations(self) -> int:
+        """Number of Newton steps taken."""
+        return max(len(self.history) - 1, 0)
+
+    def __repr__(self):
+        mult = ("?" if self.multipliers is None else
+                ", ".join(_fmt_complex(m) for m in np.atleast_1d(self.multipliers)))
+        status = ("stable" if self.stable else "unstable") if self.stable is not None else "?"
+        conv = "" if self.converged else ", NOT converged"
+        return (f"PeriodicOrbit(model={self.model.name!r}, period={self.period:.12g}, "
+                f"events={len(self.events)}, multipliers=[{mult}], {status}{conv})")
+
+    def summary(self) -> str:
+        """A multi-line human-readable report (period, signature, multipliers, Newton)."""
+        lines = [f"model       {self.model.name}",
+                 "parameters  " + (", ".join(f"{k}={v:.10g}" for k, v in self.params.items())
+                                   or "(none)"),
+                 f"period      {self.period:.15g}"
+                 + ("  (autonomous: found by Newton)" if self.autonomous else
+                    "  (forced: multiple of the forcing period)"),
+                 f"t0          {self.t0:.15g}  in {self.state0}",
+                 "x0          " + ", ".join(f"{s}={v:.15g}"
+                                            for s, v in zip(self.model.states, self.x0))]
+        lines.append(f"signature   {len(self.events)} event(s) per period")
+        for e in self.events:
+            lines.append(f"  t0+{e.t - self.t0:<12.8g} {e.kind:<11} {e.name:<12} "
+                         f"{e.mode_before} -> {e.mode_after}")
+        if self.multipliers is not None:
+            lines.append("multipliers " + ("(nontrivial; trivial 1 removed)"
+                                           if self.autonomous else "(time-T map)"))
+            for m in np.atleast_1d(self.multipliers):
+                lines.append(f"  {_fmt_complex(m):<40} |mu| = {abs(m):.10g}")
+            if self.trivial_multiplier is not None:
+                lines.append(f"trivial     {_fmt_complex(self.trivial_multiplier)} "
+                             f"(|mu - 1| = {abs(self.trivial_multiplier - 1):.2e})")
+            lines.append(f"stability   {'stable' if self.stable else 'unstable'}")
+        lines.append(f"newton      {self.iterations} iteration(s), "
+                     f"{len(self.nodes)} shooting node(s), residuals "
+                     + " ".join(f"{r:.2e}" for r in self.history)
+                     + ("" if self.converged else "  NOT CONVERGED"))
+        return "\n".join(lines)
+
+    # ------------------------------------------------------------------------------------
+    @classmethod
+    def from_trajectory(cls, traj, *, t0: float | None = None, period: float | None = None,
+                        periods: int = 1, refine: bool = True, recurrence_tol: float = 1e-3,
+                        **kwargs) -> "PeriodicOrbit":
+        """A periodic orbit from a simulated trajectory that has settled on it.
+
+        The guess is the end of the run: for a forced model ``period = periods *
+        forcing_period`` and ``t0 = t_end - period`` (or the given ``t0``); for an autonomous
+        model the period is the time between the last event and the most recent earlier event
+        of the same kind, name and modes whose post-event state agrees with it to
+        ``recurrence_tol`` (relative), unless ``period`` is given. With ``refine`` (default) the
+        guess is refined by :func:`pwsdyn.find_periodic_orbit` (``kwargs`` go there);
+        otherwise one period is re-simulated from the guess and its monodromy reported as is
+        (``converged`` then says whether it closed to ``tol``).
+
+        Parameters
+        ----------
+        traj : Trajectory
+            A run with dense output (the default of :func:`pwsdyn.simulate`).
+        t0, period : float, optional
+        periods : int
+            Forced models: the period in forcing periods.
+        refine : bool
+        recurrence_tol : float
+        **kwargs
+            Options of :func:`pwsdyn.find_periodic_orbit`.
+
+        Returns
+        -------
+        PeriodicOrbit
+        """
+        from ._shooting import _guess_from_trajectory, find_periodic_orbit, orbit_at
+
+        t0g, x0g, Tg, state = _guess_from_trajectory(traj, t0=t0, period=period, periods=periods,
+                                                     recurrence_tol=recurrence_tol)
+        if refine:
+            return find_periodic_orbit(traj.model, x0g, params=traj.params, period=Tg, t0=t0g,
+                                       mode=state, **kwargs)
+        return orbit_at(traj.model, x0g, params=traj.params, period=Tg, t0=t0g, mode=state,
+                        **kwargs)
+
+    # ------------------------------------------------------------------------------------
+    def to_dataset(self):
+        """One period as an :class:`xarray.Dataset`: the trajectory's layout plus
+        ``monodromy``, ``multiplier_real``/``multiplier_imag``, ``newton_residual`` and the
+        period, ``t0``, stability in the attributes."""
+        import json
+
+        if self.trajectory is None:
+            raise ValueError("this orbit has no trajectory to save")
+        ds = self.trajectory.to_dataset()
+        n = len(self.model.states)
+        ds["monodromy"] = (("state", "state_in"), np.asarray(self.monodromy, dtype=float),
+                           {"long_name": "one-period Jacobian with full saltation matrices"})
+        mult = np.atleast_1d(np.asarray(self.multipliers, dtype=complex))
+        ds["multiplier_real"] = (("multiplier",), mult.real)
+        ds["multiplier_imag"] = (("multiplier",), mult.imag)
+        ds["newton_residual"] = (("newton_iterate",), np.asarray(self.history, dtype=float))
+        ds["shooting_node"] = (("node_index",), np.asarray(self.nodes, dtype=float))
+        if self.poincare_jacobian is not None:
+            ds["poincare_jacobian"] = (("state", "state_in"), self.poincare_jacobian)
+        ds.attrs.update({
+            "pwsdyn_type": "periodic_orbit",
+            "title": f"pwsdyn periodic orbit of model {self.model.name}",
+            "period": float(self.period), "orbit_t0": float(self.t0),
+            "orbit_x0": json.dumps([float(v) for v in self.x0]),
+            "orbit_state0": self.state0, "stable": int(bool(self.stable)),
+            "converged": int(bool(self.converged)), "autonomous": int(bool(self.autonomous)),
+            "signature": json.dumps([list(s) for s in self.signature]),
+            "n_states": n,
+        })
+        return ds
+
+    def save(self, path):
+        """Write :meth:`to_dataset` to a NetCDF file."""
+        from ..io import save_dataset
+
+        return save_dataset(self.to_dataset(), path)
+
+
+def _fmt_complex(m) -> str:
+    m = complex(m)
+    if m.imag == 0:
+        return f"{m.real:.12g}"
+    return f"{m.real:.12g}{m.imag:+.12g}j"
+
+
+def merge_intervals(trajs: list, *, t0: float, t_end: float) -> Trajectory:
+    """Concatenate the trajectories of consecutive shooting intervals into one.
+
+    Each interval's variational solution starts at the identity; here it is multiplied by the
+    Jacobian accumulated over the previous intervals, and the transfer matrices are joined (the
+    last flow matrix of one interval and the first of the next belong to one smooth segment).
+    The junctions between intervals are stored as jumps of the size of the shooting residual.
+    """
+    first = trajs[0]
+    model = first.model
+    n = model.n_states
+    variational = first.transfer_matrices is not None
+    P = np.eye(n)
+    ts, xs, ys, states, dense, ikind, events = [], [], [], [], [], [], []
+    transfer = None
+    stats: dict = {}
+    for i, tr in enumerate(trajs):
+        y = np.array(tr._y, dtype=float, copy=True)
+        d = None if tr._dense is None else np.array(tr._dense, dtype=float, copy=True)
+        if variational:
+            N = len(y)
+            y[:, n:n + n * n] = np.matmul(y[:, n:n + n * n].reshape(N, n, n), P).reshape(N, -1)
+            if d is not None and len(d):
+                d[:, n:n + n * n, :] = np.einsum("iabk,bc->iack",
+                                                 d[:, n:n + n * n, :].reshape(len(d), n, n, -1),
+                                                 P).reshape(len(d), n * n, -1)
+            tm = [m.copy() for m in tr.transfer_matrices]
+            if transfer is None:
+                transfer = tm
+            else:
+                transfer[-1] = tm[0] @ transfer[-1]
+                transfer += tm[1:]
+            P = tr.jacobian @ P
+        if i > 0:
+            # a zero-length jump interval joins the previous interval's end to this start
+            ikind.append(np.array([1], dtype=np.int64))
+            if d is not None:
+                dense.append(np.zeros((1,) + d.shape[1:]))
+        ts.append(np.asarray(tr.t, dtype=float))
+        xs.append(np.asarray(tr.x, dtype=float))
+        ys.append(y)
+        states.append(np.asarray(tr.state))
+        ikind.append(np.asarray(tr._ikind, dtype=np.int64))
+        if d is not None:
+            dense.append(d)
+        events += list(tr.events)
+        for k, v in tr.stats.items():
+            stats[k] = stats.get(k, 0) + v
+    has_dense = all(tr._dense is not None for tr in trajs)
+    return Trajectory(
+        t=np.concatenate(ts), x=np.concatenate(xs), state=np.concatenate(states), events=events,
+        status=Status.SUCCESS, message=Status.SUCCESS.message, stats=stats, model=model,
+        params=dict(first.params), options=dict(first.options), t0=float(t0), t_end=float(t_end),
+        jacobian=P if variational else None, transfer_matrices=transfer,
+        _dense=np.concatenate(dense) if has_dense else None, _ikind=np.concatenate(ikind),
+        _y=np.concatenate(ys),
+        provenance={"model": model.name, "model_hash": model.hash, "pwsdyn_version": __version__},
+    )

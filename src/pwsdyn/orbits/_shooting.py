@@ -1,0 +1,668 @@
+"""Newton shooting for periodic orbits of hybrid models: single and multiple shooting.
+
+Unknowns and equations (slides, "Locating periodic orbits"; multiple shooting over the smooth
+segments of the orbit, as COCO's ``hspo`` toolbox splits a hybrid orbit):
+
+* shooting nodes ``t_0 < t_1 < ... < t_{N-1}`` in one period, one in the middle of each smooth
+  segment of the guess (``nodes='auto'``), with unknown states ``x_i`` and the discrete state
+  of the segment;
+* each interval ``[t_i, t_{i+1}]`` is integrated by the compiled kernel with every event on the
+  way (impacts, resets, crossings, sliding, chattering, sticking) and the variational
+  equations: end state ``y_i``, Jacobian ``M_i`` with all saltation matrices;
+* residual ``r_i = y_i - x_{i+1}`` (``x_N = x_0``); Newton matrix with blocks ``M_i`` and
+  ``-I`` (single shooting, ``N = 1``: ``Phi_x - I``, the slides' matrix).
+
+For a forced model the period ``T = n * forcing_period`` and the node times are fixed. For an
+autonomous model ``T`` is an unknown: the nodes sit at fixed fractions of ``T``, the intervals'
+end states depend on ``T`` through ``dy_i/dT = (t_{i+1} - t_i)/T * f(y_i)`` (the slides'
+column ``f_i(x_k)``), and a phase condition closes the system: the Poincaré section through
+the initial guess ``x_ref`` orthogonal to the flow there, ``f(x_ref) . (x_0 - x_ref) = 0``
+(the slides' ``h(x) = 0`` with a linear ``h``), or a given normal.
+
+The event sequence of every interval (its signature: kinds, names, modes) is compared between
+iterations. Early on it may change (a rough guess); once the residual is below ``lock_tol``
+it is locked, and a later change is an error -- the orbit is near a grazing or sliding
+bifurcation and its signature is not structurally stable. Every loop is bounded (Newton
+iterations, line-search halvings, integrator steps); failure raises :class:`OrbitError`
+naming the reason, with the last iterate as ``result``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import PwsdynError
+from ..integrate.simulate import DEFAULTS, _simulate_compiled, state_vector
+from ..model import load_model
+from ..stability._context import (DiscreteState, ModelContext, event_states,
+                                  trajectory_start_state)
+from ..stability._floquet import floquet_multipliers
+from ._orbit import PeriodicOrbit, merge_intervals
+
+#: Integrator options used by the shooting code unless given: tight tolerances, 8th order.
+SHOOTING_DEFAULTS = dict(method="DOP853", rtol=1e-12, atol=1e-12, max_steps=500_000)
+_RESERVED = {"variational", "dense", "throw", "mode"}
+#: An orbit is reported stable when every multiplier has modulus below ``1 - STABILITY_MARGIN``
+#: (a multiplier on the unit circle within the accuracy of the monodromy is not asymptotic
+#: stability).
+STABILITY_MARGIN = 1e-8
+
+
+class OrbitError(PwsdynError, RuntimeError):
+    """Newton shooting did not find a periodic orbit.
+
+    Attributes
+    ----------
+    reason : str
+        ``'singular'`` (the Newton matrix is singular: a multiplier 1, or a phase condition
+        tangent to the flow), ``'phase'`` (the phase condition is degenerate),
+        ``'equilibrium'`` (an autonomous iteration converged to a rest point), ``'signature'``
+        (the event sequence changed after it had been locked), ``'budget'`` (``max_iter``
+        Newton steps), ``'no_progress'`` (no step reduced the residual), ``'diverged'`` (the
+        Newton step or the period ran away: the guess is not near an orbit), ``'simulation'``
+        (an interval could not be integrated).
+    result : PeriodicOrbit or None
+        The last iterate, with ``converged = False``.
+    history : list[float]
+        Residual norms of the iterates.
+    """
+
+    def __init__(self, reason: str, message: str, result=None, history=None):
+        super().__init__(message)
+        self.reason = reason
+        self.result = result
+        self.history = list(history or [])
+
+
+class _SimulationFailed(Exception):
+    def __init__(self, interval, traj=None, exc=None):
+        self.interval = interval
+        self.traj = traj
+        self.exc = exc
+
+
+def _signature_of(traj, end: DiscreteState, ctx: ModelContext) -> tuple:
+    return (tuple((e.kind, e.name, e.mode_before, e.mode_after) for e in traj.events),
+            ctx.state_name(end))
+
+
+class _Shooter:
+    """The shooting problem: nodes, their discrete states, residual and Newton matrix."""
+
+    def __init__(self, ctx: ModelContext, t0: float, T: float, node_times, node_states,
+                 autonomous: bool, opts: dict, phase_ref=None, phase_normal=None):
+        self.ctx = ctx
+        self.t0 = float(t0)
+        self.T = float(T)
+        self.autonomous = autonomous
+        self.tau = np.asarray(node_times, dtype=float)       # absolute times for the guess T
+        self.frac = (self.tau - self.t0) / self.T            # fractions (autonomous)
+        self.states = list(node_states)
+        self.opts = opts
+        self.phase_ref = phase_ref
+        self.phase_normal = phase_normal
+        self.gain = float(opts.get("sliding_gain", 0.0))
+
+    @property
+    def N(self) -> int:
+        return len(self.tau)
+
+    def times(self, T: float) -> np.ndarray:
+        if self.autonomous:
+            return np.append(self.t0 + T * self.frac, self.t0 + T)
+        return np.append(self.tau, self.t0 + self.T)
+
+    def run(self, X, T, *, dense=False):
+        """Integrate every interval; return per-interval trajectories, end states, ends."""
+        ts = self.times(T)
+        opts = dict(self.opts, dense=dense, variational=True, throw=False)
+        trajs, ends = [], []
+        for i in range(self.N):
+            st = self.states[i]
+            try:
+                tr = _simulate_compiled(self.ctx.cm, np.asarray(X[i], dtype=float), ts[i],
+                                        ts[i + 1], self.ctx.p, opts, mode0=st.mode,
+                                        dkind0=st.kind, didx0=st.index)
+            except (ValueError, FloatingPointError) as exc:
+                raise _SimulationFailed(i, exc=exc) from None
+            if tr.status.failed or not np.all(np.isfinite(tr.jacobian)):
+                raise _SimulationFailed(i, traj=tr)
+            end = event_states(self.ctx, tr.events, st)[-1][1] if tr.events else st
+            trajs.append(tr)
+            ends.append(end)
+        return trajs, ends
+
+    def residual(self, X, T, trajs):
+        N, n = self.N, self.ctx.n
+        r = np.empty(N * n + (1 if self.autonomous else 0))
+        for i in range(N):
+            r[i * n:(i + 1) * n] = trajs[i].x_final - X[(i + 1) % N]
+        if self.autonomous:
+            r[-1] = self.phase_normal @ (X[0] - self.phase_ref)
+        return r
+
+    def jacobian(self, X, T, trajs, ends):
+        N, n = self.N, self.ctx.n
+        m = N * n + (1 if self.autonomous else 0)
+        J = np.zeros((m, m))
+        ts = self.times(T)
+        for i in range(N):
+            rows = slice(i * n, (i + 1) * n)
+            J[rows, i * n:(i + 1) * n] += trajs[i].jacobian
+            k = (i + 1) % N
+            J[rows, k * n:(k + 1) * n] -= np.eye(n)
+            if self.autonomous:
+                # y_i = flow over (t_{i+1} - t_i) = T (frac_{i+1} - frac_i): dy_i/dT
+                f_end = self.ctx.field(ts[i + 1], trajs[i].x_final, ends[i], self.gain)
+                J[rows, -1] = (ts[i + 1] - ts[i]) / T * f_end
+        if self.autonomous:
+            J[-1, :n] = self.phase_normal
+        return J
+
+    @staticmethod
+    def norm(r, X) -> float:
+        return float(np.max(np.abs(r)) / (1.0 + np.max(np.abs(X))))
+
+
+def _options(options: dict) -> dict:
+    bad = sorted(set(options) & _RESERVED)
+    if bad:
+        raise TypeError(f"option(s) {bad} are set by the shooting code; remove them")
+    unknown = sorted(set(options) - set(DEFAULTS))
+    if unknown:
+        raise TypeError(f"find_periodic_orbit() got unexpected keyword argument(s) {unknown}; "
+                        f"integrator options are {sorted(set(DEFAULTS) - _RESERVED)}")
+    return {**DEFAULTS, **SHOOTING_DEFAULTS, **options}
+
+
+def _initial_state(ctx: ModelContext, mode) -> DiscreteState:
+    if mode is None:
+        return DiscreteState(0, -1, ctx.model.initial_mode)
+    if isinstance(mode, DiscreteState):
+        return mode
+    return ctx.state(str(mode))
+
+
+def _state_at(ctx, traj, st0, t):
+    """Discrete state of a trajectory at time ``t`` (after the events at or before it)."""
+    st = st0
+    for e, (_, after) in zip(traj.events, event_states(ctx, traj.events, st0)):
+        if e.t_after <= t:
+            st = after
+        else:
+            break
+    return st
+
+
+def _smooth_base_point(ctx, ref, st0, t0, T):
+    """``(t, x, state)`` in the middle of the longest regular smooth segment of ``ref``."""
+    evs = list(ref.events)
+    states = event_states(ctx, evs, st0)
+    spans = [(t0, evs[0].t if evs else t0 + T, st0)]
+    for k, e in enumerate(evs):
+        end = evs[k + 1].t if k + 1 < len(evs) else t0 + T
+        spans.append((e.t_after, end, states[k][1]))
+    regular = [s for s in spans if s[2].kind == 0] or spans
+    a, b, st = max(regular, key=lambda s: s[1] - s[0])
+    tm = 0.5 * (a + b)
+    return tm, ref(tm, side="right"), st
+
+
+def _place_nodes(ctx, ref, st0, t0, T, nodes, max_nodes):
+    """Node times and discrete states from the guess trajectory ``ref`` over one period."""
+    if isinstance(nodes, (int, np.integer)) and not isinstance(nodes, bool):
+        if nodes < 1:
+            raise ValueError(f"`nodes` must be 'auto' or a positive integer, got {nodes!r}")
+        times = t0 + T * np.arange(nodes) / nodes
+        return times, [st0] + [_state_at(ctx, ref, st0, t) for t in times[1:]]
+    if nodes != "auto":
+        raise ValueError(f"`nodes` must be 'auto' or a positive integer, got {nodes!r}")
+    evs = [e for e in ref.events if e.t < t0 + T]
+    states = event_states(ctx, evs, st0)
+    cands = []
+    for k in range(len(evs) - 1):
+        a, b = evs[k].t_after, evs[k + 1].t
+        st = states[k][1]
+        if st.kind == 0 and b - a >= 1e-3 * T:
+            cands.append((0.5 * (a + b), st))
+    if len(cands) > max_nodes - 1:
+        pick = np.unique(np.round(np.linspace(0, len(cands) - 1, max_nodes - 1)).astype(int))
+        cands = [cands[i] for i in pick]
+    return (np.array([t0] + [c[0] for c in cands]), [st0] + [c[1] for c in cands])
+
+
+def find_periodic_orbit(model, x0, *, params=None, period: float | None = None,
+                        t0: float = 0.0, periods: int = 1, mode=None, nodes="auto",
+                        phase=None, tol: float = 1e-10, max_iter: int = 30,
+                        lock_tol: float = 1e-6, max_nodes: int = 24,
+                        **options) -> PeriodicOrbit:
+    """Find a periodic orbit by Newton shooting and compute its Floquet multipliers.
+
+    Parameters
+    ----------
+    model : Model, str, path or dict
+    x0 : sequence or dict
+        Guess of the state at ``t0`` (for example the end of a short simulation).
+    params : dict, optional
+        Parameter values.
+    period : float, optional
+        Forced models (``forcing_period`` in the model): the exact period, a multiple of the
+        forcing period (default ``periods * forcing_period``). Autonomous models: a guess of the
+        period (required).
+    t0 : float
+        Initial time; for a forced model it fixes the phase of ``x0``.
+    periods : int
+        Forced models: the period in forcing periods when ``period`` is not given.
+    mode : str, optional
+        Discrete state at ``t0``: a mode name, ``stick:<event>`` or ``slide:<switch>``
+        (default: the model's initial mode).
+    nodes : 'auto' or int
+        ``'auto'``: multiple shooting with a node in the middle of each smooth segment of the
+        guess (at most ``max_nodes``); an integer: that many nodes equally spaced in time
+        (``1`` is single shooting, the slides' Newton method).
+    phase : array_like, optional
+        Autonomous models: normal of the phase-condition hyperplane through ``x0`` (default
+        the vector field at ``x0``, the Poincaré phase condition).
+    tol : float
+        Converged when the residual max norm relative to ``1 + max|x|`` is at most ``tol``.
+    max_iter : int
+        Newton step budget.
+    lock_tol : float
+        The event sequence is locked once the residual is below this; a later change raises.
+    max_nodes : int
+    **options
+        Integrator options of :func:`pwsdyn.simulate`; defaults here are ``method='DOP853'``,
+        ``rtol=1e-12``, ``atol=1e-12``.
+
+    Returns
+    -------
+    PeriodicOrbit
+
+    Raises
+    ------
+    OrbitError
+        With ``reason`` ``'singular'``, ``'phase'``, ``'equilibrium'``, ``'signature'``,
+        ``'budget'``, ``'no_progress'``, ``'diverged'`` or ``'simulation'`` and the last
+        iterate as ``result`` (``converged`` False).
+
+    Examples
+    --------
+    >>> import pwsdyn
+    >>> orbit = pwsdyn.find_periodic_orbit("impact-oscillator", [0.0, -0.5])
+    >>> orbit.events[0].kind, orbit.stable
+    ('impact', True)
+    """
+    opts = _options(options)
+    ctx = ModelContext(load_model(model), params, opts.get("sliding", "convex"))
+    x0 = state_vector(ctx.model, x0)
+    if not (tol > 0 and math.isfinite(tol)):
+        raise ValueError(f"`tol` must be a positive number, got {tol!r}")
+    if not (isinstance(max_iter, (int, np.integer)) and max_iter >= 1):
+        raise ValueError(f"`max_iter` must be a positive integer, got {max_iter!r}")
+    Tf = ctx.forcing_period
+    autonomous = Tf is None
+    t0 = float(t0)
+    if autonomous:
+        if period is None:
+            raise ValueError(f"model {ctx.model.name!r} is autonomous (no `forcing_period`): "
+                             f"give a guess of the period as `period`")
+        T = float(period)
+    else:
+        if period is None:
+            if not (isinstance(periods, (int, np.integer)) and periods >= 1):
+                raise ValueError(f"`periods` must be a positive integer, got {periods!r}")
+            T = periods * Tf
+        else:
+            T = float(period)
+            k = round(T / Tf)
+            if k < 1 or abs(T - k * Tf) > 1e-9 * T:
+                raise ValueError(f"`period` = {T!r} of forced model {ctx.model.name!r} must be a "
+                                 f"multiple of its forcing period {Tf!r}")
+            T = k * Tf
+    if not (math.isfinite(T) and T > 0):
+        raise ValueError(f"`period` must be a positive number, got {period!r}")
+    st0 = _initial_state(ctx, mode)
+
+    # guess trajectory: signature and node placement
+    ref_opts = dict(opts, variational=False, dense=True, throw=False)
+    ref = _simulate_compiled(ctx.cm, x0, t0, t0 + T, ctx.p, ref_opts, mode0=st0.mode,
+                             dkind0=st0.kind, didx0=st0.index)
+    if ref.status.failed:
+        raise OrbitError("simulation", f"the guess could not be simulated over one period: "
+                         f"{ref.message} (stopped at t={ref.t_final:.17g} in {ref.state[-1]})")
+    # the kernel starts on the side of each switching surface the state lies on
+    st0 = trajectory_start_state(ctx, ref)
+    history: list = []
+    for rebase in range(3):
+        if _events_near_nodes([ref], np.array([t0, t0 + T]), T, margin=0.02):
+            # a node at an event makes the one-period map non-smooth (the event falls in or
+            # out of the interval): move the base point into the longest smooth segment
+            t0, x0, st0 = _smooth_base_point(ctx, ref, st0, t0, T)
+            ref = _simulate_compiled(ctx.cm, x0, t0, t0 + T, ctx.p, ref_opts, mode0=st0.mode,
+                                     dkind0=st0.kind, didx0=st0.index)
+            if ref.status.failed:
+                raise OrbitError("simulation", f"the guess could not be simulated over one "
+                                 f"period: {ref.message} (stopped at t={ref.t_final:.17g} in "
+                                 f"{ref.state[-1]})", history=history)
+        sh, X = _setup(ctx, ref, st0, t0, T, x0, nodes, max_nodes, autonomous, opts, phase)
+        try:
+            return _newton(sh, X, T, tol=tol, max_iter=max(max_iter - len(history), 1),
+                           lock_tol=lock_tol, history=history, allow_rebase=rebase < 2)
+        except _Rebase as rb:
+            # an event of the iterate came too close to a node: restart from its node-0 state
+            T = rb.T
+            x0 = np.asarray(rb.X[0], dtype=float)
+            ref = _simulate_compiled(ctx.cm, x0, t0, t0 + T, ctx.p, ref_opts, mode0=st0.mode,
+                                     dkind0=st0.kind, didx0=st0.index)
+            if ref.status.failed:
+                raise OrbitError("simulation", f"the iterate could not be simulated over one "
+                                 f"period: {ref.message}", history=history) from None
+            if not _events_near_nodes([ref], np.array([t0, t0 + T]), T):
+                # the event is near an interior node: re-placing the nodes is enough
+                continue
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+def _setup(ctx, ref, st0, t0, T, x0, nodes, max_nodes, autonomous, opts, phase):
+    """The shooting problem for the guess trajectory ``ref`` from ``(t0, x0)``."""
+    times, states = _place_nodes(ctx, ref, st0, t0, T, nodes, max_nodes)
+    phase_ref = phase_normal = None
+    if autonomous:
+        phase_ref = x0.copy()
+        f_ref = ctx.field(t0, x0, st0, opts.get("sliding_gain", 0.0))
+        phase_normal = f_ref if phase is None else np.asarray(phase, dtype=float).reshape(-1)
+        if phase_normal.shape != (ctx.n,) or not np.all(np.isfinite(phase_normal)):
+            raise ValueError(f"`phase` must be a finite vector of {ctx.n} entries")
+        nf = np.linalg.norm(phase_normal)
+        if nf == 0.0 or np.linalg.norm(f_ref) <= 1e-12 * (1.0 + np.linalg.norm(x0)):
+            raise OrbitError("phase", f"singular phase condition: the vector field vanishes at "
+                             f"the guess x0 = {x0.tolist()} (an equilibrium?) or the phase "
+                             f"normal is zero; there is no Poincaré section through it")
+        if abs(phase_normal @ f_ref) <= 1e-8 * nf * np.linalg.norm(f_ref):
+            raise OrbitError("phase", "singular phase condition: the phase-condition "
+                             "hyperplane is tangent to the flow at the guess (normal . f = 0)")
+    sh = _Shooter(ctx, t0, T, times, states, autonomous, opts, phase_ref, phase_normal)
+    X = [x0.copy()] + [ref(t, side="right") for t in times[1:]]
+    return sh, X
+
+
+class _Rebase(Exception):
+    def __init__(self, X, T):
+        self.X = X
+        self.T = T
+
+
+def _events_near_nodes(trajs, ts, T, margin=1e-4) -> bool:
+    """An event within ``margin * T`` of the start or end of its interval."""
+    for i, tr in enumerate(trajs):
+        for e in tr.events:
+            if e.t - ts[i] < margin * T or ts[i + 1] - e.t_after < margin * T:
+                return True
+    return False
+
+
+def _newton(sh: _Shooter, X, T, *, tol, max_iter, lock_tol, history, allow_rebase=False
+            ) -> PeriodicOrbit:
+    ctx, n, N = sh.ctx, sh.ctx.n, sh.N
+    locked = None
+
+    def evaluate(Xc, Tc):
+        trajs, ends = sh.run(Xc, Tc)
+        sig = tuple(_signature_of(tr, e, ctx) for tr, e in zip(trajs, ends))
+        return trajs, ends, sig, sh.residual(Xc, Tc, trajs)
+
+    def fail(reason, msg, Xc, Tc):
+        res = None
+        try:
+            res = _build_orbit(sh, Xc, Tc, history, converged=False)
+        except Exception:  # the last iterate may not even integrate; report what we have
+            res = None
+        raise OrbitError(reason, msg, result=res, history=history)
+
+    try:
+        trajs, ends, sig, r = evaluate(X, T)
+    except _SimulationFailed as exc:
+        fail("simulation", _sim_message(sh, exc, X), X, T)
+    for it in range(max_iter + 1):
+        # discrete states must chain: interval i ends in the state node i+1 starts in
+        mism = [i for i in range(N) if ends[i] != sh.states[(i + 1) % N]]
+        if mism:
+            if locked is not None:
+                fail("signature", _sig_message(sh, mism[0], ends, history), X, T)
+            for i in mism:
+                sh.states[(i + 1) % N] = ends[i]
+            trajs, ends, sig, r = evaluate(X, T)
+        res = sh.norm(r, X)
+        history.append(res)
+        if allow_rebase and _events_near_nodes(trajs, sh.times(T), T):
+            raise _Rebase(X, T)
+        if locked is None and res <= lock_tol:
+            locked = sig
+        elif locked is not None and sig != locked:
+            fail("signature", "the event sequence changed during the Newton iteration after it "
+                 f"had converged to {res:.2e}: the orbit is near a grazing, sliding or "
+                 f"chattering-count change and its signature is not structurally stable. "
+                 f"Locked: {_fmt_sig(locked)}; now: {_fmt_sig(sig)}", X, T)
+        if res <= tol:
+            if sh.autonomous:
+                f0 = ctx.field(sh.t0, X[0], sh.states[0], sh.gain)
+                if np.max(np.abs(f0)) <= 1e-8 * (1.0 + np.max(np.abs(X[0]))):
+                    fail("equilibrium", f"Newton converged to an equilibrium (the vector field "
+                         f"vanishes at x0 = {np.asarray(X[0]).tolist()}), not to a periodic "
+                         f"orbit: the guess is not near one", X, T)
+            return _build_orbit(sh, X, T, history, converged=True, trajs_sig=sig)
+        if it == max_iter:
+            break
+        J = sh.jacobian(X, T, trajs, ends)
+        if not np.all(np.isfinite(J)):
+            fail("simulation", "the variational solution is not finite", X, T)
+        sv = np.linalg.svd(J, compute_uv=False)
+        # relative to the blocks' scale (M_i and I): a smallest singular value below 1e-9 of
+        # it is a multiplier 1 to the accuracy of the variational solution; the step is noise
+        scale = max(sv[0], 1.0 + max(float(np.max(np.abs(tr.jacobian))) for tr in trajs))
+        if not sv[-1] > 1e-9 * scale:
+            what = ("a Floquet multiplier is 1 (the one-period map minus the identity is "
+                    "singular)" if not sh.autonomous else
+                    "a nontrivial multiplier is 1, or the phase condition is tangent to the "
+                    "flow at the current iterate")
+            fail("singular", f"singular Newton matrix (condition {sv[0] / max(sv[-1], 1e-300):.1e}"
+                 f") at iteration {it}: {what}; residual {res:.3e}", X, T)
+        z = np.concatenate([np.concatenate(X)] + ([np.array([T])] if sh.autonomous else []))
+        dz = np.linalg.solve(J, -r)
+        scale = 1.0 + np.max(np.abs(z))
+        if not np.all(np.isfinite(dz)) or np.max(np.abs(dz)) > 1e3 * scale:
+            fail("diverged", f"the Newton step ({np.max(np.abs(dz)):.3e}) is far larger than the "
+                 f"state ({scale:.3e}) at iteration {it}: the guess is not near a periodic "
+                 f"orbit", X, T)
+        # backtracking: full steps near the solution (quadratic convergence), halved steps
+        # away from it; a trial that breaks the locked signature or fails to integrate is
+        # treated like an increase of the residual
+        accepted = False
+        rejected_sig = None
+        lam = 1.0
+        for _ in range(8):
+            zt = z + lam * dz
+            Xt = [zt[i * n:(i + 1) * n] for i in range(N)]
+            Tt = float(zt[-1]) if sh.autonomous else T
+            if sh.autonomous and not (0.05 * sh.T < Tt < 20.0 * sh.T):
+                lam *= 0.5
+                continue
+            try:
+                tt, et, st, rt = evaluate(Xt, Tt)
+            except _SimulationFailed:
+                lam *= 0.5
+                continue
+            if locked is not None and st != locked:
+                rejected_sig = st
+                lam *= 0.5
+                continue
+            if sh.norm(rt, Xt) < res or sh.norm(rt, Xt) <= tol:
+                X, T, trajs, ends, sig, r = Xt, Tt, tt, et, st, rt
+                accepted = True
+                break
+            lam *= 0.5
+        if not accepted:
+            if rejected_sig is not None:
+                fail("signature", f"every Newton step from the iterate with residual {res:.2e} "
+                     f"changes the event sequence, which was locked below lock_tol = "
+                     f"{lock_tol:.1e}: the orbit near this guess has another signature, or it "
+                     f"is at a grazing, sliding or chattering-count bifurcation. Locked: "
+                     f"{_fmt_sig(locked)}; proposed: {_fmt_sig(rejected_sig)}", X, T)
+            if sh.autonomous and not (0.05 * sh.T < float(z[-1] + dz[-1]) < 20.0 * sh.T):
+                fail("diverged", f"the period ran away (Newton proposes T = "
+                     f"{float(z[-1] + dz[-1]):.6g} from the guess {sh.T:.6g}): the guess is "
+                     f"not near a periodic orbit", X, T)
+            fail("no_progress", f"no Newton step (down to 1/128 of the full step) reduced the "
+                 f"residual {res:.3e} at iteration {it}: the guess is not near a periodic orbit "
+                 f"(or the orbit is at a grazing/sliding bifurcation)", X, T)
+    fail("budget", f"no convergence in {max_iter} Newton iterations (residual {history[-1]:.3e}, "
+         f"tolerance {tol:.1e}); residuals: " + " ".join(f"{h:.2e}" for h in history), X, T)
+
+
+def _fmt_sig(sig) -> str:
+    evs = [f"{k}:{nm}" for (evs_i, _end) in sig for (k, nm, _b, _a) in evs_i]
+    return "[" + ", ".join(evs) + "]"
+
+
+def _sig_message(sh, i, ends, history) -> str:
+    return (f"the discrete state at shooting node {(i + 1) % sh.N} changed from "
+            f"{sh.ctx.state_name(sh.states[(i + 1) % sh.N])} to {sh.ctx.state_name(ends[i])} "
+            f"after the event sequence had been locked (residual "
+            f"{history[-1] if history else float('nan'):.2e}): a change of signature")
+
+
+def _sim_message(sh, exc: _SimulationFailed, X) -> str:
+    if exc.traj is not None:
+        tr = exc.traj
+        return (f"shooting interval {exc.interval} could not be integrated: {tr.message} "
+                f"(stopped at t={tr.t_final:.17g} in {tr.state[-1]})")
+    return f"shooting interval {exc.interval} could not be integrated: {exc.exc}"
+
+
+def _build_orbit(sh: _Shooter, X, T, history, *, converged, trajs_sig=None) -> PeriodicOrbit:
+    """The orbit at the iterate ``(X, T)``: one dense run per interval, merged."""
+    ctx = sh.ctx
+    trajs, ends = sh.run(X, T, dense=True)
+    ts = sh.times(T)
+    traj = merge_intervals(trajs, t0=ts[0], t_end=ts[-1])
+    M = traj.jacobian
+    gain = sh.gain
+    st0 = sh.states[0]
+    x0 = np.asarray(X[0], dtype=float).copy()
+    trivial = pj = None
+    if sh.autonomous:
+        f0 = ctx.field(ts[0], x0, st0, gain)
+        nv = sh.phase_normal
+        mult = floquet_multipliers(M, flow_direction=f0, section_normal=nv)
+        pj = M - np.outer(f0, nv @ M) / (nv @ f0)          # thesis eq. 2.25
+        ev = np.linalg.eigvals(M)
+        trivial = complex(ev[np.argmin(np.abs(ev - 1.0))])
+    else:
+        mult = floquet_multipliers(M)
+    # largest mismatch at the junctions of the intervals (the last one closes the period)
+    closure = max(float(np.max(np.abs(trajs[i].x_final - X[(i + 1) % len(trajs)])))
+                  for i in range(len(trajs)))
+    return PeriodicOrbit(
+        model=ctx.model, params=dict(ctx.params), t0=float(ts[0]), x0=x0,
+        state0=ctx.state_name(st0), period=float(T), events=list(traj.events), trajectory=traj,
+        monodromy=M, multipliers=mult,
+        stable=bool(np.all(np.abs(mult) < 1.0 - STABILITY_MARGIN)),
+        history=list(history), converged=converged, autonomous=sh.autonomous,
+        trivial_multiplier=trivial, poincare_jacobian=pj,
+        phase_normal=None if sh.phase_normal is None else np.asarray(sh.phase_normal).copy(),
+        nodes=ts[:-1].copy(), residual=float(history[-1]) if history else np.nan,
+        closure=closure, options={k: v for k, v in sh.opts.items() if k != "throw"})
+
+
+def orbit_at(model, x0, *, params=None, period, t0=0.0, mode=None, tol: float = 1e-8,
+             **options) -> PeriodicOrbit:
+    """One period from ``(t0, x0)`` reported as an orbit without Newton refinement
+    (``converged`` says whether it closes to ``tol``). Newton-only options are ignored."""
+    for key in ("nodes", "max_iter", "lock_tol", "max_nodes", "phase"):
+        options.pop(key, None)
+    opts = _options(options)
+    ctx = ModelContext(load_model(model), params, opts.get("sliding", "convex"))
+    x0 = state_vector(ctx.model, x0)
+    st0 = _initial_state(ctx, mode)
+    autonomous = ctx.forcing_period is None
+    normal = ctx.field(t0, x0, st0, opts.get("sliding_gain", 0.0)) if autonomous else None
+    sh = _Shooter(ctx, t0, period, np.array([float(t0)]), [st0], autonomous, opts, x0.copy(),
+                  normal)
+    try:
+        trajs, ends = sh.run([x0], float(period))
+    except _SimulationFailed as exc:
+        raise OrbitError("simulation", _sim_message(sh, exc, [x0])) from None
+    sh.states[0] = trajectory_start_state(ctx, trajs[0])
+    res = sh.norm(sh.residual([x0], float(period), trajs), [x0])
+    return _build_orbit(sh, [x0], float(period), [res], converged=res <= tol)
+
+
+def _guess_from_trajectory(traj, *, t0=None, period=None, periods=1, recurrence_tol=1e-3):
+    """``(t0, x0, T, state)`` of a periodic-orbit guess at the end of a trajectory."""
+    if traj._dense is None:
+        raise ValueError("the trajectory has no dense output (simulated with `dense=False`)")
+    ctx = ModelContext(traj.model, traj.params, traj.options.get("sliding", "convex"))
+    Tf = ctx.forcing_period
+    if period is None:
+        if Tf is not None:
+            period = periods * Tf
+        else:
+            period = _recurrence_period(traj, recurrence_tol)
+    T = float(period)
+    t_end = float(traj.t[-1])
+    if T > t_end - float(traj.t[0]):
+        raise ValueError(f"the trajectory ({t_end - traj.t[0]:.6g} long) is shorter than the "
+                         f"period {T:.6g}")
+    if t0 is None:
+        t0 = t_end - T
+        if Tf is None:
+            # autonomous: start in the middle of the longest smooth segment of the last period
+            evs = [e for e in traj.events if e.t >= t0]
+            bounds = [t0] + [x for e in evs for x in (e.t, e.t_after)] + [t_end]
+            spans = [(bounds[i], bounds[i + 1]) for i in range(0, len(bounds) - 1, 2)]
+            spans = [s for s in spans if ":" not in _name_at(traj, 0.5 * (s[0] + s[1]))]
+            if spans:
+                a, b = max(spans, key=lambda s: s[1] - s[0])
+                t0 = 0.5 * (a + b)
+    t0 = float(t0)
+    x0 = traj(t0, side="right")
+    name = _name_at(traj, t0)
+    hint = None
+    for e in traj.events:
+        if e.t_after > t0:
+            break
+        if ":" not in e.mode_after:
+            hint = e.mode_after
+        elif ":" not in e.mode_before:
+            hint = e.mode_before
+    if name.startswith("stick:") and hint is not None:
+        name_state = ctx.state(name, mode_hint=hint)
+    else:
+        name_state = ctx.state(name)
+    return t0, x0, T, name_state
+
+
+def _name_at(traj, t) -> str:
+    i = int(np.searchsorted(traj.t, t, side="right") - 1)
+    i = min(max(i, 0), len(traj.t) - 1)
+    return str(traj.state[i])
+
+
+def _recurrence_period(traj, tol) -> float:
+    evs = list(traj.events)
+    if not evs:
+        raise ValueError("the trajectory has no events to estimate the period of an autonomous "
+                         "orbit from; give `period`")
+    last = evs[-1]
+    scale = 1.0 + np.max(np.abs(traj.x))
+    key = (last.kind, last.name, last.mode_before, last.mode_after)
+    for e in reversed(evs[:-1]):
+        if (e.kind, e.name, e.mode_before, e.mode_after) != key:
+            continue
+        if np.max(np.abs(e.x_after - last.x_after)) <= tol * scale:
+            return float(last.t - e.t)
+    raise ValueError(f"no recurrence of the last event ({last!r}) within {tol:g} (relative) in "
+                     f"the trajectory: it has not settled on a periodic orbit; simulate longer or "
+                     f"give `period`")

@@ -1,0 +1,280 @@
+"""Poincaré maps on event sections and stroboscopic sections, with their Jacobians.
+
+An event section is the surface of a model event (an impact, a transition) or of a Filippov
+switch; the map runs the compiled kernel until the ``returns``-th crossing of it (one kernel
+call: the kernel's stop-at-the-k-th-event option) and projects the variational solution onto
+the section with thesis eq. 2.25,
+
+    P_x = (I - f_in h_x / (h_t + h_x f_in)) Phi_x,
+
+where ``Phi_x`` is the flow Jacobian just before the crossing (with every saltation matrix on
+the way). On the ``after`` side the reset is applied too: ``g_x P_x + g_t t_x``, for an
+autonomous model the projected saltation matrix of thesis eq. 2.36 times ``Phi_x``.
+
+A stroboscopic section of a forced model (``forcing_period`` in the model) samples the state
+every ``returns`` forcing periods; its Jacobian is the flow Jacobian ``Phi_x`` itself (full
+saltation matrices, no projection: the return time is fixed).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import PwsdynError, SolveError, Status
+from ..integrate.simulate import DEFAULTS, _simulate_compiled, state_vector
+from ..integrate.trajectory import EVENT_KINDS
+from ._context import DiscreteState, ModelContext, event_states, trajectory_start_state
+
+#: Kinds that count as a crossing of an event section / of a switch section.
+_EVENT_SECTION_KINDS = ("impact", "transition")
+_SWITCH_SECTION_KINDS = ("crossing", "slide_start")
+#: Step budget of one Poincaré-map evaluation unless ``max_steps`` is given.
+DEFAULT_MAX_STEPS = 200_000
+
+
+class SectionNotReachedError(PwsdynError, RuntimeError):
+    """The flow did not reach the Poincaré section the requested number of times.
+
+    Attributes
+    ----------
+    result : Trajectory
+        The run up to where it stopped.
+    crossings : int
+        How many times the section was reached.
+    """
+
+    def __init__(self, message: str, result=None, crossings: int = 0):
+        super().__init__(message)
+        self.result = result
+        self.crossings = crossings
+
+
+@dataclass(eq=False)
+class PoincareResult:
+    """One evaluation of a Poincaré map and its Jacobian.
+
+    Attributes
+    ----------
+    section : str
+        The section: an event or switch name, or ``'stroboscopic'``.
+    t0, x0 : float, numpy.ndarray
+        Initial time and state.
+    t, x : float, numpy.ndarray
+        Time of the ``returns``-th crossing and the state there (on the requested side).
+    jacobian : numpy.ndarray, shape (n, n)
+        ``dx / dx0`` at fixed ``t0``: thesis eq. 2.25 (with the reset on the ``after`` side)
+        for an event section; the flow Jacobian for a stroboscopic section.
+    time_gradient : numpy.ndarray, shape (n,)
+        ``dt / dx0`` (zero for a stroboscopic section).
+    extended_jacobian : numpy.ndarray, shape (n + 1, n + 1)
+        Derivative of ``(t, x)`` with respect to ``(t0, x0)`` (phase-extended state, time
+        first), using ``dx(t)/dt0 = -Phi_x f(t0, x0)``. At a periodic point of a forced system
+        its eigenvalues are the Floquet multipliers and 0 (event section: the projection
+        direction) or 1 (stroboscopic section: the time direction).
+    flow_jacobian : numpy.ndarray, shape (n, n)
+        The unprojected ``Phi_x`` up to just before the crossing (event section) or to ``t``.
+    side : {'before', 'after'}
+    returns : int
+    trajectory : Trajectory
+        The run from ``t0`` to the crossing.
+    event : EventRecord or None
+        The crossing (``None`` for a stroboscopic section).
+    """
+
+    section: str
+    t0: float
+    x0: np.ndarray
+    t: float
+    x: np.ndarray
+    jacobian: np.ndarray
+    time_gradient: np.ndarray
+    extended_jacobian: np.ndarray
+    flow_jacobian: np.ndarray
+    side: str
+    returns: int
+    trajectory: object
+    event: object = None
+
+
+def _initial_state(ctx: ModelContext, mode) -> DiscreteState:
+    if mode is None:
+        return DiscreteState(0, -1, ctx.model.initial_mode)
+    if isinstance(mode, DiscreteState):
+        return mode
+    return ctx.state(str(mode))
+
+
+def _run(ctx, x0, t0, t_end, st0: DiscreteState, opts, stop=None):
+    return _simulate_compiled(ctx.cm, np.asarray(x0, dtype=float), float(t0), float(t_end),
+                              ctx.p, opts, mode0=st0.mode, dkind0=st0.kind, didx0=st0.index,
+                              stop=stop)
+
+
+def _options(options: dict, *, dense: bool, variational: bool = True) -> dict:
+    reserved = sorted(set(options) & {"variational", "throw", "mode"})
+    if reserved:
+        raise TypeError(f"option(s) {reserved} are set by the Poincaré-map code; remove them")
+    unknown = sorted(set(options) - set(DEFAULTS))
+    if unknown:
+        raise TypeError(f"unexpected option(s) {unknown}; integrator options are "
+                        f"{sorted(set(DEFAULTS) - {'variational', 'throw', 'mode'})}")
+    opts = {**DEFAULTS, "max_steps": DEFAULT_MAX_STEPS, **options}
+    opts.update(variational=variational, throw=False, dense=dense)
+    return opts
+
+
+def section_spec(ctx: ModelContext, section: str):
+    """``(kind_mask, ref, surface, kinds)`` of an event or switch section name."""
+    ev_names = [e.name for e in ctx.model.events]
+    sw_names = [s.name for s in ctx.model.switches]
+    if section in ev_names:
+        kinds = _EVENT_SECTION_KINDS
+        ref = ev_names.index(section)
+        surface = int(ctx.etab[ref, 0])
+    elif section in sw_names:
+        kinds = _SWITCH_SECTION_KINDS
+        ref = sw_names.index(section)
+        surface = int(ctx.stab[ref, 0])
+    else:
+        raise ValueError(f"unknown section {section!r}: give 'stroboscopic' or the name of an "
+                         f"event {ev_names} or switch {sw_names} of model {ctx.model.name!r}")
+    mask = 0
+    for k in kinds:
+        mask |= 1 << EVENT_KINDS.index(k)
+    return mask, ref, surface, kinds
+
+
+def poincare_map(model, x0, section: str, *, params=None, t0: float = 0.0, returns: int = 1,
+                 side: str = "after", mode=None, t_max: float | None = None,
+                 **options) -> PoincareResult:
+    """Evaluate a Poincaré map and its Jacobian (thesis eq. 2.25).
+
+    Parameters
+    ----------
+    model : Model, str, path or dict
+    x0 : sequence or dict
+        Initial state (need not lie on the section).
+    section : str
+        The name of a model event (``impact``/``transition``: its surface, crossed in the
+        event's direction where its guard holds) or of a Filippov switch (crossings and
+        sliding entries), or ``'stroboscopic'`` for the time-``returns * T`` map of a forced
+        model (``T = model.forcing_period_value(params)``).
+    params : dict, optional
+    t0 : float
+        Initial time.
+    returns : int
+        Number of crossings of the section (or forcing periods) to map over.
+    side : {'after', 'before'}
+        For an event section, the state after the event's reset or before it (on the surface).
+    mode : str, optional
+        Initial discrete state: a mode name, ``stick:<event>`` or ``slide:<switch>``.
+    t_max : float, optional
+        Give up if the section is not reached by this time (default ``t0 + 100 returns T`` for
+        forced models, unbounded otherwise, with a budget of ``max_steps`` steps, 200000 by
+        default).
+    **options
+        Integrator options of :func:`pwsdyn.simulate` (``rtol``, ``atol``, ``method``, ...).
+
+    Returns
+    -------
+    PoincareResult
+
+    Raises
+    ------
+    SectionNotReachedError
+        The flow did not reach the section ``returns`` times (the message says how often it
+        did, and why the run stopped).
+    SolveError
+        The simulation itself failed.
+    """
+    dense = options.pop("dense", True)
+    opts = _options(options, dense=dense)
+    ctx = ModelContext(model, params, opts["sliding"] if "sliding" in opts else "convex")
+    x0 = state_vector(ctx.model, x0)
+    if not (isinstance(returns, (int, np.integer)) and returns >= 1):
+        raise ValueError(f"`returns` must be a positive integer, got {returns!r}")
+    if side not in ("after", "before"):
+        raise ValueError(f"`side` must be 'after' or 'before', got {side!r}")
+    st0 = _initial_state(ctx, mode)
+    Tf = ctx.forcing_period
+    n = ctx.n
+    gain = float(opts.get("sliding_gain", 0.0) or 0.0)
+    if section == "stroboscopic":
+        if Tf is None:
+            raise ValueError(f"model {ctx.model.name!r} has no `forcing_period`: it has no "
+                             f"stroboscopic section")
+        t_end = t0 + returns * Tf
+        traj = _run(ctx, x0, t0, t_end, st0, opts)
+        if traj.status.failed:
+            _raise_failed(ctx, traj)
+        # the kernel starts on the side of each switching surface the state lies on
+        st0 = trajectory_start_state(ctx, traj)
+        f0 = ctx.field(t0, x0, st0, gain)
+        J = traj.jacobian
+        st_end = _end_state(ctx, traj, st0)
+        f_end = ctx.field(t_end, traj.x_final, st_end, gain)
+        ext = np.zeros((n + 1, n + 1))
+        ext[0, 0] = 1.0
+        ext[1:, 0] = f_end - J @ f0
+        ext[1:, 1:] = J
+        return PoincareResult(section, float(t0), x0, float(traj.t_final), traj.x_final.copy(), J,
+                              np.zeros(n), ext, J, "after", int(returns), traj)
+    mask, ref, k, kinds = section_spec(ctx, section)
+    if t_max is None:
+        t_max = t0 + 100.0 * returns * Tf if Tf is not None else t0 + 1e12
+    if not (math.isfinite(t_max) and t_max > t0):
+        raise ValueError(f"`t_max` must be a finite time after t0 = {t0}, got {t_max!r}")
+    traj = _run(ctx, x0, t0, t_max, st0, opts, stop=(mask, ref, int(returns)))
+    hits = [e for e in traj.events if e.kind in kinds and e.name == section]
+    if traj.status != Status.TERMINAL_EVENT or len(hits) < returns:
+        why = (f"the run stopped early ({traj.status.name}: {traj.message})"
+               if traj.status.failed else f"t_max = {t_max:.6g} was reached")
+        raise SectionNotReachedError(
+            f"the flow reached section {section!r} {len(hits)} of {returns} time(s) from "
+            f"t0 = {t0:.6g}; {why}. The section may not be visited from this state (check "
+            f"`x0`, the event's direction and guard), or raise `t_max`/`max_steps`.",
+            result=traj, crossings=len(hits))
+    ev = traj.events[-1]
+    tm = traj.transfer_matrices
+    st0 = trajectory_start_state(ctx, traj)
+    f0 = ctx.field(t0, x0, st0, gain)
+    # flow Jacobian just before the last event: everything but its saltation and the
+    # zero-length segment after it
+    phi = tm[0].copy()
+    for m in tm[1:-2]:
+        phi = m @ phi
+    st_b, st_a = event_states(ctx, traj.events, st0)[-1]
+    f_in = ctx.field(ev.t, ev.x_before, st_b, gain)
+    hx = ctx.h_x(k, ev.t, ev.x_before)
+    den = ctx.h_t(k, ev.t, ev.x_before) + hx @ f_in
+    if abs(den) <= 1e-13 * np.linalg.norm(hx) * max(np.linalg.norm(f_in), 1e-300):
+        raise ValueError(f"the flow grazes section {section!r} at t={ev.t:.17g}: eq. 2.25 is "
+                         f"singular there")
+    proj = np.eye(n) - np.outer(f_in, hx) / den                # thesis eq. 2.25
+    A = np.column_stack([-phi @ f0, phi])                      # d x(t_ev) / d(t0, x0)
+    dt = -(hx @ A) / den
+    dx = proj @ A
+    x_out = ev.x_before.copy()
+    if side == "after":
+        x_out = ev.x_after.copy()
+        if section in [e.name for e in ctx.model.events]:
+            gx = ctx.g_x(ref, ev.t, ev.x_before)
+            gt = ctx.g_t(ref, ev.t, ev.x_before)
+            dx = gx @ dx + np.outer(gt, dt)
+    ext = np.vstack([dt[None, :], dx])
+    return PoincareResult(section, float(t0), x0, float(ev.t), x_out, dx[:, 1:].copy(),
+                          dt[1:].copy(), ext, phi, side, int(returns), traj, ev)
+
+
+def _end_state(ctx: ModelContext, traj, st0: DiscreteState) -> DiscreteState:
+    if not traj.events:
+        return st0
+    return event_states(ctx, traj.events, st0)[-1][1]
+
+
+def _raise_failed(ctx, traj):
+    raise SolveError(traj.status, traj.t_final, dict(zip(ctx.model.states, traj.x_final)),
+                     traj.state[-1], result=traj)

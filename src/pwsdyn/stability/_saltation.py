@@ -1,0 +1,183 @@
+"""Saltation matrices: the full form and the projected form of thesis eq. 2.36.
+
+Two forms are in use and they must not be mixed up:
+
+``full`` (slides, "Saltation matrices"; Adolfsson et al. 2001)
+    ``S = g_x + (f_out - g_x f_in - g_t) h_x / (h_t + h_x f_in)``: the jump of the variational
+    solution, ``Phi+ = S Phi-``, for a perturbation compared at a common time. Products of
+    flow Jacobians and full saltation matrices are Jacobians of time-``T`` maps; the monodromy
+    matrix of an autonomous periodic orbit keeps its trivial multiplier 1 (eigenvector ``f``),
+    since ``S f_in = f_out``. This is what the kernel applies (``Trajectory.jacobian``,
+    ``Trajectory.transfer_matrices``).
+
+``projected`` (thesis eq. 2.36; the transfer matrices of COCO's ``hspo`` toolbox)
+    ``S_p = g_x (I - f_in h_x / (h_t + h_x f_in)) - g_t h_x / (h_t + h_x f_in)``: the
+    derivative of the point where the perturbed solution hits the surface, mapped by the reset,
+    i.e. the Jacobian between Poincaré sections. ``S_p = S - f_out h_x / (h_t + h_x f_in)``; it
+    kills the flow direction (``S_p f_in = 0``), so products have eigenvalue 0 where the full
+    monodromy has 1. For time-independent ``h`` and ``g`` it is eq. 2.36 exactly; the ``h_t``,
+    ``g_t`` terms are the time components of the same projection in phase-extended state space.
+
+Both are defined at events applied at the crossing time: ``impact`` and ``transition`` events
+and the Filippov ``crossing`` and ``slide_start`` of a switch (``g`` the identity). Events that
+do not change the field (``release``, ``slide_end``; ``S = I``) and the complete-chattering map
+(a jump in time as well as in state) have the full form only.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..integrate._kernel import REGULAR, SLIDE
+from ._context import DiscreteState, ModelContext, event_states, trajectory_start_state
+
+#: Event kinds that have a projected (eq. 2.36) saltation matrix.
+PROJECTABLE_KINDS = ("impact", "transition", "crossing", "slide_start")
+FORMS = ("full", "projected")
+
+
+def _check_form(form: str) -> str:
+    if form not in FORMS:
+        raise ValueError(f"`form` must be one of {FORMS}, got {form!r}")
+    return form
+
+
+def _saltation_pair(ctx: ModelContext, kind: str, name: str, t: float, x_before, x_after,
+                    st_before: DiscreteState, st_after: DiscreteState, sliding_gain: float = 0.0):
+    """Full and projected saltation matrices at one event from the model's derivatives."""
+    n = ctx.n
+    x_before = np.asarray(x_before, dtype=float)
+    x_after = np.asarray(x_after, dtype=float)
+    if kind in ("impact", "transition", "chatter"):
+        j = ctx.event_index(name)
+        k = int(ctx.etab[j, 0])
+        gx = ctx.g_x(j, t, x_before)
+        gt = ctx.g_t(j, t, x_before)
+    elif kind in ("crossing", "slide_start"):
+        k = int(ctx.stab[ctx.switch_index(name), 0])
+        gx = np.eye(n)
+        gt = np.zeros(n)
+    else:
+        raise ValueError(f"no saltation formula for a {kind!r} event (its saltation matrix is "
+                         f"the identity or, for chattering, the kernel's)")
+    f_in = ctx.field(t, x_before, st_before, sliding_gain)
+    f_out = ctx.field(t, x_after, st_after, sliding_gain)
+    hx = ctx.h_x(k, t, x_before)
+    den = ctx.h_t(k, t, x_before) + hx @ f_in
+    scale = np.linalg.norm(hx) * max(np.linalg.norm(f_in), 1e-300)
+    if not np.isfinite(den) or abs(den) <= 1e-13 * scale:
+        raise ValueError(f"{kind} {name!r} at t={t:.17g} is grazing (h_t + h_x f = {den:.3e}): "
+                         f"its saltation matrix is unbounded")
+    full = gx + np.outer(f_out - gx @ f_in - gt, hx) / den
+    proj = gx - np.outer(gx @ f_in + gt, hx) / den
+    return full, proj
+
+
+def saltation_matrix(model, event: str, t: float, x, *, params=None, mode=None,
+                     form: str = "full", sliding: str = "convex",
+                     sliding_gain: float = 0.0) -> np.ndarray:
+    """Saltation matrix of a model event or switch at a point of its surface.
+
+    Parameters
+    ----------
+    model : Model, str, path or dict
+    event : str
+        Name of an ``impact``/``transition`` event or of a Filippov switch.
+    t : float
+    x : array_like
+        State just before the event, on the surface (``h(t, x) = 0``).
+    params : dict, optional
+    mode : str, optional
+        The mode before the event (default: the event's first mode; for a switch, the side
+        the flow arrives from, which must then be unique).
+    form : {'full', 'projected'}
+        ``full``: ``S = g_x + (f_out - g_x f_in - g_t) h_x / (h_t + h_x f_in)`` (slides,
+        Adolfsson et al. 2001), the jump of the variational solution. ``projected``: thesis
+        eq. 2.36, ``g_x (I - f_in h_x / (h_t + h_x f_in)) - g_t h_x / (h_t + h_x f_in)``, the
+        Jacobian between Poincaré sections (COCO ``hspo``). See the module docstring.
+    sliding, sliding_gain : str, float
+        The sliding field's method and stabilising rate (as in :func:`pwsdyn.simulate`); the
+        stabilising term vanishes on the surface.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n, n)
+
+    Examples
+    --------
+    >>> import numpy as np, pwsdyn
+    >>> S = pwsdyn.saltation_matrix("impact-oscillator", "impact", 0.3, [0.0, 1.0])
+    >>> round(float(np.linalg.det(S)), 12)   # r^2 for Newton restitution, r = 0.8
+    0.64
+    """
+    _check_form(form)
+    ctx = ModelContext(model, params, sliding)
+    x = np.asarray(x, dtype=float).reshape(-1)
+    if x.shape != (ctx.n,):
+        raise ValueError(f"`x` must have {ctx.n} entries, got {x.size}")
+    names = [e.name for e in ctx.model.events]
+    if event in names:
+        j = names.index(event)
+        ev = ctx.model.events[j]
+        m = ctx.model.mode_index(mode) if mode is not None else ev.modes[0]
+        st_b = DiscreteState(REGULAR, -1, m)
+        st_a = DiscreteState(REGULAR, -1, ev.target if ev.target is not None else m)
+        kind = ev.kind
+        x_after = ctx.g(j, t, x)
+    else:
+        s = ctx.switch_index(event)
+        k, a, b = (int(v) for v in ctx.stab[s])
+        ha = ctx.h_t(k, t, x) + ctx.h_x(k, t, x) @ ctx.mode_field(a, t, x)
+        hb = ctx.h_t(k, t, x) + ctx.h_x(k, t, x) @ ctx.mode_field(b, t, x)
+        if mode is None:
+            arrive = [m for m, ok in ((a, ha < 0), (b, hb > 0)) if ok]
+            if len(arrive) != 1:
+                raise ValueError(f"give `mode`: the flow arrives at switch {event!r} from "
+                                 f"{'both sides' if arrive else 'neither side'} here")
+            m = arrive[0]
+        else:
+            m = ctx.model.mode_index(mode)
+        st_b = DiscreteState(REGULAR, -1, m)
+        if ha < 0 and hb > 0:
+            kind, st_a = "slide_start", DiscreteState(SLIDE, s, a)
+        else:
+            kind, st_a = "crossing", DiscreteState(REGULAR, -1, b if m == a else a)
+        x_after = x
+    full, proj = _saltation_pair(ctx, kind, event, t, x, x_after, st_b, st_a, sliding_gain)
+    return full if form == "full" else proj
+
+
+def event_saltations(traj, form: str = "full") -> list:
+    """The saltation matrix of each event of a trajectory, in the order of ``traj.events``.
+
+    Parameters
+    ----------
+    traj : Trajectory
+        With ``form='full'`` a run with ``variational=True`` (the matrices the kernel applied,
+        ``traj.transfer_matrices[1::2]``).
+    form : {'full', 'projected'}
+        ``projected`` (thesis eq. 2.36) is computed from the model's derivatives at each event;
+        it is ``None`` for events without a projected form (``chatter``, ``stick``,
+        ``release``, ``slide_end``; see the module docstring).
+
+    Returns
+    -------
+    list of numpy.ndarray (or None)
+    """
+    _check_form(form)
+    if form == "full":
+        if traj.transfer_matrices is None:
+            raise ValueError("the trajectory has no transfer matrices: simulate it with "
+                             "`variational=True`")
+        return list(traj.transfer_matrices[1::2])
+    ctx = ModelContext(traj.model, traj.params, traj.options.get("sliding", "convex"))
+    gain = float(traj.options.get("sliding_gain", 0.0) or 0.0)
+    states = event_states(ctx, traj.events, trajectory_start_state(ctx, traj))
+    out = []
+    for e, (sb, sa) in zip(traj.events, states):
+        if e.kind in PROJECTABLE_KINDS:
+            out.append(_saltation_pair(ctx, e.kind, e.name, e.t, e.x_before, e.x_after, sb, sa,
+                                       gain)[1])
+        else:
+            out.append(None)
+    return out
