@@ -1,0 +1,10 @@
+"""Global analysis: brute-force bifurcation diagrams (:func:`sweep`), basins of attraction
+(:func:`basins`) and Lyapunov spectra (:func:`lyapunov_spectrum`) of piecewise-smooth flows
+and maps, chunked, parallel on Dask and resumable from a store on disk."""
+
+from ._lyapunov import LyapunovSpectrum as LyapunovSpectrum
+from ._lyapunov import lyapunov_spectrum as lyapunov_spectrum
+from ._store import StoreMismatchError as StoreMismatchError
+from ._sweep import sweep as sweep
+from ._basins import basin_fractions as basin_fractions
+from ._basins import basins as basins

@@ -1,0 +1,338 @@
+"""Basins of attraction on a grid of initial conditions, with attractor classification.
+
+Every start of the grid (the other states and the initial phase fixed) is run for a transient
+and then recorded at a section for a window of periods, exactly as one value of a sweep
+(:mod:`pwsdyn.explore._sweep`). Its fingerprint is the period ``k`` of the section points, the
+last ``k`` section points (one cycle), and the event signature of the cycle (events per
+period, time sticking and sliding per period). After all chunks are done the fingerprints are
+matched in grid order (row by row) -- so labels do not depend on chunking or workers:
+
+* two periodic starts land on the same attractor when their periods and event signatures are
+  equal and their cycles agree, up to a cyclic shift, within ``match_tol * (1 + max |point|)``;
+  attractors are numbered 0, 1, ... in order of first appearance;
+* all non-periodic starts (no period up to ``max_period`` within ``period_tol``: quasi-periodic,
+  chaotic, or not yet settled) share one label, listed in the table with period 0;
+* ``-1``: diverged (a state beyond ``bound``, or a non-finite state);
+* ``-2``: the run failed (a step or event budget spent, step size underflow, Zeno).
+
+Labels are ints with ``-1`` for divergence as in Attractors.jl (STYLE.md); basin fractions
+are counts over the grid and sum to 1.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+import xarray as xr
+
+from .. import __version__
+from ..errors import Status
+from ..integrate.simulate import DEFAULTS, _check_options, state_vector
+from ._common import DIVERGED, ModelContext, model_payload, period_estimate
+from ._executor import run_chunks
+from ._store import ChunkStore
+from ._sweep import _period_function, _settings_json, run_window
+
+LABEL_DIVERGED = -1
+LABEL_FAILED = -2
+
+
+def basins_chunk(task: dict) -> dict:
+    """Fingerprints of the starts of one chunk (see module docstring). Plain arrays."""
+    ctx = ModelContext.get(task["model"])
+    s = task["settings"]
+    n = ctx.model.n_states
+    starts = np.asarray(task["starts"], dtype=float)
+    m = len(starts)
+    p = np.array(task["p"], dtype=float)
+    fperiod = _period_function(ctx)
+    T = s["period"] if s["period"] is not None else (
+        float(fperiod(*p)) if fperiod is not None else 1.0)
+    mp = s["max_period"]
+    out = {"status": np.zeros(m, dtype=np.int64), "period": np.zeros(m, dtype=np.int64),
+           "cycle": np.full((m, mp, n), np.nan), "events_per_period": np.full(m, np.nan),
+           "stick_time": np.full(m, np.nan), "slide_time": np.full(m, np.nan)}
+    for r, x in enumerate(starts):
+        w = run_window(ctx, x, p, T, s["phase"], s["transient"], s["samples"], s["section"],
+                       s["samples"], task["opts"], s["bound"])
+        out["status"][r] = w["status"]
+        out["events_per_period"][r] = w["events_per_period"]
+        out["stick_time"][r] = w["stick_time"]
+        out["slide_time"][r] = w["slide_time"]
+        if w["status"] != 0:
+            continue
+        pts = w["points"][: w["n_points"]]
+        k = period_estimate(pts, mp, s["period_tol"])
+        out["period"][r] = k
+        if k:
+            out["cycle"][r, :k] = pts[-k:]
+    return out
+
+
+def _same_cycle(a: np.ndarray, b: np.ndarray, tol: float) -> bool:
+    """``a`` and ``b`` (k, n) agree within ``tol`` up to a cyclic shift."""
+    for shift in range(len(a)):
+        if np.all(np.abs(np.roll(a, shift, axis=0) - b) <= tol):
+            return True
+    return False
+
+
+def classify(fp: dict, match_tol: float) -> tuple[np.ndarray, list[dict]]:
+    """Labels (flat, in grid order) and the attractor table from the fingerprints."""
+    m = len(fp["status"])
+    labels = np.empty(m, dtype=np.int64)
+    table: list[dict] = []
+    nonper = None
+    for i in range(m):
+        st = fp["status"][i]
+        if st == DIVERGED or st == int(Status.NONFINITE):
+            labels[i] = LABEL_DIVERGED
+            continue
+        if st != 0:
+            labels[i] = LABEL_FAILED
+            continue
+        k = int(fp["period"][i])
+        if k == 0:
+            if nonper is None:
+                nonper = len(table)
+                table.append({"period": 0, "kind": "non-periodic",
+                              "events_per_period": fp["events_per_period"][i],
+                              "stick_time": fp["stick_time"][i],
+                              "slide_time": fp["slide_time"][i], "cycle": None, "first": i})
+            labels[i] = nonper
+            continue
+        cyc = fp["cycle"][i, :k]
+        tol = match_tol * (1.0 + float(np.max(np.abs(cyc))))
+        sig = (round(fp["events_per_period"][i] * k), fp["stick_time"][i] > 0,
+               fp["slide_time"][i] > 0)
+        for j, att in enumerate(table):
+            if att["kind"] != "periodic" or att["period"] != k or att["sig"] != sig:
+                continue
+            if _same_cycle(att["cycle"], cyc, tol):
+                labels[i] = j
+                break
+        else:
+            labels[i] = len(table)
+            table.append({"period": k, "kind": "periodic", "sig": sig, "cycle": cyc.copy(),
+                          "events_per_period": fp["events_per_period"][i],
+                          "stick_time": fp["stick_time"][i], "slide_time": fp["slide_time"][i],
+                          "first": i})
+    return labels, table
+
+
+def basins(model, grid: Mapping[str, object], x0=None, *, params=None, transient: int = 200,
+           samples: int = 32, section: str = "stroboscopic", phase: float = 0.0,
+           period: float | None = None, max_period: int | None = None,
+           period_tol: float = 1e-6, match_tol: float = 1e-4, bound: float = 1e8,
+           chunk_size: int | None = None, workers: int | None = None, client=None,
+           scheduler: str | None = None, store=None, out=None, progress: bool = True,
+           **options) -> xr.Dataset:
+    """Basins of attraction on a grid of initial conditions.
+
+    Parameters
+    ----------
+    model : Model, MapModel, str, path or dict
+    grid : dict
+        One or two entries ``state name -> 1-D array of values`` (the grid axes, in order;
+        two for a flow's 2-D grid, one for a 1-D map).
+    x0 : sequence or dict, optional
+        Values of the states not on the grid (default: the model's ``[defaults] x0``, else 0).
+    params : dict, optional
+        Parameter values.
+    transient, samples : int
+        Forcing periods (maps: iterations) discarded, then recorded (defaults 200 and 32).
+    section : str
+        ``"stroboscopic"`` or the name of an event (see :func:`pwsdyn.sweep`).
+    phase : float
+        Initial phase (in periods) of every start, and phase of the section.
+    period : float, optional
+        Time unit of ``transient``/``samples`` (default: the forcing period; required for
+        autonomous flows).
+    max_period : int, optional
+        Longest period looked for (default ``min(samples // 4, 64)``).
+    period_tol, match_tol : float
+        Tolerances (relative to ``1 + max |point|``) for periodicity and for matching two
+        starts' cycles to one attractor.
+    bound : float
+        Divergence threshold (label -1).
+    chunk_size : int, optional
+        Grid rows (first axis) per chunk (default ``ceil(rows / 16)``).
+    workers, client, scheduler, store, out, progress
+        As for :func:`pwsdyn.sweep`.
+    **options
+        Integrator options of :func:`pwsdyn.simulate`.
+
+    Returns
+    -------
+    xarray.Dataset
+        ``label`` over the grid axes (attractor index >= 0, -1 diverged, -2 failed); the
+        attractor table over ``attractor``: ``attractor_period`` (0: the non-periodic class),
+        ``attractor_kind``, ``attractor_events_per_period``, ``attractor_stick_time``,
+        ``attractor_slide_time``, ``attractor_points`` (attractor, cycle_point, state: one
+        cycle of section points), ``attractor_start`` (state: the first start that reached
+        it); and ``fraction`` over ``basin`` (-2, -1, 0, 1, ...), summing to 1.
+
+    Raises
+    ------
+    ValueError
+        An empty grid axis, an unknown or repeated state, non-finite values, ...
+
+    Examples
+    --------
+    >>> import numpy as np, pwsdyn
+    >>> ds = pwsdyn.basins("sqrt-map", {"x": np.linspace(-0.5, 0.5, 11)},
+    ...                    params={"mu": 0.1, "lam": 0.1}, workers=1, progress=False)
+    >>> float(ds.fraction.sum())
+    1.0
+    """
+    from ..model import load_model
+
+    model = load_model(model)
+    is_map = bool(getattr(model, "is_map", False))
+    if not isinstance(grid, Mapping) or not 1 <= len(grid) <= 2:
+        raise ValueError("`grid` must be a dict of one or two entries: state name -> values")
+    axes = []
+    for name, v in grid.items():
+        if name not in model.states:
+            raise ValueError(f"`grid` names unknown state {name!r}; states are "
+                             f"{list(model.states)}")
+        arr = np.asarray(v, dtype=float).reshape(-1)
+        if arr.size == 0:
+            raise ValueError(f"`grid` axis {name!r} has zero size: give at least one value")
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"`grid` axis {name!r} must be finite")
+        axes.append((name, arr))
+    if len(axes) == 2 and axes[0][0] == axes[1][0]:
+        raise ValueError("the two `grid` axes must be different states")
+    for nm_, v, lo in (("transient", transient, 0), ("samples", samples, 2)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
+            raise ValueError(f"`{nm_}` must be an integer >= {lo}, got {v!r}")
+    if is_map:
+        if section != "stroboscopic" or options:
+            raise ValueError(f"model {model.name!r} is a map: `section` and integrator "
+                             "options apply to flows only")
+    else:
+        if section != "stroboscopic":
+            names = {e.name for e in model.events} | {s.name for s in model.switches}
+            if section not in names:
+                raise ValueError(f"`section` must be 'stroboscopic' or an event of model "
+                                 f"{model.name!r} ({sorted(names)}), got {section!r}")
+        if period is None and model.forcing_period is None:
+            raise ValueError(f"model {model.name!r} is autonomous: give `period`")
+        unknown = sorted(set(options) - set(DEFAULTS))
+        if unknown:
+            raise TypeError(f"basins() got unexpected keyword argument(s) {unknown}")
+    if x0 is None:
+        x0 = (model.spec.get("defaults") or {}).get("x0")
+    base = state_vector(model, x0) if x0 is not None else np.zeros(model.n_states)
+    p = model.parameter_vector(params)
+    if max_period is None:
+        max_period = max(1, min(samples // 4, 64))
+    opts = {**DEFAULTS, **options, "dense": False, "throw": False, "variational": False}
+    if not is_map:
+        _check_options(opts)
+    shape = tuple(len(a) for _, a in axes)
+    rows = shape[0]
+    if chunk_size is None:
+        chunk_size = max(1, math.ceil(rows / 16))
+    if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) \
+            or chunk_size < 1:
+        raise ValueError(f"`chunk_size` must be a positive integer, got {chunk_size!r}")
+    out_path = Path(out) if out is not None else None
+    if out_path is not None and out_path.exists():
+        raise FileExistsError(f"output file {str(out_path)!r} exists; nothing was overwritten "
+                              "(choose another name or delete it)")
+
+    idx = [model.states.index(nm_) for nm_, _ in axes]
+    mesh = np.meshgrid(*[a for _, a in axes], indexing="ij")
+    starts = np.tile(base, (int(np.prod(shape)), 1))
+    for j, mg in zip(idx, mesh):
+        starts[:, j] = mg.reshape(-1)
+    starts = starts.reshape(shape + (model.n_states,))
+    settings = _settings_json(dict(
+        grid={nm_: a.tolist() for nm_, a in axes}, x0=base.tolist(),
+        params=dict(zip(model.parameters, map(float, p))), transient=int(transient),
+        samples=int(samples), section=section, phase=float(phase),
+        period=None if period is None else float(period), max_period=int(max_period),
+        period_tol=float(period_tol), bound=float(bound), chunk_size=int(chunk_size),
+        options={k: v for k, v in opts.items() if k not in ("throw", "dense")}
+        if not is_map else {}))
+    payload = model_payload(model)
+    tasks = []
+    for r0 in range(0, rows, chunk_size):
+        blk = starts[r0:r0 + chunk_size].reshape(-1, model.n_states)
+        tasks.append({"model": payload, "settings": settings, "p": p.tolist(), "opts": opts,
+                      "starts": blk.tolist()})
+
+    results: dict[int, dict] = {}
+    st = None
+    if store is not None:
+        st = ChunkStore(store, "basins", model.name, model.hash, settings, len(tasks))
+        for i in st.done():
+            with_ds = st.read(i)
+            results[i] = {k: with_ds[k].values for k in with_ds.data_vars}
+
+    def on_result(i, res):
+        results[i] = res
+        if st is not None:
+            st.write(i, xr.Dataset({k: (("start",) + tuple(f"d{j}" for j in range(v.ndim - 1)),
+                                        v) for k, v in res.items()}, attrs={"chunk": i}))
+
+    todo = [i for i in range(len(tasks)) if i not in results]
+    run_chunks(basins_chunk, tasks, todo, on_result, workers=workers, client=client,
+               scheduler=scheduler, progress=progress, desc="basins", n_done=len(results))
+    fp = {k: np.concatenate([results[i][k] for i in range(len(tasks))])
+          for k in results[0]} if tasks else {}
+    labels, table = classify(fp, match_tol)
+    ds = _assemble(model, axes, shape, labels, table, fp, starts, settings)
+    if out_path is not None:
+        from ..io import save_dataset
+
+        save_dataset(ds, out_path)
+    return ds
+
+
+def _assemble(model, axes, shape, labels, table, fp, starts, settings) -> xr.Dataset:
+    n = model.n_states
+    K = len(table)
+    mp = max([t["period"] for t in table] + [1])
+    pts = np.full((K, mp, n), np.nan)
+    for j, t in enumerate(table):
+        if t["cycle"] is not None:
+            pts[j, : t["period"]] = t["cycle"]
+    flat = starts.reshape(-1, n)
+    dims = tuple(nm_ for nm_, _ in axes)
+    basin_ids = np.array([LABEL_FAILED, LABEL_DIVERGED] + list(range(K)), dtype=np.int64)
+    total = labels.size
+    frac = np.array([np.count_nonzero(labels == b) / total for b in basin_ids])
+    data = {
+        "label": (dims, labels.reshape(shape),
+                  {"long_name": "attractor label (-1 diverged, -2 failed)"}),
+        "attractor_period": (("attractor",), np.array([t["period"] for t in table],
+                                                       dtype=np.int64)),
+        "attractor_kind": (("attractor",), np.array([t["kind"] for t in table], dtype=str)),
+        "attractor_events_per_period": (("attractor",),
+                                        np.array([t["events_per_period"] for t in table])),
+        "attractor_stick_time": (("attractor",), np.array([t["stick_time"] for t in table])),
+        "attractor_slide_time": (("attractor",), np.array([t["slide_time"] for t in table])),
+        "attractor_points": (("attractor", "cycle_point", "state"), pts),
+        "attractor_start": (("attractor", "state"),
+                            flat[[t["first"] for t in table]].reshape(K, n)),
+        "fraction": (("basin",), frac, {"long_name": "basin fraction"}),
+    }
+    coords = {nm_: a for nm_, a in axes}
+    coords.update(attractor=np.arange(K), basin=basin_ids, state=list(model.states),
+                  cycle_point=np.arange(mp))
+    attrs = {"kind": "basins", "model": model.name, "model_hash": model.hash,
+             "model_kind": "map" if getattr(model, "is_map", False) else "flow",
+             "pwsdyn_version": __version__, "settings": json.dumps(settings, sort_keys=True)}
+    return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def basin_fractions(ds: xr.Dataset) -> dict:
+    """``{label: fraction}`` of a :func:`basins` result (labels with zero fraction left out)."""
+    return {int(b): float(f) for b, f in zip(ds.basin.values, ds.fraction.values) if f > 0}

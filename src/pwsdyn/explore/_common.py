@@ -1,0 +1,221 @@
+"""Shared pieces of the global analyses: the model as it travels to workers, the integration
+of one window of forcing periods with a stroboscopic section, and the period estimate.
+
+Workers receive a model as its *spec* (the dict the TOML file holds), never as compiled
+numba functions. Each worker process loads it once and calls ``compile_model``, which finds
+the generated module in the on-disk cache by the model hash and loads its machine code
+(:mod:`pwsdyn.model.codegen`), so no task recompiles anything.
+
+Stroboscopic section of a flow
+------------------------------
+The state at the times ``t_k = (k + phase) T`` is recorded by the compiled kernel itself: the
+model is extended (a copy, with its own hash) by one ``transition`` event named ``_section``
+on the surface ``sin(2 pi (t / T - phase + 1e-12)) = 0`` crossed upwards, with the identity as
+reset (see ``SECTION_LEAD`` for the 1e-12).
+``T`` and ``phase`` are two extra parameters, so one compiled copy serves every period.
+The kernel locates such an event to a few ulps and logs the state there, so a whole window
+of hundreds of periods is one kernel call (the slides' "ODEs vs. Hybrid": a Poincaré section
+is an event like any other).
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+
+from ..model import compile_model, load_model
+
+SECTION_EVENT = "_section"
+SECTION_PERIOD = "_section_period"
+SECTION_PHASE = "_section_phase"
+#: The section surface crosses zero this fraction of a period before ``(k + phase) T``, so
+#: that it is positive (not zero) at the start of a run at ``t = phase T``: an event at the
+#: very start would be handled before a contact at the start (a ball at rest on the table)
+#: and hide it from the kernel. The section states are taken 1e-12 T early, a time shift far
+#: below the integration error (the state moves by about ``|f| 1e-12 T``).
+SECTION_LEAD = 1e-12
+
+#: Event kinds counted in "events per period" (state changes -- stick, release, slide start
+#: and end -- are reported as times instead).
+COUNTED_KINDS = ("impact", "transition", "crossing", "chatter")
+
+#: Extra status codes of the explore results (besides :class:`pwsdyn.Status` values >= 0).
+DIVERGED = -1
+SECTION_MISSED = -3
+
+
+def model_payload(model) -> dict:
+    """What a worker needs to rebuild ``model``: its spec dict and origin (picklable)."""
+    if not model.spec:
+        raise ValueError(f"model {model.name!r} has no spec dict (it was not made by "
+                         "pwsdyn.load_model); build it with load_model to use it here")
+    return {"spec": model.spec, "origin": model.origin, "hash": model.hash}
+
+
+_CONTEXTS: dict = {}
+
+
+class ModelContext:
+    """A model with its compiled functions, created once per process (see module docstring).
+
+    Attributes
+    ----------
+    model : Model or MapModel
+    is_map : bool
+    cm : CompiledModel or CompiledMap
+    cms : CompiledModel or None
+        The flow with the stroboscopic ``_section`` event (flows only).
+    """
+
+    def __init__(self, model):
+        self.model = model
+        self.is_map = bool(getattr(model, "is_map", False))
+        if self.is_map:
+            from ..model.maps import compile_map
+
+            self.cm = compile_map(model)
+            self.cms = None
+            return
+        self.cm = compile_model(model)
+        self.cms = compile_model(section_model(model))
+
+    @classmethod
+    def get(cls, payload_or_model) -> "ModelContext":
+        if isinstance(payload_or_model, dict):
+            key = payload_or_model["hash"]
+            if key not in _CONTEXTS:
+                from ..model.spec import model_from_dict
+
+                model = model_from_dict(dict(payload_or_model["spec"]),
+                                        origin=payload_or_model["origin"])
+                if model.hash != key:
+                    raise RuntimeError(f"model {model.name!r} rebuilt on a worker has hash "
+                                       f"{model.hash}, expected {key} (different pwsdyn "
+                                       "versions on the client and the workers?)")
+                _CONTEXTS[key] = cls(model)
+            return _CONTEXTS[key]
+        model = load_model(payload_or_model)
+        if model.hash not in _CONTEXTS:
+            _CONTEXTS[model.hash] = cls(model)
+        return _CONTEXTS[model.hash]
+
+
+def section_model(model):
+    """A copy of the flow ``model`` with the stroboscopic ``_section`` event (see module
+    docstring); the parameter vector of the copy is the model's plus ``(T, phase)``."""
+    spec = copy.deepcopy(dict(model.spec))
+    params = dict(spec.get("parameters", {}) or {})
+    for extra in (SECTION_PERIOD, SECTION_PHASE):
+        if extra in params or extra in model.states:
+            raise ValueError(f"model {model.name!r} uses the reserved name {extra!r}")
+    params[SECTION_PERIOD] = 1.0
+    params[SECTION_PHASE] = 0.0
+    spec["parameters"] = params
+    events = list(spec.get("events", []) or [])
+    events.append({"name": SECTION_EVENT, "kind": "transition", "direction": 1,
+                   "surface": f"sin(2*pi*(t/{SECTION_PERIOD} - {SECTION_PHASE} + "
+                              f"{SECTION_LEAD!r}))"})
+    spec["events"] = events
+    spec.pop("defaults", None)
+    spec["name"] = f"{model.name}+section"
+    from ..model.spec import model_from_dict
+
+    return model_from_dict(spec, origin=model.origin)
+
+
+def readmit(ctx: ModelContext, t: float, x, p) -> np.ndarray:
+    """``x`` moved onto the admissible side of every impact surface it lies a round-off
+    distance behind, for a restart at time ``t``.
+
+    A state carried from one kernel run to the next (to the next parameter value, the next
+    Lyapunov segment) may be sticking on an impact surface, ``h = 0`` up to round-off. The
+    kernel always starts in a regular mode, where a start with ``h`` a few ulps below zero
+    would not register the contact and the motion would pass through the wall; from
+    ``h >= 0`` it registers the contact at once (an impact of vanishing speed, the
+    chattering map, sticking). So ``x += (delta - h) h_x / |h_x|^2`` when
+    ``-1e-8 (1 + |x|) < h < 0`` (``delta`` a few ulps).
+    """
+    from ..model.codegen import W_H, W_HX
+
+    x = np.array(x, dtype=float)
+    model = ctx.model
+    if ctx.is_map or not model.events:
+        return x
+    n = model.n_states
+    buf = np.zeros(max(n, 2))
+    pv = p if len(p) else np.zeros(1)
+    scale = 1.0 + float(np.max(np.abs(x)))
+    for k in sorted({e.surface for e in model.events if e.kind == "impact"}):
+        ctx.cm.evaluate(W_H, k, float(t), x, pv, buf)
+        h = buf[0]
+        if -1e-8 * scale < h < 0.0:
+            ctx.cm.evaluate(W_HX, k, float(t), x, pv, buf)
+            g = buf[:n].copy()
+            nrm2 = float(g @ g)
+            if nrm2 > 0:
+                x = x + (4 * np.finfo(float).eps * scale - h) * g / nrm2
+    return x
+
+
+def period_estimate(points: np.ndarray, max_period: int, tol: float) -> int:
+    """The smallest ``k <= max_period`` such that the section points repeat after ``k``.
+
+    ``points`` (m, d) are consecutive section points (NaN rows are ignored at the end). Points
+    ``j`` and ``j + k`` must agree within ``tol * (1 + max |P|)`` in every component for all
+    ``j`` in the second half of the record (at least ``k`` pairs). Returns 0 when no such
+    ``k`` exists (non-periodic within the record, or too few points).
+    """
+    pts = np.asarray(points, dtype=float)
+    good = np.all(np.isfinite(pts), axis=1)
+    if not good.all():
+        pts = pts[: np.argmin(good)] if not good[0] or good.any() else pts[:0]
+    m = len(pts)
+    if m < 2:
+        return 0
+    scale = tol * (1.0 + float(np.max(np.abs(pts))))
+    start = m // 2
+    for k in range(1, max_period + 1):
+        if m - start - k < k:
+            break
+        diff = np.abs(pts[start + k:] - pts[start:m - k])
+        if np.all(diff <= scale):
+            return k
+    return 0
+
+
+def state_times(events, t_lo: float, t_hi: float, initial: str = "") -> tuple[float, float]:
+    """Total time in sticking and in sliding states within ``[t_lo, t_hi]`` from an event log.
+
+    The discrete state after each event is ``mode_after`` (``stick:<event>``,
+    ``slide:<switch>`` or a mode name); ``initial`` is the state before the first event.
+    """
+    stick = slide = 0.0
+    state, t_prev = initial, t_lo
+    for e in events:
+        t = min(max(e.t, t_lo), t_hi)
+        if state.startswith("stick:"):
+            stick += t - t_prev
+        elif state.startswith("slide:"):
+            slide += t - t_prev
+        t_prev = t
+        if e.kind != "chatter":
+            state = e.mode_after
+    if state.startswith("stick:"):
+        stick += t_hi - t_prev
+    elif state.startswith("slide:"):
+        slide += t_hi - t_prev
+    return stick, slide
+
+
+def failed_status(traj) -> int:
+    """The run's status as an int for the result arrays (0 when it did not fail)."""
+    return int(traj.status) if traj.status.failed else 0
+
+
+def check_bound(x: np.ndarray, bound: float) -> bool:
+    """True while every component is finite and within ``bound``."""
+    return bool(np.all(np.isfinite(x)) and np.all(np.abs(x) <= bound))
+
+
+__all__ = ["ModelContext", "period_estimate", "readmit", "section_model", "state_times"]

@@ -1,0 +1,584 @@
+"""Brute-force bifurcation diagrams: parameter sweeps with continuation of the final state.
+
+For each parameter value the model is run for a transient, then for a window of ``samples``
+forcing periods (or iterations of a map) in which the state is recorded at a section; the
+state at the end of the window is the initial state at the next parameter value, as users of
+these diagrams do (thesis, section 2.7: the final state of one value continues into the next).
+Sweeping up and down shows hysteresis where attractors coexist.
+
+Chunks and warm-up
+------------------
+The ordered values are split into chunks of ``chunk_size`` consecutive values that run
+independently (on Dask workers). Chunk ``c`` starts ``warmup`` values before its first value:
+from the user's ``x0`` it runs the transient at each of those warm-up values (results
+discarded), then continues through its own values. The first chunk starts at ``x0`` with no
+warm-up. The chunking depends only on the values and ``chunk_size`` (never on the number of
+workers), so serial and parallel runs give identical datasets.
+
+Where attractors coexist, a chunk border can show: the warm-up starts from ``x0`` and may
+settle on another attractor than the one the previous chunk was following, so a hysteresis
+branch followed across the border by a single uninterrupted sweep can switch to the other
+attractor exactly at a border. Use ``chunk_size=len(values)`` (one chunk, no parallelism
+within a direction) for an uninterrupted continuation, or a longer ``warmup``; the chunk
+starts are stored in the dataset (``chunk_start``) so borders can be marked on plots.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+import sympy as sp
+import xarray as xr
+
+from .. import __version__
+from ..integrate.simulate import DEFAULTS, _check_options, _simulate_compiled, state_vector
+from ._common import (COUNTED_KINDS, DIVERGED, SECTION_EVENT, SECTION_MISSED, ModelContext,
+                      check_bound, failed_status, model_payload, period_estimate, readmit,
+                      state_times)
+from ._executor import run_chunks
+from ._lyapunov import flow_segments
+from ._store import ChunkStore
+
+DIRECTIONS = ("up", "down", "both")
+#: Log records that count as a crossing of an event section (not chattering, sticking or
+#: release, which are changes of the discrete state at the same surface).
+SECTION_KINDS = ("impact", "transition", "crossing", "slide_start", "slide_end")
+
+
+# ======================================================================================
+# one parameter value
+# ======================================================================================
+
+def _period_function(ctx: ModelContext):
+    """A fast numeric forcing period ``T(p)`` (or ``None`` for an autonomous model)."""
+    fn = getattr(ctx, "_period_fn", False)
+    if fn is False:
+        fp = ctx.model.forcing_period
+        fn = None if fp is None else sp.lambdify(ctx.model.parameter_symbols, fp, "math")
+        ctx._period_fn = fn
+    return fn
+
+
+def run_window(ctx: ModelContext, x, p, T: float, phase: float, n_tr: int, n_s: int,
+               section: str, max_points: int, opts: dict, bound: float,
+               lyapunov: bool = False, record: bool = True) -> dict:
+    """Transient of ``n_tr`` periods then a window of ``n_s`` periods, from ``x`` at
+    ``t = phase * T``. Returns the section points and per-window statistics (see
+    :func:`sweep` for their meaning). ``record=False`` runs only the transient (warm-up)."""
+    n = ctx.model.n_states
+    out = {"x_end": np.array(x, dtype=float), "status": 0}
+    if ctx.is_map:
+        return _map_window(ctx, x, p, n_tr, n_s, max_points, bound, lyapunov, record)
+    t_start = phase * T
+    t_w = t_start + n_tr * T
+    x = readmit(ctx, t_start, x, p)
+    if not record:
+        if n_tr:
+            tr = _simulate_compiled(ctx.cm, np.asarray(x, float), t_start, t_w, p, opts)
+            out["status"] = failed_status(tr)
+            out["x_end"] = tr.x_final.copy()
+        return out
+    t_end = t_w + n_s * T
+    strobe = section == "stroboscopic"
+    pts = np.full((max_points, n), np.nan)
+    phs = np.full(max_points, np.nan)
+    lyap = np.full(n, np.nan)
+    if lyapunov:
+        # per-period segments with the variational equations; the section points are the
+        # segment start states (stroboscopic times)
+        status = 0
+        xx = np.asarray(x, float)
+        if n_tr:
+            tr = _simulate_compiled(ctx.cm, xx, t_start, t_w, p, opts)
+            status = failed_status(tr)
+            xx = tr.x_final.copy()
+        events = []
+        if not status:
+            sums, done, xe, status, starts, events, _ = flow_segments(
+                ctx, xx, t_w, T, n_s, p, opts, bound, keep_events=True)
+            if done:
+                lyap = np.sort(sums / (done * T))[::-1]
+            xx = xe
+            if strobe:
+                m = min(max_points, done)
+                pts[:m] = starts[:m]
+        x_end = xx
+        nsteps = 0
+    else:
+        events = []
+        nsteps = 0
+        xx = np.asarray(x, float)
+        if strobe:
+            # The transient runs with the model itself, the window with its section copy
+            # (the section event costs about a third more per period: landing steps and
+            # Newton polishing at every section); the window restarts at t_w.
+            # If the transient ends sticking or sliding, a restart at t_w would start in a
+            # regular mode and re-register the contact (an impact of vanishing speed, a
+            # chattering sequence) inside the window: then the whole run is done again in
+            # one piece with the section copy instead.
+            status = 0
+            t_run = t_w
+            if n_tr:
+                tr = _simulate_compiled(ctx.cm, xx, t_start, t_w, p, opts)
+                status = failed_status(tr)
+                nsteps += tr.stats.get("steps", 0)
+                if not status and ":" in str(tr.state[-1]):
+                    t_run = t_start
+                else:
+                    events.extend(tr.events)
+                    xx = readmit(ctx, t_w, tr.x_final, p)
+            x_end = xx
+            if not status:
+                if t_run == t_w:
+                    pts[0] = xx
+                # Steps of at most T/4 hold at most one zero of the section surface, so its
+                # sign test cannot step over a crossing (the flow's error estimate alone does
+                # not limit the step: a ball's parabola is integrated exactly by any
+                # Runge-Kutta pair, with steps of many periods). The run goes a quarter
+                # period past the window, so that the section at its end (the state handed
+                # on) is an interior event, not a time a few ulps before the end.
+                pv = np.concatenate([p, [T, phase]])
+                sopts = {**opts, "max_step": min(opts["max_step"], 0.25 * T)}
+                traj = _simulate_compiled(ctx.cms, xx, t_run, t_end + 0.25 * T, pv, sopts)
+                status = failed_status(traj)
+                nsteps += traj.stats.get("steps", 0)
+                last = None
+                for e in traj.events:
+                    if e.name == SECTION_EVENT:
+                        j = int(round((e.t - t_w) / T))
+                        if 0 <= j < min(max_points, n_s) and np.isnan(pts[j, 0]):
+                            pts[j] = e.x_before
+                        elif j == n_s and last is None:
+                            last = e.x_before.copy()
+                    elif e.t < t_end:
+                        events.append(e)
+                if last is None and not status:
+                    status = SECTION_MISSED
+                x_end = last if last is not None else traj.x_final.copy()
+        else:
+            traj = _simulate_compiled(ctx.cm, xx, t_start, t_end, p, opts)
+            status = failed_status(traj)
+            x_end = traj.x_final.copy()
+            nsteps = traj.stats.get("steps", 0)
+            events = list(traj.events)
+    if not strobe:
+        m = 0
+        for e in events:
+            if (e.name == section and e.kind in SECTION_KINDS
+                    and t_w <= e.t < t_end):
+                if m < max_points:
+                    pts[m] = e.x_before
+                    phs[m] = ((e.t - t_start) / T) % 1.0
+                m += 1
+    win = [e for e in events if t_w <= e.t < t_end]
+    counted = sum(1 for e in win if e.kind in COUNTED_KINDS)
+    before = [e for e in events if e.t < t_w and e.kind != "chatter"]
+    initial = before[-1].mode_after if before else ""
+    stick, slide = state_times([e for e in events if e.t < t_end], t_w, t_end, initial)
+    if status == 0 and not check_bound(x_end, bound):
+        status = DIVERGED
+    npts = int(np.sum(np.all(np.isfinite(pts), axis=1)))
+    out.update(points=pts, phase=phs, n_points=npts, status=status, x_end=x_end,
+               events_per_period=counted / n_s, stick_time=stick / n_s, slide_time=slide / n_s,
+               lyapunov=lyap, steps=nsteps)
+    return out
+
+
+def _map_window(ctx, x, p, n_tr, n_s, max_points, bound, lyapunov, record):
+    from ..model.maps import MAP_DIVERGED, MAP_OK, lyapunov_kernel, orbit_kernel
+
+    n = ctx.model.n_states
+    pv = p if p.size else np.zeros(1)
+    x = np.asarray(x, dtype=float)
+    if not record:
+        st, _, _, xe, _ = orbit_kernel(ctx.cm.step, x, pv, int(n_tr), 0, float(bound))
+        return {"x_end": xe, "status": 0 if st == MAP_OK else
+                (DIVERGED if st == MAP_DIVERGED else int(st))}
+    st, xs, pieces, xe, _ = orbit_kernel(ctx.cm.step, x, pv, int(n_tr), int(n_s), float(bound))
+    status = 0 if st == MAP_OK else (DIVERGED if st == MAP_DIVERGED else int(st))
+    pts = np.full((max_points, n), np.nan)
+    m = min(max_points, n_s)
+    pts[:m] = xs[:m]
+    good = pieces >= 0
+    crossings = int(np.sum(pieces[1:][good[1:] & good[:-1]] != pieces[:-1][good[1:] & good[:-1]]))
+    lyap = np.full(n, np.nan)
+    if lyapunov and status == 0:
+        _, ex, _, _ = lyapunov_kernel(ctx.cm.step, x, pv, int(n_tr), int(n_s), float(bound))
+        lyap = np.sort(ex)[::-1]
+    return {"points": pts, "phase": np.full(max_points, np.nan),
+            "n_points": int(np.sum(np.all(np.isfinite(pts), axis=1))), "status": status,
+            "x_end": xe, "events_per_period": crossings / n_s, "stick_time": 0.0,
+            "slide_time": 0.0, "lyapunov": lyap, "steps": 0}
+
+
+# ======================================================================================
+# chunks
+# ======================================================================================
+
+def sweep_chunk(task: dict) -> dict:
+    """Run one chunk of a sweep (on a worker or in-process). Returns plain arrays."""
+    ctx = ModelContext.get(task["model"])
+    model = ctx.model
+    s = task["settings"]
+    n = model.n_states
+    p = np.array(task["p"], dtype=float)
+    pidx = task["pidx"]
+    x0 = np.array(s["x0"], dtype=float)
+    x = x0.copy()
+    values = task["values"]
+    nw = task["warmup"]
+    nv = len(values) - nw
+    maxp = s["max_points"]
+    opts = task["opts"]
+    fperiod = _period_function(ctx)
+    res = {k: np.full(shp, np.nan) for k, shp in (
+        ("section", (nv, maxp, n)), ("phase", (nv, maxp)), ("x_final", (nv, n)),
+        ("lyapunov", (nv, n)), ("events_per_period", nv), ("stick_time", nv),
+        ("slide_time", nv))}
+    for k in ("n_points", "period", "status", "steps"):
+        res[k] = np.zeros(nv, dtype=np.int64)
+    for i, val in enumerate(values):
+        p[pidx] = val
+        T = s["period"] if s["period"] is not None else (
+            float(fperiod(*p)) if fperiod is not None else 1.0)
+        rec = i >= nw
+        w = run_window(ctx, x, p, T, s["phase"], s["transient"], s["samples"], s["section"],
+                       maxp, opts, s["bound"], s["lyapunov"], record=rec)
+        if rec:
+            r = i - nw
+            res["section"][r] = w["points"]
+            res["phase"][r] = w["phase"]
+            res["x_final"][r] = w["x_end"]
+            res["lyapunov"][r] = w["lyapunov"]
+            for k in ("events_per_period", "stick_time", "slide_time", "n_points", "status",
+                      "steps"):
+                res[k][r] = w[k]
+            if w["status"] == 0:
+                pts = w["points"]
+                # the phase of event-section points counts for a forced model (autonomous
+                # flows have no phase: ``period`` is then only a unit of time)
+                if (s["section"] != "stroboscopic" and not ctx.is_map
+                        and model.forcing_period is not None):
+                    ang = 2 * np.pi * w["phase"]
+                    pts = np.column_stack([pts, np.cos(ang), np.sin(ang)])
+                res["period"][r] = period_estimate(pts, s["max_period"], s["period_tol"])
+        # continue the final state into the next value; restart from x0 after a failure
+        ok = w["status"] == 0 and check_bound(w["x_end"], s["bound"])
+        x = np.array(w["x_end"], dtype=float) if ok else x0.copy()
+    return res
+
+
+# ======================================================================================
+# the public function
+# ======================================================================================
+
+def _settings_json(d: dict) -> dict:
+    return json.loads(json.dumps(d, sort_keys=True, default=float))
+
+
+def sweep(model, param: str, values: Sequence[float], x0=None, *, transient: int = 200,
+          samples: int = 100, section: str = "stroboscopic", direction: str = "up",
+          params: Mapping[str, float] | None = None, phase: float = 0.0,
+          period: float | None = None, max_points: int | None = None,
+          max_period: int | None = None, period_tol: float = 1e-6, bound: float = 1e8,
+          lyapunov: bool = False, chunk_size: int | None = None, warmup: int = 2,
+          workers: int | None = None, client=None, scheduler: str | None = None,
+          store=None, out=None, progress: bool = True, **options) -> xr.Dataset:
+    """Brute-force bifurcation diagram: sweep one parameter, continuing the final state.
+
+    Parameters
+    ----------
+    model : Model, MapModel, str, path or dict
+        A flow or a piecewise-smooth map (anything :func:`pwsdyn.load_model` accepts).
+    param : str
+        The parameter swept.
+    values : sequence of float
+        Its values (distinct, finite; sorted here). ``direction="up"`` visits them in
+        increasing order, ``"down"`` in decreasing order, ``"both"`` does both sweeps.
+    x0 : sequence or dict, optional
+        Initial state at the first value (default: the model's ``[defaults] x0``).
+    transient : int
+        Forcing periods (maps: iterations) run and discarded at each value (default 200).
+    samples : int
+        Forcing periods (maps: iterations) of the recording window (default 100).
+    section : str
+        ``"stroboscopic"`` (default): the state at ``t = (k + phase) T`` for each period of
+        the window. Or the name of an event or switch (e.g. ``"impact"``): the state just
+        before each such event in the window (impacts, transitions, crossings, sliding starts
+        and ends), with its phase ``(t / T) mod 1``. Maps record every iterate.
+    direction : {'up', 'down', 'both'}
+    params : dict, optional
+        Values of the other parameters (default: the model's defaults).
+    phase : float
+        Phase of the stroboscopic section and of the start of each value, in periods.
+    period : float, optional
+        Time unit of ``transient`` and ``samples``: default the forcing period at each value
+        (``model.forcing_period_value``); required for autonomous flows.
+    max_points : int, optional
+        Section points stored per value (default ``samples``; event sections keep the first
+        ``max_points`` events of the window).
+    max_period : int, optional
+        Largest period looked for by the period estimate (default ``min(samples // 4, 64)``).
+    period_tol : float
+        Section points ``j`` and ``j + k`` count as equal within
+        ``period_tol * (1 + max |point|)`` (default 1e-6).
+    bound : float
+        A state component beyond ``bound`` counts as divergence (status -1); the next value
+        then starts again from ``x0``.
+    lyapunov : bool
+        Also compute the Lyapunov spectrum over the window (flows: variational equations with
+        saltation matrices, one QR per period; maps: per iteration). Slower for flows.
+    chunk_size : int, optional
+        Values per chunk (default ``ceil(len(values) / 16)``, independent of the workers).
+    warmup : int
+        Values before a chunk's first value at which the chunk runs the transient first
+        (default 2). See the module docstring for how chunk borders can show.
+    workers : int, optional
+        ``1``: run in this process. Otherwise the number of processes of a local Dask cluster
+        (default: one per core).
+    client : dask.distributed.Client, optional
+        Run on this Dask client's cluster.
+    scheduler : str, optional
+        Address of a Dask scheduler to connect to.
+    store : str or Path, optional
+        Directory where each finished chunk is written as it completes. An existing store
+        of the same model and settings is resumed (finished chunks are not recomputed); one
+        of another model or settings is refused.
+    out : str or Path, optional
+        Write the dataset to this NetCDF file (refused if it exists).
+    progress : bool
+        Show a progress bar (chunks, ETA).
+    **options
+        Integrator options of :func:`pwsdyn.simulate` (``rtol``, ``atol``, ``method``,
+        ``max_steps`` (per value), ...).
+
+    Returns
+    -------
+    xarray.Dataset
+        Dimensions ``direction``, the parameter (named ``param``), ``sample``, ``state`` (and
+        ``exponent`` with ``lyapunov``). Variables:
+
+        - ``section`` (direction, param, sample, state): section points (NaN where none);
+        - ``phase`` (direction, param, sample): phase of event-section points;
+        - ``n_points``: section points recorded; ``period``: smallest ``k <= max_period``
+          with repeating section points (in periods, events for event sections, iterations
+          for maps; 0: none found);
+        - ``events_per_period``: impacts, transitions, crossings and chattering sequences per
+          period (maps: border crossings per iteration);
+        - ``stick_time``, ``slide_time``: time per period spent sticking / sliding;
+        - ``status``: 0, a :class:`pwsdyn.Status` code of a failed run, -1 (diverged) or -3
+          (the section at the end of the window was not logged; not expected to occur);
+        - ``x_final``: the state handed on to the next value; ``steps``: integrator steps;
+        - ``lyapunov`` (direction, param, exponent), with ``lyapunov=True``;
+        - ``chunk_start`` (direction, param): True at the first value of each chunk.
+
+        Attributes hold the provenance (model name and hash, pwsdyn version, settings).
+
+    Raises
+    ------
+    ValueError
+        Empty or non-finite values, an unknown parameter, section or direction, bad counts.
+    StoreMismatchError
+        ``store`` holds results of another model or other settings.
+    FileExistsError
+        ``out`` exists.
+
+    Examples
+    --------
+    >>> import numpy as np, pwsdyn
+    >>> ds = pwsdyn.sweep("sqrt-map", "mu", np.linspace(0.01, 0.05, 5), [0.0],
+    ...                   params={"lam": 0.8}, workers=1, progress=False)
+    >>> ds.sizes["mu"], int(ds.period.sel(direction="up").min())
+    (5, 0)
+    """
+    from ..model import load_model
+
+    model = load_model(model)
+    is_map = bool(getattr(model, "is_map", False))
+    if param not in model.parameters:
+        raise ValueError(f"unknown parameter {param!r} for model {model.name!r}; parameters "
+                         f"are {list(model.parameters)}")
+    vals = np.asarray(values, dtype=float).reshape(-1) if np.ndim(values) else None
+    if vals is None or vals.size == 0:
+        raise ValueError(f"`values` of {param!r} must be a non-empty sequence of numbers, got "
+                         f"{values!r}")
+    if not np.all(np.isfinite(vals)):
+        raise ValueError(f"`values` of {param!r} must be finite")
+    vals = np.sort(vals)
+    if np.any(np.diff(vals) == 0):
+        raise ValueError(f"`values` of {param!r} must be distinct")
+    if direction not in DIRECTIONS:
+        raise ValueError(f"`direction` must be one of {DIRECTIONS}, got {direction!r}")
+    for name, v, lo in (("transient", transient, 0), ("samples", samples, 1),
+                        ("warmup", warmup, 0)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
+            raise ValueError(f"`{name}` must be an integer >= {lo}, got {v!r}")
+    if params and param in params:
+        raise ValueError(f"`params` must not set the swept parameter {param!r}")
+    if is_map:
+        if section != "stroboscopic":
+            raise ValueError(f"model {model.name!r} is a map: every iterate is recorded; "
+                             "`section` applies to flows only")
+        if options:
+            raise TypeError(f"integrator options {sorted(options)} apply to flows, not to map "
+                            f"{model.name!r}")
+    else:
+        if section != "stroboscopic":
+            names = {e.name for e in model.events} | {s.name for s in model.switches}
+            if section not in names:
+                raise ValueError(f"`section` must be 'stroboscopic' or an event of model "
+                                 f"{model.name!r} ({sorted(names)}), got {section!r}")
+        if period is None and model.forcing_period is None:
+            raise ValueError(f"model {model.name!r} is autonomous: give `period`, the time "
+                             "unit of `transient` and `samples`")
+        unknown = sorted(set(options) - set(DEFAULTS))
+        if unknown:
+            raise TypeError(f"sweep() got unexpected keyword argument(s) {unknown}; "
+                            f"integrator options are {sorted(DEFAULTS)}")
+    if period is not None and not (math.isfinite(float(period)) and float(period) > 0):
+        raise ValueError(f"`period` must be a positive number, got {period!r}")
+    if x0 is None:
+        x0 = (model.spec.get("defaults") or {}).get("x0")
+        if x0 is None:
+            raise ValueError(f"give `x0`: model {model.name!r} has no [defaults] x0")
+    x0v = state_vector(model, x0)
+    base = dict(params or {})
+    p = model.parameter_vector(base)
+    pidx = list(model.parameters).index(param)
+    max_points = samples if max_points is None else int(max_points)
+    if max_points < 1:
+        raise ValueError(f"`max_points` must be positive, got {max_points!r}")
+    if max_period is None:
+        max_period = max(1, min(samples // 4, 64))
+    opts = {**DEFAULTS, **options, "dense": False, "throw": False}
+    opts.pop("variational", None)
+    opts["variational"] = False
+    if not is_map:
+        _check_options(opts)
+    if chunk_size is None:
+        chunk_size = max(1, math.ceil(len(vals) / 16))
+    if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) \
+            or chunk_size < 1:
+        raise ValueError(f"`chunk_size` must be a positive integer, got {chunk_size!r}")
+    out_path = Path(out) if out is not None else None
+    if out_path is not None and out_path.exists():
+        raise FileExistsError(f"output file {str(out_path)!r} exists; nothing was overwritten "
+                              "(choose another name or delete it)")
+
+    settings = dict(param=param, values=[float(v) for v in vals], x0=[float(v) for v in x0v],
+                    transient=int(transient), samples=int(samples), section=section,
+                    direction=direction, params=dict(zip(model.parameters, map(float, p))),
+                    phase=float(phase), period=None if period is None else float(period),
+                    max_points=int(max_points), max_period=int(max_period),
+                    period_tol=float(period_tol), bound=float(bound), lyapunov=bool(lyapunov),
+                    chunk_size=int(chunk_size), warmup=int(warmup),
+                    options={k: v for k, v in opts.items() if k not in ("throw", "dense")}
+                    if not is_map else {})
+    settings = _settings_json(settings)
+
+    dirs = ["up", "down"] if direction == "both" else [direction]
+    tasks = []
+    payload = model_payload(model)
+    nvals = len(vals)
+    for d in dirs:
+        order = np.arange(nvals) if d == "up" else np.arange(nvals)[::-1]
+        for c0 in range(0, nvals, chunk_size):
+            idx = order[c0:c0 + chunk_size]
+            w0 = max(0, c0 - warmup)
+            warm = order[w0:c0]
+            tasks.append({"model": payload, "settings": settings, "p": p.tolist(),
+                          "pidx": pidx, "opts": opts, "direction": d,
+                          "index": idx.tolist(),
+                          "values": [float(vals[i]) for i in np.concatenate([warm, idx])],
+                          "warmup": len(warm)})
+
+    results: dict[int, dict] = {}
+    st = None
+    if store is not None:
+        st = ChunkStore(store, "sweep", model.name, model.hash, settings, len(tasks))
+        for i in st.done():
+            results[i] = _from_chunk_dataset(st.read(i))
+
+    def on_result(i, res):
+        results[i] = res
+        if st is not None:
+            st.write(i, _chunk_dataset(res, i))
+
+    todo = [i for i in range(len(tasks)) if i not in results]
+    run_chunks(sweep_chunk, tasks, todo, on_result, workers=workers, client=client,
+               scheduler=scheduler, progress=progress, desc="sweep", n_done=len(results))
+    ds = _assemble(model, vals, tasks, results, dirs, settings, lyapunov)
+    if out_path is not None:
+        from ..io import save_dataset
+
+        save_dataset(ds, out_path)
+    return ds
+
+
+_CHUNK_VARS = ("section", "phase", "x_final", "lyapunov", "events_per_period", "stick_time",
+               "slide_time", "n_points", "period", "status", "steps")
+_CHUNK_DIMS = {"section": ("value", "sample", "state"), "phase": ("value", "sample"),
+               "x_final": ("value", "state"), "lyapunov": ("value", "state")}
+
+
+def _chunk_dataset(res: dict, i: int) -> xr.Dataset:
+    return xr.Dataset({k: (_CHUNK_DIMS.get(k, ("value",)), res[k]) for k in _CHUNK_VARS},
+                      attrs={"chunk": i})
+
+
+def _from_chunk_dataset(ds: xr.Dataset) -> dict:
+    return {k: ds[k].values for k in _CHUNK_VARS}
+
+
+def _assemble(model, vals, tasks, results, dirs, settings, lyapunov) -> xr.Dataset:
+    n = model.n_states
+    nv = len(vals)
+    maxp = settings["max_points"]
+    nd = len(dirs)
+    arr = {k: np.full((nd, nv) + shp, np.nan) for k, shp in (
+        ("section", (maxp, n)), ("phase", (maxp,)), ("x_final", (n,)), ("lyapunov", (n,)),
+        ("events_per_period", ()), ("stick_time", ()), ("slide_time", ()))}
+    for k in ("n_points", "period", "status", "steps"):
+        arr[k] = np.zeros((nd, nv), dtype=np.int64)
+    chunk_start = np.zeros((nd, nv), dtype=bool)
+    for ti, task in enumerate(tasks):
+        di = dirs.index(task["direction"])
+        idx = np.asarray(task["index"])
+        res = results[ti]
+        for k in arr:
+            arr[k][di, idx] = res[k]
+        chunk_start[di, idx[0]] = True
+    pname = settings["param"]
+    vdim = pname
+    data = {
+        "section": (("direction", vdim, "sample", "state"), arr["section"],
+                    {"long_name": "section points"}),
+        "n_points": (("direction", vdim), arr["n_points"]),
+        "period": (("direction", vdim), arr["period"],
+                   {"long_name": "period estimate (0: none found)"}),
+        "events_per_period": (("direction", vdim), arr["events_per_period"]),
+        "stick_time": (("direction", vdim), arr["stick_time"]),
+        "slide_time": (("direction", vdim), arr["slide_time"]),
+        "status": (("direction", vdim), arr["status"]),
+        "x_final": (("direction", vdim, "state"), arr["x_final"]),
+        "steps": (("direction", vdim), arr["steps"]),
+        "chunk_start": (("direction", vdim), chunk_start),
+    }
+    if settings["section"] != "stroboscopic":
+        data["phase"] = (("direction", vdim, "sample"), arr["phase"])
+    if lyapunov:
+        data["lyapunov"] = (("direction", vdim, "exponent"), arr["lyapunov"])
+    coords = {"direction": list(dirs), vdim: vals, "sample": np.arange(maxp),
+              "state": list(model.states)}
+    if lyapunov:
+        coords["exponent"] = np.arange(n)
+    attrs = {"kind": "sweep", "model": model.name, "model_hash": model.hash,
+             "model_kind": "map" if getattr(model, "is_map", False) else "flow",
+             "pwsdyn_version": __version__, "parameter": pname,
+             "section": settings["section"],
+             "settings": json.dumps(settings, sort_keys=True)}
+    return xr.Dataset(data, coords=coords, attrs=attrs)
