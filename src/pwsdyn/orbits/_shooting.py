@@ -252,7 +252,10 @@ def find_periodic_orbit(model, x0, *, params=None, period: float | None = None,
         forcing period (default ``periods * forcing_period``). Autonomous models: a guess of the
         period (required).
     t0 : float
-        Initial time; for a forced model it fixes the phase of ``x0``.
+        Initial time; for a forced model it fixes the phase of ``x0``. A shooting node at an
+        event makes the one-period map non-smooth, so when an event of the guess (or of an
+        iterate) comes within 2% (1e-4) of a period of ``t0`` the base point is moved to the
+        middle of the longest smooth segment: ``orbit.t0`` is the time used.
     periods : int
         Forced models: the period in forcing periods when ``period`` is not given.
     mode : str, optional

@@ -159,9 +159,10 @@ def poincare_map(model, x0, section: str, *, params=None, t0: float = 0.0, retur
         Initial state (need not lie on the section).
     section : str
         The name of a model event (``impact``/``transition``: its surface, crossed in the
-        event's direction where its guard holds) or of a Filippov switch (crossings and
-        sliding entries), or ``'stroboscopic'`` for the time-``returns * T`` map of a forced
-        model (``T = model.forcing_period_value(params)``).
+        event's direction where its guard holds; an impact that starts a complete chattering
+        sequence is logged as ``chatter`` and does not count) or of a Filippov switch
+        (crossings and sliding entries), or ``'stroboscopic'`` for the time-``returns * T``
+        map of a forced model (``T = model.forcing_period_value(params)``).
     params : dict, optional
     t0 : float
         Initial time.
