@@ -450,6 +450,16 @@ def save_dataset(ds, path) -> Path:
         else:
             raise TypeError(f"`ds` must be an xarray.Dataset or a Trajectory, got "
                             f"{type(ds).__name__}")
+    def write(tmp):
+        with _engine_hint():
+            ds.to_netcdf(tmp, engine=ENGINE)
+
+    return atomic_write(path, write)
+
+
+def atomic_write(path, write) -> Path:
+    """Write a file through ``write(tmp_path)`` and move it into place in one step, so a
+    failed write never leaves a half-written file or destroys the old one."""
     path = Path(path)
     directory = path.parent if str(path.parent) else Path(".")
     if not directory.is_dir():
@@ -460,8 +470,7 @@ def save_dataset(ds, path) -> Path:
     # hidden name in the same directory: os.replace is atomic only within one file system
     tmp = directory / f".{path.name}.{uuid.uuid4().hex}.tmp"
     try:
-        with _engine_hint():
-            ds.to_netcdf(tmp, engine=ENGINE)
+        write(tmp)
         os.replace(tmp, path)
     except BaseException:
         try:

@@ -9,8 +9,6 @@ This module only reads result objects; the numerical code never imports it.
 
 from __future__ import annotations
 
-import os
-import uuid
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -518,23 +516,10 @@ def _draw_contours(ax, contours, phase_ij, handles):
 
 
 def _save_figure(fig: Figure, path) -> Path:
-    path = Path(path)
-    fmt = path.suffix[1:].lower() or "png"
-    directory = path.parent if str(path.parent) else Path(".")
-    if not directory.is_dir():
-        raise FileNotFoundError(f"cannot write {str(path)!r}: directory {str(directory)!r} "
-                                f"does not exist")
-    tmp = directory / f".{path.name}.{uuid.uuid4().hex}.tmp"
-    try:
-        fig.savefig(tmp, dpi=120, format=fmt)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            tmp.unlink()
-        except FileNotFoundError:
-            pass
-        raise
-    return path
+    from .io import atomic_write
+
+    fmt = Path(path).suffix[1:].lower() or "png"
+    return atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=120, format=fmt))
 
 
 # ======================================================================================

@@ -144,6 +144,23 @@ def _grow1(a, need):
 
 
 @njit(cache=True)
+def _log_event(log_t, log_t2, log_info, log_xb, log_xa, n_ev, t, t_after, rec, xb, xa):
+    """Append one record to the event log, growing its arrays; returns the arrays."""
+    log_t = _grow1(log_t, n_ev + 1)
+    log_t2 = _grow1(log_t2, n_ev + 1)
+    log_info = _grow2(log_info, n_ev + 1)
+    log_xb = _grow2(log_xb, n_ev + 1)
+    log_xa = _grow2(log_xa, n_ev + 1)
+    log_t[n_ev] = t
+    log_t2[n_ev] = t_after
+    for c in range(rec.shape[0]):
+        log_info[n_ev, c] = rec[c]
+    log_xb[n_ev, :] = xb
+    log_xa[n_ev, :] = xa
+    return log_t, log_t2, log_info, log_xb, log_xa
+
+
+@njit(cache=True)
 def _dot(a, b, n):
     s = 0.0
     for i in range(n):
@@ -460,65 +477,38 @@ def _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_la
 
 
 @njit(cache=True)
-def _error_norm_var(K, E, method, s, y, ynew, h, n, nY, rtol, atol):
-    """Scaled error of the variational components ``y[n:nY]`` (same norm as the state's).
+def _error_norm(K, E, method, s, y, ynew, h, i0, i1, rtol, atol):
+    """Scaled RMS error of the components ``y[i0:i1]``.
 
-    Steps are accepted only when both the state and ``Phi`` meet the tolerances: on a
-    sliding surface, for example, the state moves trivially while ``Phi`` contracts at the
-    stabilising rate, and a step chosen for the state alone misses that."""
-    m_var = nY - n
+    The kernel takes the state (``0:n``) and, with variational equations, ``Phi`` (``n:nY``)
+    separately and accepts a step only when both meet the tolerances: on a sliding surface,
+    for example, the state moves trivially while ``Phi`` contracts at the stabilising rate,
+    and a step chosen for the state alone misses that."""
+    m = i1 - i0
     if method == 0:
         acc = 0.0
-        for i in range(n, nY):
+        for i in range(i0, i1):
             e = 0.0
-            for m in range(s + 1):
-                e += E[0, m] * K[m, i]
+            for j in range(s + 1):
+                e += E[0, j] * K[j, i]
             sc = atol + rtol * max(abs(y[i]), abs(ynew[i]))
             acc += (h * e / sc) ** 2
-        return np.sqrt(acc / m_var)
-    e5 = 0.0
-    e3 = 0.0
-    for i in range(n, nY):
-        a5 = 0.0
-        a3 = 0.0
-        for m in range(s + 1):
-            a5 += E[0, m] * K[m, i]
-            a3 += E[1, m] * K[m, i]
-        sc = atol + rtol * max(abs(y[i]), abs(ynew[i]))
-        e5 += (a5 / sc) ** 2
-        e3 += (a3 / sc) ** 2
-    if e5 == 0.0 and e3 == 0.0:
-        return 0.0
-    return abs(h) * e5 / np.sqrt((e5 + 0.01 * e3) * m_var)
-
-
-@njit(cache=True)
-def _error_norm(K, E, method, s, y, ynew, h, n, rtol, atol):
-    """Scaled RMS error over the state components (not the variational ones)."""
-    if method == 0:
-        acc = 0.0
-        for i in range(n):
-            e = 0.0
-            for m in range(s + 1):
-                e += E[0, m] * K[m, i]
-            sc = atol + rtol * max(abs(y[i]), abs(ynew[i]))
-            acc += (h * e / sc) ** 2
-        return np.sqrt(acc / n)
+        return np.sqrt(acc / m)
     # DOP853 (Hairer et al. II.10): combined 5th and 3rd order estimates
     e5 = 0.0
     e3 = 0.0
-    for i in range(n):
+    for i in range(i0, i1):
         a5 = 0.0
         a3 = 0.0
-        for m in range(s + 1):
-            a5 += E[0, m] * K[m, i]
-            a3 += E[1, m] * K[m, i]
+        for j in range(s + 1):
+            a5 += E[0, j] * K[j, i]
+            a3 += E[1, j] * K[j, i]
         sc = atol + rtol * max(abs(y[i]), abs(ynew[i]))
         e5 += (a5 / sc) ** 2
         e3 += (a3 / sc) ** 2
     if e5 == 0.0 and e3 == 0.0:
         return 0.0
-    return abs(h) * e5 / np.sqrt((e5 + 0.01 * e3) * n)
+    return abs(h) * e5 / np.sqrt((e5 + 0.01 * e3) * m)
 
 
 @njit(cache=True)
@@ -914,6 +904,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     ev_info = np.empty((ecap, 9), dtype=np.int64)
     ev_xb = np.empty((ecap, nY))
     ev_xa = np.empty((ecap, nY))
+    rec = np.zeros(9, dtype=np.int64)   # one event record's integer columns
     stats = np.zeros(6, dtype=np.int64)  # steps, rejected, nfev, events, chatter, landing steps
     n_nodes = 0
     n_ev = 0
@@ -1109,21 +1100,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             ynew[i] = ytmp[i]
             if not (np.isfinite(K[s_fsal, i]) and np.isfinite(ynew[i])):
                 finite = False
-        if not finite:
-            err = np.inf
-        elif method == 0:
-            err = 0.0
-            for i in range(n):
-                e = 0.0
-                for m in range(s_fsal + 1):
-                    e += E[0, m] * K[m, i]
-                sc = atol + rtol * max(abs(y[i]), abs(ynew[i]))
-                err += (h * e / sc) ** 2
-            err = np.sqrt(err / n)
-        else:
-            err = _error_norm(K, E, method, s_fsal, y, ynew, h, n, rtol, atol)
+        err = _error_norm(K, E, method, s_fsal, y, ynew, h, 0, n, rtol, atol) if finite else np.inf
         if nvar and finite:
-            err = max(err, _error_norm_var(K, E, method, s_fsal, y, ynew, h, n, nY, rtol, atol))
+            err = max(err, _error_norm(K, E, method, s_fsal, y, ynew, h, n, nY, rtol, atol))
         if not (err <= 1.0):
             stats[1] += 1
             if not finite:
@@ -1684,26 +1663,19 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                         for m in range(n):
                             acc += S[i, m] * Phi[m, c]
                         y[n + i * n + c] = acc
-            ev_t = _grow1(ev_t, n_ev + 1)
-            ev_t2 = _grow1(ev_t2, n_ev + 1)
-            ev_info = _grow2(ev_info, n_ev + 1)
-            ev_xb = _grow2(ev_xb, n_ev + 1)
-            ev_xa = _grow2(ev_xa, n_ev + 1)
-            ev_t[n_ev] = t
-            ev_t2[n_ev] = t_after
-            ev_info[n_ev, 0] = log_kind
-            ev_info[n_ev, 1] = log_ref
-            ev_info[n_ev, 2] = old_kind
-            ev_info[n_ev, 3] = old_idx
-            ev_info[n_ev, 4] = old_mode
+            rec[0] = log_kind
+            rec[1] = log_ref
+            rec[2] = old_kind
+            rec[3] = old_idx
+            rec[4] = old_mode
             # the chatter record is the jump x_in -> Q(x_in); the change of discrete state
             # to sticking is the `stick` record that follows it
-            ev_info[n_ev, 5] = old_kind if log_kind == K_CHATTER else dkind
-            ev_info[n_ev, 6] = old_idx if log_kind == K_CHATTER else didx
-            ev_info[n_ev, 7] = old_mode if log_kind == K_CHATTER else mode
-            ev_info[n_ev, 8] = n_nodes
-            ev_xb[n_ev, :] = xs
-            ev_xa[n_ev, :] = y
+            rec[5] = old_kind if log_kind == K_CHATTER else dkind
+            rec[6] = old_idx if log_kind == K_CHATTER else didx
+            rec[7] = old_mode if log_kind == K_CHATTER else mode
+            rec[8] = n_nodes
+            ev_t, ev_t2, ev_info, ev_xb, ev_xa = _log_event(ev_t, ev_t2, ev_info, ev_xb, ev_xa,
+                                                            n_ev, t, t_after, rec, xs, y)
             n_ev += 1
             stats[3] += 1
             if nvar and seg_var:
@@ -1722,24 +1694,14 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             n_nodes += 1
             if log_kind == K_CHATTER:
                 # the accumulation is followed by sticking: log it as its own event
-                ev_t = _grow1(ev_t, n_ev + 1)
-                ev_t2 = _grow1(ev_t2, n_ev + 1)
-                ev_info = _grow2(ev_info, n_ev + 1)
-                ev_xb = _grow2(ev_xb, n_ev + 1)
-                ev_xa = _grow2(ev_xa, n_ev + 1)
-                ev_t[n_ev] = t_after
-                ev_t2[n_ev] = t_after
-                ev_info[n_ev, 0] = K_STICK
-                ev_info[n_ev, 1] = log_ref
-                ev_info[n_ev, 2] = old_kind
-                ev_info[n_ev, 3] = old_idx
-                ev_info[n_ev, 4] = old_mode
-                ev_info[n_ev, 5] = dkind
-                ev_info[n_ev, 6] = didx
-                ev_info[n_ev, 7] = mode
-                ev_info[n_ev, 8] = n_nodes - 1
-                ev_xb[n_ev, :] = y
-                ev_xa[n_ev, :] = y
+                rec[0] = K_STICK
+                rec[5] = dkind
+                rec[6] = didx
+                rec[7] = mode
+                rec[8] = n_nodes - 1
+                ev_t, ev_t2, ev_info, ev_xb, ev_xa = _log_event(ev_t, ev_t2, ev_info, ev_xb,
+                                                                ev_xa, n_ev, t_after, t_after,
+                                                                rec, y, y)
                 n_ev += 1
             t = t_after
         if stop_mask != 0:
