@@ -452,6 +452,25 @@ def test_chunk_borders_warmup_and_one_chunk():
     assert one.chunk_start.values.sum() == 1 and many.chunk_start.values.sum() == 5
 
 
+def test_coexisting_attractors_make_chunk_borders_visible():
+    """The ball at 0.98 <= Gamma <= 1.05 has a period-1 orbit (continued from Gamma = 0.9)
+    and a period-3 one (reached from the drop at 1.5 m). One chunk follows period 1 all the
+    way; with chunks of 4 values each chunk restarts from x0 after its warm-up and may land
+    on period 3 -- the documented way chunk borders show where attractors coexist."""
+    gam = np.linspace(0.9, 1.05, 16)
+    kw = dict(params={"omega": OMEGA, "e": E}, transient=300, samples=32, workers=1,
+              progress=False)
+    one = pwsdyn.sweep("bouncing-ball", "A", ball_A(gam), [1.5, 0.0], chunk_size=16, **kw)
+    assert np.all(one.period.values == 1)
+    many = pwsdyn.sweep("bouncing-ball", "A", ball_A(gam), [1.5, 0.0], chunk_size=4, **kw)
+    per = many.period.values[0]
+    starts = np.flatnonzero(many.chunk_start.values[0])
+    assert np.any(per == 3)
+    # the attractor changes only at chunk starts (a chunk keeps the attractor it settles on)
+    changes = np.flatnonzero(np.diff(per)) + 1
+    assert set(changes) <= set(starts)
+
+
 # ======================================================================================
 # bad input
 # ======================================================================================
@@ -579,12 +598,12 @@ def test_readme_sweep_command(tmp_path, monkeypatch):
     default transient and samples, local cluster with one worker per core)."""
     monkeypatch.chdir(tmp_path)
     res = _cli(["sweep", "impact-oscillator", "--param", "omega", "--from", "2.4", "--to",
-                "3.4", "--num", "600", "--no-progress", "--out", "diagram.nc",
+                "3.4", "--num", "1000", "--no-progress", "--out", "diagram.nc",
                 "--plot", "diagram.png"])
     assert res.exit_code == 0, res.output
     _png(tmp_path / "diagram.png")
     with xr.open_dataset(tmp_path / "diagram.nc", engine="h5netcdf") as ds:
-        assert ds.sizes["omega"] == 600 and list(ds.direction.values) == ["up", "down"]
+        assert ds.sizes["omega"] == 1000 and list(ds.direction.values) == ["up", "down"]
         assert int((ds.status != 0).sum()) == 0
         # omega = 2.5 lies on the stable period-1 branch (zoo file): period 1, one impact
         d = ds.sel(omega=2.5, method="nearest")
