@@ -80,7 +80,10 @@ def simulate(model, x0, t_span, params: Mapping[str, float] | None = None, **opt
     rtol, atol : float
         Local error tolerances (defaults 1e-10, 1e-12).
     first_step, max_step : float
-        Initial step (default: estimated) and largest step.
+        Initial step (default: estimated) and largest step. For a forced model (one with a
+        ``forcing_period`` T) the default largest step is T/4: where the vector field is
+        polynomial (a ball in flight) the error control alone would let a step span many
+        periods of a moving surface.
     max_steps, max_events : int
         Budgets; exhausting one ends the run with a status naming time, state and mode.
     chatter : bool
@@ -186,10 +189,29 @@ def _check_options(opts):
         raise ValueError(f"`sliding_gain` must be a non-negative number, got {gain!r}")
 
 
+def _max_step(model, p, max_step) -> float:
+    """The largest step: the user's, else a quarter forcing period for forced models."""
+    if math.isfinite(max_step) or model.forcing_period is None:
+        return min(max_step, 1e300)
+    period = model.forcing_period_function(*p)
+    return period / 4.0 if math.isfinite(period) and period > 0 else 1e300
+
+
+_TABLES: dict = {}
+
+
 def kernel_tables(cm: CompiledModel, sliding: str = "convex"):
     """The kernel's event table (surface, direction, kind, target, terminal, has_reset,
     surface moves in time), event activity per mode and switch table (surface, above, below,
-    kind, sliding method, surface moves in time)."""
+    kind, sliding method, surface moves in time). Built once per model and sliding method:
+    loops (shooting, sweeps) call the kernel many times."""
+    key = (cm.model.hash, cm.source_path, sliding)
+    if key not in _TABLES:
+        _TABLES[key] = _build_kernel_tables(cm, sliding)
+    return _TABLES[key]
+
+
+def _build_kernel_tables(cm: CompiledModel, sliding: str):
     model = cm.model
     ne = len(model.events)
     tdep = cm.surface_time_dependent
@@ -237,7 +259,7 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
     iopt[IO_DKIND0] = 0 if dkind0 is None else dkind0
     iopt[IO_DIDX0] = -1 if didx0 is None else didx0
     fopt = np.array([opts["rtol"], opts["atol"], opts["first_step"] or 0.0,
-                     min(opts["max_step"], 1e300), opts["chatter_ratio"],
+                     _max_step(model, p, opts["max_step"]), opts["chatter_ratio"],
                      -1.0 if opts["chatter_velocity"] is None else opts["chatter_velocity"],
                      opts["sliding_gain"]], dtype=float)
     pv = p if p.size else np.zeros(1)

@@ -203,6 +203,14 @@ class Model:
                              f"number, got {val!r} for these parameters")
         return val
 
+    @functools.cached_property
+    def forcing_period_function(self):
+        """The forcing period as a fast function of the parameter values (in order); NaN for
+        an autonomous model. Lambdified once from the trusted symbolic expression."""
+        if self.forcing_period is None:
+            return lambda *p: math.nan
+        return sp.lambdify(self.parameter_symbols, self.forcing_period, modules="math")
+
     # --- identity ------------------------------------------------------------------------
     @functools.cached_property
     def hash(self) -> str:
