@@ -608,3 +608,16 @@ def test_readme_sweep_command(tmp_path, monkeypatch):
         # omega = 2.5 lies on the stable period-1 branch (zoo file): period 1, one impact
         d = ds.sel(omega=2.5, method="nearest")
         assert bool((d.period == 1).all()) and bool((d.events_per_period == 1).all())
+
+
+def test_lyapunov_of_a_ball_stuck_on_its_table_is_superstable():
+    # With table acceleration A w^2 < g the ball, once stuck, never releases: any perturbation
+    # (a small hop) ends by sticking again in finite time, so both exponents are -inf. A
+    # restart of each segment in free flight re-registered the contact with a chattering
+    # saltation every segment and reported a spurious positive exponent.
+    w = 2 * np.pi
+    lyap = pwsdyn.lyapunov_spectrum("bouncing-ball", {"y": 0.5, "v": 0.0},
+                                    params={"A": 0.2, "omega": w}, duration=50, transient=20)
+    assert 0.2 * w * w < 9.81
+    assert np.all(np.isneginf(lyap.exponents))
+    assert lyap.events.get("chatter", 0) <= 1   # not one per segment

@@ -65,6 +65,25 @@ class LyapunovSpectrum:
         return float(np.sum(self.exponents))
 
 
+def _sticking_projector(ctx: ModelContext, t: float, x, p, kind: int, event: int, mode: int):
+    """Projector onto the tangent space of the sticking manifold {h = 0, hdot = 0} of impact
+    event ``event``, along span(h_x, hdot_x) -- the derivative of the projection the kernel
+    applies at the end of a chattering sequence."""
+    from ..model.codegen import W_HDX, W_HX
+
+    n = ctx.model.n_states
+    k = ctx.model.events[event].surface
+    nm = len(ctx.model.modes)
+    pv = p if len(p) else np.zeros(1)
+    buf = np.zeros(max(n, 2))
+    ctx.cm.evaluate(W_HX, k, float(t), np.asarray(x, float), pv, buf)
+    a = buf[:n].copy()
+    ctx.cm.evaluate(W_HDX, k * nm + mode, float(t), np.asarray(x, float), pv, buf)
+    b = buf[:n].copy()
+    A = np.vstack([a, b])
+    return np.eye(n) - A.T @ np.linalg.solve(A @ A.T, A)
+
+
 def flow_segments(ctx: ModelContext, x, t0: float, seg: float, n_seg: int, p, opts,
                   bound: float, keep_events: bool = False):
     """Integrate ``n_seg`` segments of length ``seg`` with the variational equations and QR.
@@ -82,21 +101,34 @@ def flow_segments(ctx: ModelContext, x, t0: float, seg: float, n_seg: int, p, op
     status = 0
     done = 0
     x = np.array(x, dtype=float)
+    discrete = None   # the discrete state the previous segment ended in
     for k in range(n_seg):
         ta = t0 + k * seg
-        x = readmit(ctx, ta, x, p)
+        P0 = None
+        if discrete is not None and discrete[0] == 1:
+            # still sticking: continue in the sticking state (a restart in free flight would
+            # register the contact again with a chattering saltation each segment), and
+            # start Phi on the tangent space of the sticking manifold {h = 0, hdot = 0}:
+            # perturbations off it return to it in finite time (superstable directions)
+            P0 = _sticking_projector(ctx, ta, x, p, *discrete)
+            traj = _simulate_compiled(ctx.cm, x, ta, ta + seg, p, vopts, mode0=discrete[2],
+                                      dkind0=1, didx0=discrete[1])
+        else:
+            x = readmit(ctx, ta, x, p)
+            traj = _simulate_compiled(ctx.cm, x, ta, ta + seg, p, vopts)
         starts[k] = x
-        traj = _simulate_compiled(ctx.cm, x, ta, ta + seg, p, vopts)
         status = failed_status(traj)
         if status:
             break
         if keep_events:
             events.extend(traj.events)
         x = traj.x_final.copy()
+        discrete = traj.final_discrete_state
         if not check_bound(x, bound):
             status = -1
             break
-        Qn, R = np.linalg.qr(traj.jacobian @ Q)
+        J = traj.jacobian if P0 is None else traj.jacobian @ P0
+        Qn, R = np.linalg.qr(J @ Q)
         d = np.abs(np.diag(R))
         if not np.all(np.isfinite(d)):
             status = -1

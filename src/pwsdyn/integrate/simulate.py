@@ -302,7 +302,9 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
         t=nodes_t, x=nodes_y[:, :n].copy(), state=states, events=events, status=status,
         message=status.message, stats=stat, model=model, params=params,
         options={k: v for k, v in opts.items() if k != "throw"}, t0=t0, t_end=t_end,
-        jacobian=jac, transfer_matrices=transfer, _dense=dense if opts["dense"] else None,
+        jacobian=jac, transfer_matrices=transfer,
+        final_discrete_state=tuple(int(v) for v in dstate),
+        _dense=dense if opts["dense"] else None,
         _ikind=ikind, _y=nodes_y,
         provenance={"model": model.name, "model_hash": model.hash, "pwsdyn_version": __version__},
     )

@@ -86,6 +86,10 @@ class Trajectory:
         segment, ``S_k`` the full saltation matrix of the ``k``-th event (``Phi+ = S Phi-``), so
         ``jacobian`` is their ordered product ``Phi_m S_m ... S_1 Phi_0`` (COCO's hspo
         composition). See :mod:`pwsdyn.stability` for projected forms. Not saved to files.
+    final_discrete_state : tuple of int or None
+        The kernel's discrete state at the end, ``(kind, index, mode)`` (kind 0 a mode, 1
+        sticking on event ``index``, 2 sliding on switch ``index``): a run continued from
+        ``x_final`` starts in it (the ``dkind0``/``didx0``/``mode0`` of the internal runner).
     """
 
     t: np.ndarray
@@ -102,6 +106,7 @@ class Trajectory:
     t_end: float
     jacobian: np.ndarray | None = None
     transfer_matrices: list | None = field(default=None, repr=False)
+    final_discrete_state: tuple | None = field(default=None, repr=False)
     # dense output: per interval between consecutive nodes
     _dense: np.ndarray | None = field(default=None, repr=False)
     _ikind: np.ndarray | None = field(default=None, repr=False)
