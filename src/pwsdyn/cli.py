@@ -549,8 +549,8 @@ def basins_cmd(model, xname, x_from, x_to, x_num, yname, y_from, y_to, y_num, se
               help="Forced models: the period in forcing periods.")
 @click.option("--transient", type=float, default=None,
               help="Simulate this long from x0 first and take the guess from the end of the "
-                   "run (default: none for forced models and autonomous ones given --period; "
-                   "else the model's defaults.t_end).")
+                   "run (default: the model's defaults.t_end when no --x0 is given or the "
+                   "model is autonomous without --period; else none: --x0 is the guess).")
 @click.option("--mode", default=None, metavar="STATE",
               help="Discrete state at t0: a mode, stick:<event> or slide:<switch>.")
 @click.option("--nodes", default="auto", show_default=True,
@@ -612,8 +612,9 @@ def orbit_cmd(model, params, x0, t0, period, periods, transient, mode, nodes, to
         if val is not None:
             options[key] = val
     autonomous = mdl.forcing_period is None
-    if transient is None and autonomous and period is None:
-        transient = t_end
+    # without a guess from the user, settle on the attractor first (the model's typical run)
+    if transient is None and period is None and (autonomous or not cli_x0):
+        transient = t_end - t0
     try:
         if transient:
             sim_opts = {k: options[k] for k in ("rtol", "atol", "method") if k in options}
