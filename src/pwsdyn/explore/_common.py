@@ -8,33 +8,18 @@ the generated module in the on-disk cache by the model hash and loads its machin
 
 Stroboscopic section of a flow
 ------------------------------
-The state at the times ``t_k = (k + phase) T`` is recorded by the compiled kernel itself: the
-model is extended (a copy, with its own hash) by one ``transition`` event named ``_section``
-on the surface ``sin(2 pi (t / T - phase + 1e-12)) = 0`` crossed upwards, with the identity as
-reset (see ``SECTION_LEAD`` for the 1e-12).
-``T`` and ``phase`` are two extra parameters, so one compiled copy serves every period.
-The kernel locates such an event to a few ulps and logs the state there, so a whole window
-of hundreds of periods is one kernel call (the slides' "ODEs vs. Hybrid": a Poincaré section
-is an event like any other).
+The state at the times ``t_k = (k + phase) T`` is recorded by the compiled kernel itself, on
+its dense output, as it steps (the internal runner's ``sample=(t_first, T)``): a whole
+transient and window of hundreds of periods is one kernel call, with no event and no landing
+step for the section.
 """
 
 from __future__ import annotations
 
-import copy
 
 import numpy as np
 
 from ..model import compile_model, load_model
-
-SECTION_EVENT = "_section"
-SECTION_PERIOD = "_section_period"
-SECTION_PHASE = "_section_phase"
-#: The section surface crosses zero this fraction of a period before ``(k + phase) T``, so
-#: that it is positive (not zero) at the start of a run at ``t = phase T``: an event at the
-#: very start would be handled before a contact at the start (a ball at rest on the table)
-#: and hide it from the kernel. The section states are taken 1e-12 T early, a time shift far
-#: below the integration error (the state moves by about ``|f| 1e-12 T``).
-SECTION_LEAD = 1e-12
 
 #: Event kinds counted in "events per period" (state changes -- stick, release, slide start
 #: and end -- are reported as times instead).
@@ -64,8 +49,6 @@ class ModelContext:
     model : Model or MapModel
     is_map : bool
     cm : CompiledModel or CompiledMap
-    cms : CompiledModel or None
-        The flow with the stroboscopic ``_section`` event (flows only).
     """
 
     def __init__(self, model):
@@ -75,10 +58,8 @@ class ModelContext:
             from ..model.maps import compile_map
 
             self.cm = compile_map(model)
-            self.cms = None
             return
         self.cm = compile_model(model)
-        self.cms = compile_model(section_model(model))
 
     @classmethod
     def get(cls, payload_or_model) -> "ModelContext":
@@ -99,29 +80,6 @@ class ModelContext:
         if model.hash not in _CONTEXTS:
             _CONTEXTS[model.hash] = cls(model)
         return _CONTEXTS[model.hash]
-
-
-def section_model(model):
-    """A copy of the flow ``model`` with the stroboscopic ``_section`` event (see module
-    docstring); the parameter vector of the copy is the model's plus ``(T, phase)``."""
-    spec = copy.deepcopy(dict(model.spec))
-    params = dict(spec.get("parameters", {}) or {})
-    for extra in (SECTION_PERIOD, SECTION_PHASE):
-        if extra in params or extra in model.states:
-            raise ValueError(f"model {model.name!r} uses the reserved name {extra!r}")
-    params[SECTION_PERIOD] = 1.0
-    params[SECTION_PHASE] = 0.0
-    spec["parameters"] = params
-    events = list(spec.get("events", []) or [])
-    events.append({"name": SECTION_EVENT, "kind": "transition", "direction": 1,
-                   "surface": f"sin(2*pi*(t/{SECTION_PERIOD} - {SECTION_PHASE} + "
-                              f"{SECTION_LEAD!r}))"})
-    spec["events"] = events
-    spec.pop("defaults", None)
-    spec["name"] = f"{model.name}+section"
-    from ..model.spec import model_from_dict
-
-    return model_from_dict(spec, origin=model.origin)
 
 
 def readmit(ctx: ModelContext, t: float, x, p) -> np.ndarray:
@@ -218,4 +176,4 @@ def check_bound(x: np.ndarray, bound: float) -> bool:
     return bool(np.all(np.isfinite(x)) and np.all(np.abs(x) <= bound))
 
 
-__all__ = ["ModelContext", "period_estimate", "readmit", "section_model", "state_times"]
+__all__ = ["ModelContext", "period_estimate", "readmit", "state_times"]

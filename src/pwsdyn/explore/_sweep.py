@@ -40,7 +40,7 @@ import xarray as xr
 
 from .. import __version__
 from ..integrate.simulate import DEFAULTS, _check_options, _simulate_compiled, state_vector
-from ._common import (COUNTED_KINDS, DIVERGED, SECTION_EVENT, SECTION_MISSED, ModelContext,
+from ._common import (COUNTED_KINDS, DIVERGED, SECTION_MISSED, ModelContext,
                       check_bound, failed_status, model_payload, period_estimate, readmit,
                       state_times)
 from ._executor import run_chunks
@@ -117,52 +117,20 @@ def run_window(ctx: ModelContext, x, p, T: float, phase: float, n_tr: int, n_s: 
         nsteps = 0
         xx = np.asarray(x, float)
         if strobe:
-            # The transient runs with the model itself, the window with its section copy
-            # (the section event costs about a third more per period: landing steps and
-            # Newton polishing at every section); the window restarts at t_w.
-            # If the transient ends sticking or sliding, a restart at t_w would start in a
-            # regular mode and re-register the contact (an impact of vanishing speed, a
-            # chattering sequence) inside the window: then the whole run is done again in
-            # one piece with the section copy instead.
-            status = 0
-            t_run = t_w
-            if n_tr:
-                tr = _simulate_compiled(ctx.cm, xx, t_start, t_w, p, opts)
-                status = failed_status(tr)
-                nsteps += tr.stats.get("steps", 0)
-                if not status and ":" in str(tr.state[-1]):
-                    t_run = t_start
-                else:
-                    events.extend(tr.events)
-                    xx = readmit(ctx, t_w, tr.x_final, p)
-            x_end = xx
-            if not status:
-                if t_run == t_w:
-                    pts[0] = xx
-                # Steps of at most T/4 hold at most one zero of the section surface, so its
-                # sign test cannot step over a crossing (the flow's error estimate alone does
-                # not limit the step: a ball's parabola is integrated exactly by any
-                # Runge-Kutta pair, with steps of many periods). The run goes a quarter
-                # period past the window, so that the section at its end (the state handed
-                # on) is an interior event, not a time a few ulps before the end.
-                pv = np.concatenate([p, [T, phase]])
-                sopts = {**opts, "max_step": min(opts["max_step"], 0.25 * T)}
-                traj = _simulate_compiled(ctx.cms, xx, t_run, t_end + 0.25 * T, pv, sopts)
-                status = failed_status(traj)
-                nsteps += traj.stats.get("steps", 0)
-                last = None
-                for e in traj.events:
-                    if e.name == SECTION_EVENT:
-                        j = int(round((e.t - t_w) / T))
-                        if 0 <= j < min(max_points, n_s) and np.isnan(pts[j, 0]):
-                            pts[j] = e.x_before
-                        elif j == n_s and last is None:
-                            last = e.x_before.copy()
-                    elif e.t < t_end:
-                        events.append(e)
-                if last is None and not status:
-                    status = SECTION_MISSED
-                x_end = last if last is not None else traj.x_final.copy()
+            # Transient and window in one kernel call that records the state at
+            # t_w + k T (k = 0 .. n_s) on the dense output (no event, no landing step, so the
+            # section costs a few percent; the state sticking or sliding at t_w just goes on).
+            traj = _simulate_compiled(ctx.cm, xx, t_start, t_end, p, opts, sample=(t_w, T))
+            status = failed_status(traj)
+            nsteps = traj.stats.get("steps", 0)
+            events = list(traj.events)
+            ts, xs = traj.samples
+            j = np.rint((ts - t_w) / T).astype(int)
+            keep = (j >= 0) & (j < min(max_points, n_s))
+            pts[j[keep]] = xs[keep]
+            x_end = traj.x_final.copy()
+            if not status and not (len(j) and j[-1] == n_s):
+                status = SECTION_MISSED
         else:
             traj = _simulate_compiled(ctx.cm, xx, t_start, t_end, p, opts)
             status = failed_status(traj)

@@ -99,7 +99,9 @@ IO_N = 13
 VAR_NONE, VAR_GLOBAL, VAR_SEGMENTS = 0, 1, 2
 # float options
 FO_RTOL, FO_ATOL, FO_H0, FO_HMAX, FO_CHAT_REL, FO_CHAT_ABS, FO_SLIDE_C = range(7)
-FO_N = 7
+# sampling at t = FO_SAMPLE_T0 + k FO_SAMPLE_DT (k >= 0) on the dense output; DT <= 0: off
+FO_SAMPLE_T0, FO_SAMPLE_DT = 7, 8
+FO_N = 9
 # switch table columns: surface, above mode, below mode, and optionally the kind (SW_FILIPPOV:
 # cross or slide; SW_CONTINUOUS: only a derivative jumps, always cross) and the sliding method
 # (SLIDE_CONVEX: Filippov's convex combination; SLIDE_UTKIN: Utkin's equivalent control)
@@ -543,6 +545,23 @@ def _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_f
 
 
 @njit(cache=True)
+def _take_samples(t, h, y, Q, nY, n, deg, s0, sdt, k, t_end, samp, n_samp, xs):
+    """Record the states at the sample times ``s0 + k sdt`` in ``(t, t + h]`` (and not past
+    ``t_end``) from the step's dense output. Returns ``(samp, n_samp, k)``."""
+    ts = s0 + k * sdt
+    while ts <= t + h and ts <= t_end:
+        _dense_eval(y, Q, (ts - t) / h if h > 0.0 else 1.0, nY, deg, xs)
+        samp = _grow2(samp, n_samp + 1)
+        samp[n_samp, 0] = ts
+        for i in range(n):
+            samp[n_samp, 1 + i] = xs[i]
+        n_samp += 1
+        k += 1
+        ts = s0 + k * sdt
+    return samp, n_samp, k
+
+
+@njit(cache=True)
 def _dense_eval(y0, Q, theta, nY, deg, out):
     for i in range(nY):
         acc = 0.0
@@ -816,7 +835,7 @@ def _kernel_signature():
     i1 = nt.int64[::1]
     i2 = nt.int64[:, ::1]
     ret = nt.Tuple((nt.int64, nt.float64, f1, i1, f1, f2, i2, nt.float64[:, :, ::1], i1, f1, f1,
-                    i2, f2, f2, i1))
+                    i2, f2, f2, i1, f2))
     return ret(EVALUATE_TYPE, nt.float64, nt.float64, f1, f1, i2, i2, i2, i1, f1, f2, f1, f2, f2,
                nt.int64)
 
@@ -964,6 +983,23 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     nodes_s[0, 1] = didx
     nodes_s[0, 2] = mode
     n_nodes = 1
+
+    # stroboscopic sampling on the dense output (no event, no landing step)
+    samp = np.empty((16, 1 + n))
+    n_samp = 0
+    s0 = 0.0
+    sdt = 0.0
+    sk = 0
+    if fopt.shape[0] > FO_SAMPLE_DT and fopt[FO_SAMPLE_DT] > 0.0:
+        s0 = fopt[FO_SAMPLE_T0]
+        sdt = fopt[FO_SAMPLE_DT]
+        sk = max(0, int(np.ceil((t - s0) / sdt)))
+        if s0 + sk * sdt == t:
+            samp[0, 0] = t
+            for i in range(n):
+                samp[0, 1 + i] = y[i]
+            n_samp = 1
+            sk += 1
 
     restart = True
     h = fopt[FO_H0]
@@ -1342,6 +1378,14 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 nodes_s[n_nodes, 1] = didx
                 nodes_s[n_nodes, 2] = mode
                 n_nodes += 1
+            if sdt > 0.0 and s0 + sk * sdt <= t_new:
+                if not q_ready:
+                    stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar,
+                                            K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c,
+                                            w1, w2, gx, hdx, jac, xt, ft)
+                    q_ready = True
+                samp, n_samp, sk = _take_samples(t, h, y, Q, nY, n, deg, s0, sdt, sk, t_end,
+                                                 samp, n_samp, xs)
             t = t_new
             for i in range(nY):
                 y[i] = ynew[i]
@@ -1399,6 +1443,10 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                      etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
         _dense_coeffs(Kland, P, h_ev, nY, s_ext, deg, Q)
         t_ev = t + h_ev
+        if sdt > 0.0:
+            # samples up to the event (one at the event time takes the state before it)
+            samp, n_samp, sk = _take_samples(t, h_ev, y, Q, nY, n, deg, s0, sdt, sk, t_end,
+                                             samp, n_samp, xs)
         # store the node just before the event (always, also when not saving all steps)
         nodes_t = _grow1(nodes_t, n_nodes + 3)
         nodes_y = _grow2(nodes_y, n_nodes + 3)
@@ -1703,6 +1751,15 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                                                                 ev_xa, n_ev, t_after, t_after,
                                                                 rec, y, y)
                 n_ev += 1
+                while sdt > 0.0 and s0 + sk * sdt < t_after and s0 + sk * sdt <= t_end:
+                    ts = s0 + sk * sdt
+                    th = (ts - t) / (t_after - t)
+                    samp = _grow2(samp, n_samp + 1)
+                    samp[n_samp, 0] = ts
+                    for i in range(n):
+                        samp[n_samp, 1 + i] = (1.0 - th) * xs[i] + th * y[i]
+                    n_samp += 1
+                    sk += 1
             t = t_after
         if stop_mask != 0:
             # stop at the stop_count-th logged event of the requested kinds and index
@@ -1785,4 +1842,4 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             nodes_t[:n_nodes].copy(), nodes_y[:n_nodes].copy(), nodes_s[:n_nodes].copy(),
             dense[: max(n_nodes - 1, 0)].copy(), ikind[: max(n_nodes - 1, 0)].copy(),
             ev_t[:n_ev].copy(), ev_t2[:n_ev].copy(), ev_info[:n_ev].copy(),
-            ev_xb[:n_ev].copy(), ev_xa[:n_ev].copy(), stats)
+            ev_xb[:n_ev].copy(), ev_xa[:n_ev].copy(), stats, samp[:n_samp].copy())

@@ -235,7 +235,7 @@ def _build_kernel_tables(cm: CompiledModel, sliding: str):
 
 
 def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dkind0=None,
-                       didx0=None, stop=None):
+                       didx0=None, stop=None, sample=None):
     """The kernel run behind :func:`simulate`, without re-validating model, state, params.
 
     ``dkind0``, ``didx0``: initial discrete state (0 mode, 1 sticking on event ``didx0``, 2
@@ -243,6 +243,9 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
     ends the run (status TERMINAL_EVENT) at the ``count``-th logged event whose kind code
     (``EVENT_KINDS`` index) has its bit set in ``kind_mask`` and whose event or switch index is
     ``ref`` (-1: any), so Poincaré maps on event sections run in one kernel call.
+    ``sample = (t_first, dt)`` records the state at ``t_first + k dt`` (``k >= 0``, within the
+    run) from the dense output, without events or landing steps: stroboscopic sections
+    (``traj.samples``).
     """
     _check_options(opts)
     model = cm.model
@@ -261,13 +264,15 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
     fopt = np.array([opts["rtol"], opts["atol"], opts["first_step"] or 0.0,
                      _max_step(model, p, opts["max_step"]), opts["chatter_ratio"],
                      -1.0 if opts["chatter_velocity"] is None else opts["chatter_velocity"],
-                     opts["sliding_gain"]], dtype=float)
+                     opts["sliding_gain"],
+                     sample[0] if sample is not None else 0.0,
+                     sample[1] if sample is not None else 0.0], dtype=float)
     pv = p if p.size else np.zeros(1)
     res = run_kernel(cm.evaluate, float(t0), float(t_end), np.ascontiguousarray(x, dtype=float),
                      np.ascontiguousarray(pv, dtype=float), etab, eact, stab, iopt, fopt,
                      tab.A, tab.C, tab.E, tab.P, tab.n_stages)
     (status, t_fin, y_fin, dstate, nodes_t, nodes_y, nodes_s, dense, ikind, ev_t, ev_t2, ev_info,
-     ev_xb, ev_xa, stats) = res
+     ev_xb, ev_xa, stats, samples) = res
     n = model.n_states
     jac = transfer = None
     if opts["variational"]:
@@ -284,17 +289,27 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
             label[key[i]] = _state_name(model, *nodes_s[i])
     run_names = np.array([label[key[i]] for i in starts], dtype=str)
     states = np.repeat(run_names, np.diff(np.append(starts, len(key))))
+    # event records (one Python object each: names looked up once per distinct code, the
+    # state vectors are rows of one copied array; sweeps log hundreds of events per call)
+    xb_all = ev_xb[:, :n].copy()
+    xa_all = ev_xa[:, :n].copy()
+    names: dict = {}
+
+    def state_name(k, i, m):
+        key = (k, i, m)
+        if key not in names:
+            names[key] = _state_name(model, k, i, m)
+        return names[key]
+
+    switch_kinds = ("crossing", "slide_start", "slide_end")
     events = []
-    for r in range(len(ev_t)):
-        kind, ref, ok, oi, om, nk, ni, nmode = ev_info[r, :8]
+    for r, row in enumerate(ev_info[:, :8].tolist()):
+        kind, ref, ok, oi, om, nk, ni, nmode = row
         kname = EVENT_KINDS[kind]
-        if kname in ("crossing", "slide_start", "slide_end"):
-            name = model.switches[ref].name
-        else:
-            name = model.events[ref].name
-        events.append(EventRecord(float(ev_t[r]), name, kname, ev_xb[r, :n].copy(),
-                                  ev_xa[r, :n].copy(), _state_name(model, ok, oi, om),
-                                  _state_name(model, nk, ni, nmode), float(ev_t2[r])))
+        name = model.switches[ref].name if kname in switch_kinds else model.events[ref].name
+        events.append(EventRecord(float(ev_t[r]), name, kname, xb_all[r], xa_all[r],
+                                  state_name(ok, oi, om), state_name(nk, ni, nmode),
+                                  float(ev_t2[r])))
     stat = dict(zip(("steps", "rejected_steps", "nfev", "events", "chatter", "landing_steps"),
                     (int(s) for s in stats)))
     params = dict(zip(model.parameters, (float(v) for v in p)))
@@ -304,6 +319,7 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
         options={k: v for k, v in opts.items() if k != "throw"}, t0=t0, t_end=t_end,
         jacobian=jac, transfer_matrices=transfer,
         final_discrete_state=tuple(int(v) for v in dstate),
+        samples=(samples[:, 0].copy(), samples[:, 1:].copy()) if sample is not None else None,
         _dense=dense if opts["dense"] else None,
         _ikind=ikind, _y=nodes_y,
         provenance={"model": model.name, "model_hash": model.hash, "pwsdyn_version": __version__},

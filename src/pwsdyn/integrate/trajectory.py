@@ -86,6 +86,9 @@ class Trajectory:
         segment, ``S_k`` the full saltation matrix of the ``k``-th event (``Phi+ = S Phi-``), so
         ``jacobian`` is their ordered product ``Phi_m S_m ... S_1 Phi_0`` (COCO's hspo
         composition). See :mod:`pwsdyn.stability` for projected forms. Not saved to files.
+    samples : (numpy.ndarray, numpy.ndarray) or None
+        Times and states recorded at regular times from the dense output (a stroboscopic
+        section; the internal runner's ``sample=(t_first, dt)``).
     final_discrete_state : tuple of int or None
         The kernel's discrete state at the end, ``(kind, index, mode)`` (kind 0 a mode, 1
         sticking on event ``index``, 2 sliding on switch ``index``): a run continued from
@@ -107,6 +110,7 @@ class Trajectory:
     jacobian: np.ndarray | None = None
     transfer_matrices: list | None = field(default=None, repr=False)
     final_discrete_state: tuple | None = field(default=None, repr=False)
+    samples: tuple | None = field(default=None, repr=False)
     # dense output: per interval between consecutive nodes
     _dense: np.ndarray | None = field(default=None, repr=False)
     _ikind: np.ndarray | None = field(default=None, repr=False)
