@@ -41,6 +41,7 @@ from numba import njit, types
 from ..errors import ModelError
 from .codegen import _Printer, cache_dir
 from .expressions import parse_expression
+from .spec import SymbolicSystem
 
 #: Signature of a generated map function: step(x, p, out, jac, want_jac) -> piece.
 MAP_STEP_SIGNATURE = types.int64(types.float64[::1], types.float64[::1], types.float64[::1],
@@ -69,7 +70,7 @@ class MapPiece:
 
 
 @dataclass(frozen=True, eq=False)
-class MapModel:
+class MapModel(SymbolicSystem):
     """A piecewise-smooth map ``x -> F_i(x)`` (symbolic). Create it with
     :func:`pwsdyn.load_model` from a file or dict with ``kind = "map"``.
 
@@ -97,26 +98,8 @@ class MapModel:
     initial_mode = 0
 
     @property
-    def state_symbols(self) -> tuple:
-        return tuple(sp.Symbol(s, real=True) for s in self.states)
-
-    @property
-    def parameter_symbols(self) -> tuple:
-        return tuple(sp.Symbol(p, real=True) for p in self.parameters)
-
-    @property
-    def n_states(self) -> int:
-        return len(self.states)
-
-    @property
     def mode_names(self) -> tuple:
         return tuple(pc.name for pc in self.pieces)
-
-    def parameter_vector(self, params: Mapping[str, float] | None = None) -> np.ndarray:
-        """Default parameter values overridden by ``params`` (by name), as a float array."""
-        from .spec import Model
-
-        return Model.parameter_vector(self, params)
 
     def forcing_period_value(self, params=None):
         """Maps have no forcing period (``None``); one iteration is their unit of time."""

@@ -111,29 +111,9 @@ class Switch:
     family: tuple | None = None
 
 
-@dataclass(frozen=True, eq=False)
-class Model:
-    """A piecewise-smooth hybrid model (symbolic). Create it with :func:`load_model`."""
-
-    name: str
-    states: tuple
-    parameters: dict
-    modes: tuple
-    surfaces: tuple
-    events: tuple
-    switches: tuple = ()
-    description: str = ""
-    reference: str = ""
-    definitions: dict = field(default_factory=dict)
-    forcing_period: Any = None
-    initial_mode: int = 0
-    origin: str = "<dict>"
-    spec: dict = field(default_factory=dict, repr=False)
-
-    # --- symbols -------------------------------------------------------------------------
-    @property
-    def t(self) -> sp.Symbol:
-        return sp.Symbol(TIME, real=True)
+class SymbolicSystem:
+    """What flows (:class:`Model`) and maps (:class:`~pwsdyn.model.maps.MapModel`) share:
+    symbols of states and parameters, and parameter values by name."""
 
     @property
     def state_symbols(self) -> tuple:
@@ -147,28 +127,6 @@ class Model:
     def n_states(self) -> int:
         return len(self.states)
 
-    @property
-    def mode_names(self) -> tuple:
-        return tuple(m.name for m in self.modes)
-
-    def mode_index(self, name: str) -> int:
-        try:
-            return self.mode_names.index(name)
-        except ValueError:
-            # a mode split at its discontinuous terms (``slip`` -> ``slip[v-V>0]``, ...): its
-            # first variant; the simulator picks the variant on the right side of each surface
-            for i, m in enumerate(self.mode_names):
-                if m.startswith(name + "["):
-                    return i
-            raise ValueError(f"unknown mode {name!r}; modes are {list(self.mode_names)}") from None
-
-    def event_index(self, name: str) -> int:
-        for i, ev in enumerate(self.events):
-            if ev.name == name:
-                return i
-        raise ValueError(f"unknown event {name!r}; events are {[e.name for e in self.events]}")
-
-    # --- parameters ----------------------------------------------------------------------
     def parameter_vector(self, params: Mapping[str, float] | None = None):
         """Default parameter values overridden by ``params`` (by name), as a float array.
 
@@ -192,6 +150,54 @@ class Model:
                              f"finite, got {[values[k] for k in bad]}")
         return p
 
+
+
+@dataclass(frozen=True, eq=False)
+class Model(SymbolicSystem):
+    """A piecewise-smooth hybrid model (symbolic). Create it with :func:`load_model`."""
+
+    name: str
+    states: tuple
+    parameters: dict
+    modes: tuple
+    surfaces: tuple
+    events: tuple
+    switches: tuple = ()
+    description: str = ""
+    reference: str = ""
+    definitions: dict = field(default_factory=dict)
+    forcing_period: Any = None
+    initial_mode: int = 0
+    origin: str = "<dict>"
+    spec: dict = field(default_factory=dict, repr=False)
+
+    # --- symbols -------------------------------------------------------------------------
+    @property
+    def t(self) -> sp.Symbol:
+        return sp.Symbol(TIME, real=True)
+
+    @property
+    def mode_names(self) -> tuple:
+        return tuple(m.name for m in self.modes)
+
+    def mode_index(self, name: str) -> int:
+        try:
+            return self.mode_names.index(name)
+        except ValueError:
+            # a mode split at its discontinuous terms (``slip`` -> ``slip[v-V>0]``, ...): its
+            # first variant; the simulator picks the variant on the right side of each surface
+            for i, m in enumerate(self.mode_names):
+                if m.startswith(name + "["):
+                    return i
+            raise ValueError(f"unknown mode {name!r}; modes are {list(self.mode_names)}") from None
+
+    def event_index(self, name: str) -> int:
+        for i, ev in enumerate(self.events):
+            if ev.name == name:
+                return i
+        raise ValueError(f"unknown event {name!r}; events are {[e.name for e in self.events]}")
+
+    # --- parameters ----------------------------------------------------------------------
     def forcing_period_value(self, params: Mapping[str, float] | None = None) -> float | None:
         """The forcing period for these parameters, or ``None`` for an autonomous model."""
         if self.forcing_period is None:
