@@ -343,6 +343,19 @@ def _find_switch(stab, k, a, b):
 
 
 @njit(cache=True)
+def _surface_offset(ev, p, k, t, y, n, xmax, buf, hdx):
+    """h of surface ``k`` at (t, y) and the round-off band around zero it is judged with
+    (64 ulps of the state and gradient scales)."""
+    ev(W_H, k, t, y, p, buf)
+    hv = buf[0]
+    ev(W_HX, k, t, y, p, hdx)
+    gmax = 1.0
+    for i in range(n):
+        gmax = max(gmax, abs(hdx[i]))
+    return hv, 64.0 * _EPS * xmax * gmax
+
+
+@njit(cache=True)
 def _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx):
     """The discrete state that the switches impose at ``(t, y)`` starting from ``mode``.
 
@@ -365,14 +378,7 @@ def _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx):
             b = stab[s, 2]
             if mode != a and mode != b:
                 continue
-            k = stab[s, 0]
-            ev(W_H, k, t, y, p, buf)
-            hv = buf[0]
-            ev(W_HX, k, t, y, p, hdx)
-            gmax = 1.0
-            for i in range(n):
-                gmax = max(gmax, abs(hdx[i]))
-            tol = 64.0 * _EPS * xmax * gmax
+            hv, tol = _surface_offset(ev, p, stab[s, 0], t, y, n, xmax, buf, hdx)
             new = mode
             if hv > tol:
                 new = a
@@ -390,13 +396,8 @@ def _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx):
         if mode != a and mode != b:
             continue
         k = stab[s, 0]
-        ev(W_H, k, t, y, p, buf)
-        hv = buf[0]
-        ev(W_HX, k, t, y, p, hdx)
-        gmax = 1.0
-        for i in range(n):
-            gmax = max(gmax, abs(hdx[i]))
-        if abs(hv) > 64.0 * _EPS * xmax * gmax:
+        hv, tol = _surface_offset(ev, p, k, t, y, n, xmax, buf, hdx)
+        if abs(hv) > tol:
             continue
         ev(W_HD, k * nm + a, t, y, p, buf)
         sa = buf[0]
