@@ -15,7 +15,7 @@ EVENT_KINDS = ("impact", "transition", "chatter", "stick", "release", "crossing"
 STATE_KINDS = ("mode", "stick", "slide")
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class EventRecord:
     """One event of a trajectory.
 
@@ -37,6 +37,9 @@ class EventRecord:
         ``slide:<switch>``.
     t_after : float
         Time after the event (differs from ``t`` only for ``chatter``).
+
+    Records are plain slotted objects (not frozen: a frozen dataclass costs five times as much
+    to create, and sweeps create millions); treat them as read-only.
     """
 
     t: float
