@@ -444,7 +444,7 @@ def sweep_cmd(model, param, start, stop, num, direction, lyapunov, state, sets, 
     click.echo(f"model       {mdl.name} (hash {mdl.hash})")
     click.echo(f"swept       {param} from {_fmt(values[0])} to {_fmt(values[-1])} "
                f"({num} values, {', '.join(map(str, ds.direction.values))})")
-    click.echo(f"periods     " + ", ".join(
+    click.echo("periods     " + ", ".join(
         f"{k if k else 'none'}: {int(np.sum(per == k))}" for k in np.unique(per)))
     nbad = int(np.sum(ds.status.values != 0))
     if nbad:
@@ -517,7 +517,7 @@ def basins_cmd(model, xname, x_from, x_to, x_num, yname, y_from, y_to, y_num, se
     except _explore_errors() as exc:
         _fail(exc)
     click.echo(f"model       {mdl.name} (hash {mdl.hash})")
-    click.echo(f"grid        " + " x ".join(f"{k}: {len(v)}" for k, v in grid.items()))
+    click.echo("grid        " + " x ".join(f"{k}: {len(v)}" for k, v in grid.items()))
     for b, f in zip(ds.basin.values, ds.fraction.values):
         if f == 0:
             continue

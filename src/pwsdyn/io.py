@@ -214,7 +214,6 @@ def trajectory_to_dataset(traj) -> xr.Dataset:
     x = np.asarray(traj.x, dtype=float).reshape(len(t), n)
     y = np.asarray(traj._y if traj._y is not None else x, dtype=float)
     ny = y.shape[1]
-    nint = max(len(t) - 1, 0)
 
     data_vars = {
         "t": (("node",), t, {"long_name": "time of the node"}),

@@ -31,7 +31,7 @@ import xarray as xr
 
 from .. import __version__
 from ..errors import Status
-from ..integrate.simulate import DEFAULTS, _check_options, state_vector
+from ..integrate.simulate import DEFAULTS, integrator_options, _check_options, state_vector
 from ._common import DIVERGED, ModelContext, model_payload, period_estimate
 from ._executor import run_chunks
 from ._store import ChunkStore
@@ -223,9 +223,7 @@ def basins(model, grid: Mapping[str, object], x0=None, *, params=None, transient
                                  f"{model.name!r} ({sorted(names)}), got {section!r}")
         if period is None and model.forcing_period is None:
             raise ValueError(f"model {model.name!r} is autonomous: give `period`")
-        unknown = sorted(set(options) - set(DEFAULTS))
-        if unknown:
-            raise TypeError(f"basins() got unexpected keyword argument(s) {unknown}")
+        integrator_options(options, "basins()")
     if x0 is None:
         x0 = (model.spec.get("defaults") or {}).get("x0")
     base = state_vector(model, x0) if x0 is not None else np.zeros(model.n_states)

@@ -26,7 +26,7 @@ from typing import Mapping
 import numpy as np
 
 from .. import __version__
-from ..integrate.simulate import DEFAULTS, _simulate_compiled, state_vector
+from ..integrate.simulate import integrator_options, _simulate_compiled, state_vector
 from ._common import ModelContext, check_bound, failed_status, readmit
 
 
@@ -210,10 +210,8 @@ def lyapunov_spectrum(model, x0, params: Mapping[str, float] | None = None, *,
         status = 0 if st == MAP_OK else (-1 if st == MAP_DIVERGED else int(st))
         return LyapunovSpectrum(np.sort(ex)[::-1], float(done), ex[None, :], {}, status, xe,
                                 prov)
-    unknown = sorted(set(options) - set(DEFAULTS))
-    if unknown:
-        raise TypeError(f"lyapunov_spectrum() got unexpected keyword argument(s) {unknown}")
-    opts = {**DEFAULTS, **options, "dense": False, "throw": False}
+    opts = {**integrator_options(options, "lyapunov_spectrum()"), "dense": False,
+            "throw": False}
     if segment is None:
         segment = model.forcing_period_value(params)
         if segment is None:

@@ -39,7 +39,7 @@ import sympy as sp
 import xarray as xr
 
 from .. import __version__
-from ..integrate.simulate import DEFAULTS, _check_options, _simulate_compiled, state_vector
+from ..integrate.simulate import DEFAULTS, integrator_options, _check_options, _simulate_compiled, state_vector
 from ._common import (COUNTED_KINDS, DIVERGED, SECTION_MISSED, ModelContext,
                       check_bound, failed_status, model_payload, period_estimate, readmit,
                       state_times)
@@ -407,10 +407,7 @@ def sweep(model, param: str, values: Sequence[float], x0=None, *, transient: int
         if period is None and model.forcing_period is None:
             raise ValueError(f"model {model.name!r} is autonomous: give `period`, the time "
                              "unit of `transient` and `samples`")
-        unknown = sorted(set(options) - set(DEFAULTS))
-        if unknown:
-            raise TypeError(f"sweep() got unexpected keyword argument(s) {unknown}; "
-                            f"integrator options are {sorted(DEFAULTS)}")
+        integrator_options(options, "sweep()")
     if period is not None and not (math.isfinite(float(period)) and float(period) > 0):
         raise ValueError(f"`period` must be a positive number, got {period!r}")
     if x0 is None:

@@ -1004,7 +1004,6 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
 
     restart = True
     h = fopt[FO_H0]
-    f_ok = False
     while True:
         if restart:
             # (re)build the watch list for the current discrete state

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from typing import Mapping, Sequence
+from typing import Mapping
 
 import numpy as np
 
@@ -25,6 +25,19 @@ DEFAULTS = dict(method="RK45", rtol=1e-10, atol=1e-12, first_step=None, max_step
 
 #: Sliding methods (option ``sliding``) and their kernel codes.
 SLIDING_METHODS = {"convex": 0, "utkin": 1}
+
+
+def integrator_options(options: Mapping, caller: str, reserved=()) -> dict:
+    """``options`` merged over :data:`DEFAULTS`, after rejecting unknown names and those the
+    caller sets itself (``reserved``), with a ``TypeError`` naming ``caller``."""
+    bad = sorted(set(options) & set(reserved))
+    if bad:
+        raise TypeError(f"{caller}: option(s) {bad} are set by {caller} itself; remove them")
+    unknown = sorted(set(options) - set(DEFAULTS))
+    if unknown:
+        raise TypeError(f"{caller} got unexpected keyword argument(s) {unknown}; integrator "
+                        f"options are {sorted(set(DEFAULTS) - set(reserved))}")
+    return {**DEFAULTS, **options}
 
 
 def state_vector(model, x0, *, name: str = "x0") -> np.ndarray:
@@ -142,11 +155,7 @@ def simulate(model, x0, t_span, params: Mapping[str, float] | None = None, **opt
     >>> traj.events[0].kind
     'impact'
     """
-    unknown = sorted(set(options) - set(DEFAULTS))
-    if unknown:
-        raise TypeError(f"simulate() got unexpected keyword argument(s) {unknown}; options are "
-                        f"{sorted(DEFAULTS)}")
-    opts = {**DEFAULTS, **options}
+    opts = integrator_options(options, "simulate()")
     model = load_model(model)
     cm = compile_model(model)
     p = model.parameter_vector(params)

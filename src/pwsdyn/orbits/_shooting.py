@@ -34,7 +34,7 @@ import math
 import numpy as np
 
 from ..errors import PwsdynError
-from ..integrate.simulate import DEFAULTS, _simulate_compiled, state_vector
+from ..integrate.simulate import integrator_options, _simulate_compiled, state_vector
 from ..model import load_model
 from ..stability._context import (DiscreteState, ModelContext, event_states,
                                   trajectory_start_state)
@@ -167,14 +167,8 @@ class _Shooter:
 
 
 def _options(options: dict) -> dict:
-    bad = sorted(set(options) & _RESERVED)
-    if bad:
-        raise TypeError(f"option(s) {bad} are set by the shooting code; remove them")
-    unknown = sorted(set(options) - set(DEFAULTS))
-    if unknown:
-        raise TypeError(f"find_periodic_orbit() got unexpected keyword argument(s) {unknown}; "
-                        f"integrator options are {sorted(set(DEFAULTS) - _RESERVED)}")
-    return {**DEFAULTS, **SHOOTING_DEFAULTS, **options}
+    return {**integrator_options(options, "find_periodic_orbit()", _RESERVED),
+            **SHOOTING_DEFAULTS, **options}
 
 
 def _initial_state(ctx: ModelContext, mode) -> DiscreteState:

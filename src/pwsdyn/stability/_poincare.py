@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import PwsdynError, SolveError, Status
-from ..integrate.simulate import DEFAULTS, _simulate_compiled, state_vector
+from ..integrate.simulate import integrator_options, _simulate_compiled, state_vector
 from ..integrate.trajectory import EVENT_KINDS
 from ._context import DiscreteState, ModelContext, event_states, trajectory_start_state
 
@@ -114,14 +114,8 @@ def _run(ctx, x0, t0, t_end, st0: DiscreteState, opts, stop=None):
 
 
 def _options(options: dict, *, dense: bool, variational: bool = True) -> dict:
-    reserved = sorted(set(options) & {"variational", "throw", "mode"})
-    if reserved:
-        raise TypeError(f"option(s) {reserved} are set by the Poincaré-map code; remove them")
-    unknown = sorted(set(options) - set(DEFAULTS))
-    if unknown:
-        raise TypeError(f"unexpected option(s) {unknown}; integrator options are "
-                        f"{sorted(set(DEFAULTS) - {'variational', 'throw', 'mode'})}")
-    opts = {**DEFAULTS, "max_steps": DEFAULT_MAX_STEPS, **options}
+    opts = integrator_options(options, "poincare_map()", ("variational", "throw", "mode"))
+    opts["max_steps"] = options.get("max_steps", DEFAULT_MAX_STEPS)
     opts.update(variational=variational, throw=False, dense=dense)
     return opts
 
