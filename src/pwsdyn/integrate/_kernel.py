@@ -37,15 +37,21 @@ Watch functions
 In each discrete state the kernel watches a small list of scalar functions of ``(t, x)`` for
 zero crossings: surfaces ``h`` (events, switches), normal velocities ``hdot`` (sliding exit)
 and normal accelerations ``hddot`` (release from sticking). On every accepted step each is
-sampled on the dense output (ends, midpoint and, for surfaces, the extremum of the cubic
-Hermite fit from ``h`` and ``hdot`` at the ends) so a crossing and re-crossing inside one step
-(near grazing) is still found. The earliest crossing is bracketed and located by the Illinois
+sampled on the dense output -- surfaces at the ends and at the interior extrema of the cubic
+Hermite fit from ``h`` and ``hdot`` at the ends, the other functions at the ends and the
+midpoint -- so a crossing and re-crossing inside one step (near grazing) is still found. The earliest crossing is bracketed and located by the Illinois
 method on the dense output to a few ulps, then the step is re-taken exactly to that time
 ("landing step") and the time is polished with Newton steps on ``h`` (or ``hdot`` for a
 sliding exit) so the event state comes from the integrator itself, not from the interpolant.
 A surface that depends on ``t`` explicitly (a moving constraint) must also be resolved by the
 step: where the Hermite fit misses ``h`` at the step's midpoint by more than 1% the step is
 retaken shorter, so a state at rest cannot step over an oscillating wall.
+
+Sampling
+--------
+With ``FO_SAMPLE_DT > 0`` the state at ``FO_SAMPLE_T0 + k FO_SAMPLE_DT`` is recorded from each
+step's dense output as the integration passes it (stroboscopic sections: no event, no landing
+step); across a chattering gap it is the linear interpolation the trajectory also uses.
 
 Variational equations
 ---------------------
