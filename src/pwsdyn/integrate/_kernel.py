@@ -1438,16 +1438,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 break
             h_ev += dt
         # landing-step dense output (extra stages for DOP853)
-        if s_ext > s_fsal + 1:
-            for st in range(s_fsal + 1, s_ext):
-                for i in range(nY):
-                    acc = 0.0
-                    for m in range(st):
-                        acc += A[st, m] * Kland[m, i]
-                    ytmp[i] = y[i] + h_ev * acc
-                _rhs(ev, p, dkind, didx, mode, nm, t + C[st] * h_ev, ytmp, n, nvar, Kland[st],
-                     etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
-        _dense_coeffs(Kland, P, h_ev, nY, s_ext, deg, Q)
+        stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, nvar, Kland, A,
+                                C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac,
+                                xt, ft)
         t_ev = t + h_ev
         if sdt > 0.0:
             # samples up to the event (one at the event time takes the state before it)

@@ -27,7 +27,6 @@ from __future__ import annotations
 import functools
 import hashlib
 import importlib.util
-import math
 import os
 import sys
 from dataclasses import dataclass, field
@@ -130,7 +129,7 @@ def map_model_from_dict(data: dict, origin: str = "<dict>", text: str | None = N
     ModelError
         A malformed map model; the message names the source and the field.
     """
-    from .spec import _NAME_RE, _RESERVED, _Where
+    from .spec import _NAME_RE, _RESERVED, _Where, states_and_parameters
 
     W = _Where(origin, text)
     unknown = sorted(set(data) - _TOP_KEYS)
@@ -140,25 +139,7 @@ def map_model_from_dict(data: dict, origin: str = "<dict>", text: str | None = N
     name = data.get("name")
     if not isinstance(name, str) or not name:
         raise W.error("missing required field `name`", "name")
-    states = data.get("states")
-    if not isinstance(states, list) or not states:
-        raise W.error("a map needs a non-empty list `states`", "states")
-    for s in states:
-        if not isinstance(s, str) or not _NAME_RE.match(s) or s in _RESERVED:
-            raise W.error(f"invalid state name {s!r}", "states", str(s))
-    if len(set(states)) != len(states):
-        raise W.error("duplicate state names", "states")
-    params_raw = data.get("parameters", {})
-    if not isinstance(params_raw, dict):
-        raise W.error("`parameters` must be a table of name = default value", "parameters")
-    parameters = {}
-    for k, v in params_raw.items():
-        if not _NAME_RE.match(k) or k in _RESERVED or k in states:
-            raise W.error(f"invalid or clashing parameter name {k!r}", f"parameters.{k}")
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise W.error(f"parameter {k!r} must have a finite numeric default, got {v!r}",
-                          f"parameters.{k}")
-        parameters[k] = float(v)
+    states, parameters = states_and_parameters(data, W, "map")
 
     names = {s: sp.Symbol(s, real=True) for s in states}
     names.update({p: sp.Symbol(p, real=True) for p in parameters})

@@ -351,6 +351,34 @@ _EVENT_KEYS = {"name", "kind", "surface", "direction", "modes", "mode", "guard",
                "target", "terminal", "description"}
 
 
+def states_and_parameters(data: dict, W: "_Where", what: str) -> tuple[list, dict]:
+    """The validated ``states`` list and ``parameters`` table (name -> float default) of a
+    model or map definition; errors name the field and its line."""
+    states = data.get("states")
+    if not isinstance(states, list) or not states:
+        raise W.error(f"a {what} needs at least one state (a non-empty list `states`)",
+                      "states")
+    for s in states:
+        if not isinstance(s, str) or not _NAME_RE.match(s) or s in _RESERVED:
+            raise W.error(f"invalid state name {s!r}", "states", str(s))
+    if len(set(states)) != len(states):
+        raise W.error("duplicate state names", "states")
+    params_raw = data.get("parameters", {})
+    if not isinstance(params_raw, dict):
+        raise W.error("`parameters` must be a table of name = default value", "parameters")
+    parameters = {}
+    for k, v in params_raw.items():
+        if not _NAME_RE.match(k) or k in _RESERVED or k in states:
+            raise W.error(f"invalid or clashing parameter name {k!r}", f"parameters.{k}")
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise W.error(f"parameter {k!r} must have a numeric default, got {v!r}",
+                          f"parameters.{k}")
+        if not math.isfinite(float(v)):
+            raise W.error(f"parameter {k!r} must be finite, got {v!r}", f"parameters.{k}")
+        parameters[k] = float(v)
+    return states, parameters
+
+
 def model_from_dict(data: dict, origin: str = "<dict>", text: str | None = None) -> Model:
     """Build and validate a :class:`Model` from a dict with the TOML file's structure.
 
@@ -376,28 +404,8 @@ def model_from_dict(data: dict, origin: str = "<dict>", text: str | None = None)
         return val
 
     name = need("name", str)
-    states = need("states", list)
-    if not states:
-        raise W.error("a model needs at least one state", "states")
-    for s in states:
-        if not isinstance(s, str) or not _NAME_RE.match(s) or s in _RESERVED:
-            raise W.error(f"invalid state name {s!r}", "states", str(s))
-    if len(set(states)) != len(states):
-        raise W.error("duplicate state names", "states")
-
-    params_raw = data.get("parameters", {})
-    if not isinstance(params_raw, dict):
-        raise W.error("`parameters` must be a table of name = default value", "parameters")
-    parameters = {}
-    for k, v in params_raw.items():
-        if not _NAME_RE.match(k) or k in _RESERVED or k in states:
-            raise W.error(f"invalid or clashing parameter name {k!r}", f"parameters.{k}")
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise W.error(f"parameter {k!r} must have a numeric default, got {v!r}",
-                          f"parameters.{k}")
-        if not math.isfinite(float(v)):
-            raise W.error(f"parameter {k!r} must be finite, got {v!r}", f"parameters.{k}")
-        parameters[k] = float(v)
+    need("states", list)
+    states, parameters = states_and_parameters(data, W, "model")
 
     t = sp.Symbol(TIME, real=True)
     names = {TIME: t}
