@@ -32,7 +32,7 @@ import xarray as xr
 from .. import __version__
 from ..errors import Status
 from ..integrate.simulate import DEFAULTS, integrator_options, _check_options, state_vector
-from ._common import DIVERGED, ModelContext, model_payload, period_estimate
+from ._common import check_section, DIVERGED, ModelContext, model_payload, period_estimate
 from ._executor import run_chunks
 from ._store import ChunkStore
 from ._sweep import _period_function, _settings_json, run_window
@@ -216,11 +216,7 @@ def basins(model, grid: Mapping[str, object], x0=None, *, params=None, transient
             raise ValueError(f"model {model.name!r} is a map: `section` and integrator "
                              "options apply to flows only")
     else:
-        if section != "stroboscopic":
-            names = {e.name for e in model.events} | {s.name for s in model.switches}
-            if section not in names:
-                raise ValueError(f"`section` must be 'stroboscopic' or an event of model "
-                                 f"{model.name!r} ({sorted(names)}), got {section!r}")
+        check_section(model, section)
         if period is None and model.forcing_period is None:
             raise ValueError(f"model {model.name!r} is autonomous: give `period`")
         integrator_options(options, "basins()")

@@ -171,6 +171,15 @@ def failed_status(traj) -> int:
     return int(traj.status) if traj.status.failed else 0
 
 
+def check_section(model, section: str) -> None:
+    """``section`` is 'stroboscopic' or the name of an event or switch of the flow ``model``."""
+    if section != "stroboscopic":
+        names = {e.name for e in model.events} | {s.name for s in model.switches}
+        if section not in names:
+            raise ValueError(f"`section` must be 'stroboscopic' or an event of model "
+                             f"{model.name!r} ({sorted(names)}), got {section!r}")
+
+
 def check_bound(x: np.ndarray, bound: float) -> bool:
     """True while every component is finite and within ``bound``."""
     return bool(np.all(np.isfinite(x)) and np.all(np.abs(x) <= bound))

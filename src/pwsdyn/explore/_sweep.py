@@ -40,7 +40,7 @@ import xarray as xr
 
 from .. import __version__
 from ..integrate.simulate import DEFAULTS, integrator_options, _check_options, _simulate_compiled, state_vector
-from ._common import (COUNTED_KINDS, DIVERGED, SECTION_MISSED, ModelContext,
+from ._common import (check_section, COUNTED_KINDS, DIVERGED, SECTION_MISSED, ModelContext,
                       check_bound, failed_status, model_payload, period_estimate, readmit,
                       state_times)
 from ._executor import run_chunks
@@ -399,11 +399,7 @@ def sweep(model, param: str, values: Sequence[float], x0=None, *, transient: int
             raise TypeError(f"integrator options {sorted(options)} apply to flows, not to map "
                             f"{model.name!r}")
     else:
-        if section != "stroboscopic":
-            names = {e.name for e in model.events} | {s.name for s in model.switches}
-            if section not in names:
-                raise ValueError(f"`section` must be 'stroboscopic' or an event of model "
-                                 f"{model.name!r} ({sorted(names)}), got {section!r}")
+        check_section(model, section)
         if period is None and model.forcing_period is None:
             raise ValueError(f"model {model.name!r} is autonomous: give `period`, the time "
                              "unit of `transient` and `samples`")
