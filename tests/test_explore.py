@@ -82,15 +82,17 @@ def test_closed_form_thresholds_are_consistent():
     assert np.min(m.real) == pytest.approx(-1.0, abs=1e-12)
 
 
-def test_ball_sweep_finds_period_one_and_its_period_doubling():
+@pytest.mark.parametrize("exact", [False, True])
+def test_ball_sweep_finds_period_one_and_its_period_doubling(exact):
     """Sweeping the table amplitude up from Gamma = 0.9 (one chunk, so the period-1 branch is
     continued without restarts) the period-1 orbit (1 impact per period, period 1) holds up
-    to Gamma_PD and gives way to period 2 there, to within the sweep resolution."""
+    to Gamma_PD and gives way to period 2 there, to within the sweep resolution; with the
+    Runge-Kutta pair and with exact flights (``exact=True``)."""
     gam = np.linspace(0.9, 1.2, 61)                     # step 0.005
     step = gam[1] - gam[0]
     ds = pwsdyn.sweep("bouncing-ball", "A", ball_A(gam), {"y": 1.5, "v": 0.0},
                       params={"omega": OMEGA, "e": E}, transient=400, samples=64,
-                      chunk_size=len(gam), workers=1, progress=False)
+                      chunk_size=len(gam), workers=1, progress=False, exact=exact)
     per = ds.period.sel(direction="up").values
     ev = ds.events_per_period.sel(direction="up").values
     assert np.all(ds.status.values == 0)

@@ -214,6 +214,9 @@ def models_cmd():
 @click.option("--atol", type=float, default=None, help="Absolute tolerance (default 1e-12).")
 @click.option("--method", type=click.Choice(["RK45", "DOP853"], case_sensitive=False),
               default=None, help="Runge-Kutta pair (default RK45).")
+@click.option("--exact", is_flag=True,
+              help="Propagate the modes that are affine in the state with harmonic forcing "
+                   "exactly (matrix exponential) instead of by the Runge-Kutta pair.")
 @click.option("--mode", default=None, metavar="NAME", help="Initial mode.")
 @click.option("--sliding", type=click.Choice(["convex", "utkin"], case_sensitive=False),
               default=None, help="Sliding vector field on Filippov surfaces: Filippov's convex "
@@ -222,7 +225,8 @@ def models_cmd():
               help="Write the trajectory to this NetCDF file.")
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
               help="Write a figure of the trajectory to this PNG file.")
-def simulate_cmd(model, params, x0, t0, t_end, rtol, atol, method, mode, sliding, out, plot):
+def simulate_cmd(model, params, x0, t0, t_end, rtol, atol, method, exact, mode, sliding, out,
+                 plot):
     """Simulate MODEL (a built-in name, see `pwsdyn models`, or a TOML file).
 
     Prints a summary; with --out and --plot also writes the trajectory and a figure.
@@ -259,6 +263,8 @@ def simulate_cmd(model, params, x0, t0, t_end, rtol, atol, method, mode, sliding
         options["atol"] = atol
     if method is not None:
         options["method"] = method.upper()
+    if exact:
+        options["exact"] = True
     if mode is not None:
         options["mode"] = mode
     if sliding is not None:
@@ -290,7 +296,7 @@ def simulate_cmd(model, params, x0, t0, t_end, rtol, atol, method, mode, sliding
               f"{traj.state[-1]}: {traj.message}")
 
 
-def _explore_common(model, sets, x0, method, rtol, atol):
+def _explore_common(model, sets, x0, method, rtol, atol, exact=False):
     """Load MODEL, check ``--set`` and ``--x0`` and collect integrator options."""
     import pwsdyn
     from .errors import ModelError
@@ -316,6 +322,8 @@ def _explore_common(model, sets, x0, method, rtol, atol):
     for k, v in (("rtol", rtol), ("atol", atol), ("method", method.upper() if method else None)):
         if v is not None:
             options[k] = v
+    if exact:
+        options["exact"] = True
     return mdl, all_params, cli_x0, options
 
 
@@ -354,6 +362,9 @@ _EXPLORE_OPTIONS = [
     click.option("--atol", type=float, default=None, help="Absolute tolerance (1e-12)."),
     click.option("--method", type=click.Choice(["RK45", "DOP853"], case_sensitive=False),
                  default=None, help="Runge-Kutta pair (default RK45)."),
+    click.option("--exact", is_flag=True,
+                 help="Propagate the modes that are affine in the state with harmonic forcing "
+                      "exactly (matrix exponential) instead of by the Runge-Kutta pair."),
     click.option("--no-progress", "no_progress", is_flag=True, help="No progress bar."),
     click.option("--out", type=click.Path(dir_okay=False), default=None,
                  help="Write the dataset to this NetCDF file (never overwritten)."),
@@ -405,7 +416,7 @@ def _explore_errors():
 @_explore_options
 def sweep_cmd(model, param, start, stop, num, direction, lyapunov, state, sets, x0, transient,
               samples, section, workers, scheduler, chunk_size, store, rtol, atol, method,
-              no_progress, out, plot):
+              exact, no_progress, out, plot):
     """Brute-force bifurcation diagram of MODEL in parameter --param.
 
     For each of --num values from --from to --to, run --transient forcing periods, record
@@ -425,7 +436,7 @@ def sweep_cmd(model, param, start, stop, num, direction, lyapunov, state, sets, 
 
     if num < 1:
         raise click.BadParameter(f"must be at least 1, got {num}", param_hint="--num")
-    mdl, params, x0v, options = _explore_common(model, sets, x0, method, rtol, atol)
+    mdl, params, x0v, options = _explore_common(model, sets, x0, method, rtol, atol, exact)
     if param not in mdl.parameters:
         raise click.BadParameter(f"unknown parameter {param!r} for model {mdl.name!r}; "
                                  f"parameters are {list(mdl.parameters)}", param_hint="--param")
@@ -476,7 +487,7 @@ def sweep_cmd(model, param, start, stop, num, direction, lyapunov, state, sets, 
 @_explore_options
 def basins_cmd(model, xname, x_from, x_to, x_num, yname, y_from, y_to, y_num, sets, x0,
                transient, samples, section, workers, scheduler, chunk_size, store, rtol,
-               atol, method, no_progress, out, plot):
+               atol, method, exact, no_progress, out, plot):
     """Basins of attraction of MODEL on a grid of initial conditions.
 
     \b
@@ -490,7 +501,7 @@ def basins_cmd(model, xname, x_from, x_to, x_num, yname, y_from, y_to, y_num, se
     import pwsdyn
     from .plot import plot_basins
 
-    mdl, params, x0v, options = _explore_common(model, sets, x0, method, rtol, atol)
+    mdl, params, x0v, options = _explore_common(model, sets, x0, method, rtol, atol, exact)
     grid = {}
     for name, a, b, n, hint in ((xname, x_from, x_to, x_num, "--x"),
                                 (yname, y_from, y_to, y_num, "--y")):

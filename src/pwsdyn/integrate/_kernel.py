@@ -74,8 +74,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..model.codegen import (W_F, W_FU, W_FX, W_G, W_GUARD, W_GX, W_GT, W_H, W_HD, W_HDT,
-                             W_HDU, W_HDUD, W_HDX, W_HHD, W_HT, W_HX)
+from ..model.codegen import (W_AFFINE, W_F, W_FU, W_FX, W_G, W_GUARD, W_GX, W_GT, W_H, W_HD,
+                             W_HDT, W_HDU, W_HDUD, W_HDX, W_HHD, W_HT, W_HX)
 
 # discrete states
 REGULAR, STICK, SLIDE = 0, 1, 2
@@ -98,7 +98,9 @@ IO_MODE0, IO_NMODES, IO_MAXSTEPS, IO_MAXEVENTS, IO_METHOD, IO_VAR, IO_CHATTER, I
 # IO_STOP_COUNT-th logged event whose kind K_* has its bit set in IO_STOP_MASK and whose event
 # (or switch) index is IO_STOP_REF (-1: any); the initial discrete state kind and index
 IO_STOP_MASK, IO_STOP_REF, IO_STOP_COUNT, IO_DKIND0, IO_DIDX0 = range(8, 13)
-IO_N = 13
+# exact propagation of the affine modes (1) instead of the Runge-Kutta pair (0)
+IO_EXACT = 13
+IO_N = 14
 # values of iopt[IO_VAR]: no variational equations; Phi = dx(t)/dx0 through every event; or per
 # segment: Phi restarts at the identity after each event and each event record carries the
 # segment's Phi (variational part of x_before) and the saltation matrix S (of x_after)
@@ -118,6 +120,8 @@ _EPS = np.finfo(np.float64).eps
 #: Relative step of the central differences of the variational code (cube root of eps).
 _FD_STEP = 6e-6
 _MAXW = 64
+#: Terms of the Taylor-summed exponential of an exact step (||h M|| <= 1: 1/20! < 1e-18).
+_EXACT_TERMS = 20
 
 
 # --------------------------------------------------------------------------------------
@@ -548,6 +552,10 @@ def _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_f
         _rhs(ev, p, dkind, didx, mode, nm, t + C[st] * h, ytmp, n, nvar, K[st], etab, stab,
              slide_c, w1, w2, gx, hdx, jac, xt, ft)
     _dense_coeffs(K, P, h, nY, s_ext, P.shape[1], Q)
+    # columns beyond the method's degree are used by exact steps only
+    for k in range(P.shape[1], Q.shape[1]):
+        for i in range(nY):
+            Q[i, k] = 0.0
     return s_ext - s_fsal - 1
 
 
@@ -566,6 +574,112 @@ def _take_samples(t, h, y, Q, nY, n, deg, s0, sdt, k, t_end, samp, n_samp, xs):
         k += 1
         ts = s0 + k * sdt
     return samp, n_samp, k
+
+
+@njit(cache=True)
+def _exact_step(M, sc, nz, n, t, y, h, z, v, Q, ynew):
+    """One exact step of an affine mode: ``z(t + h) = exp(h M) z(t)`` for the augmented state
+    ``z = (x, 1, cos(w_j t), sin(w_j t), ...)`` (:mod:`pwsdyn.model.affine`).
+
+    The exponential is summed as its Taylor series ``sum_k (h M)^k z / k!`` (dense products: a
+    compressed-row product skipping the zeros of ``M`` measured slower at these sizes). The
+    caller keeps ``||h M||_inf <= 1``, so the terms fall faster than ``1/k!`` and the sum is
+    exact to rounding after at most ``_EXACT_TERMS`` terms; it stops once a term is below
+    1e-18 of ``z``. The terms are also the dense output: ``x(t + theta h) = x + sum_k
+    Q[:, k-1] theta^k`` is the same series at ``theta h``, so events are located on the exact
+    flow too. Columns of ``Q`` past the last term are zeroed."""
+    _augment(M, sc, nz, n, t, y, z)
+    zmax = 0.0
+    for i in range(nz):
+        zmax = max(zmax, abs(z[i]))
+    for i in range(n):
+        ynew[i] = y[i]
+    ncol = Q.shape[1]
+    k = 1
+    while k <= ncol:
+        # v = (h / k) M z, then z = v (z holds the previous term)
+        c = h / k
+        big = 0.0
+        for i in range(nz):
+            acc = 0.0
+            for m in range(nz):
+                acc += M[i, m] * z[m]
+            v[i] = c * acc
+            big = max(big, abs(v[i]))
+        for i in range(nz):
+            z[i] = v[i]
+        for i in range(n):
+            Q[i, k - 1] = v[i]
+            ynew[i] += v[i]
+        k += 1
+        if big <= 1e-18 * zmax or k > _EXACT_TERMS:
+            break
+    for kk in range(k - 1, ncol):
+        for i in range(n):
+            Q[i, kk] = 0.0
+
+
+@njit(cache=True)
+def _exact_propagator(M, nz, h, Pm, T1, T2):
+    """``Pm = exp(h M)`` summed as its Taylor series (``||h M||_inf <= 1``, as in
+    :func:`_exact_step`): steps of the same length then cost one matrix-vector product."""
+    for i in range(nz):
+        for c in range(nz):
+            T1[i, c] = 1.0 if i == c else 0.0
+            Pm[i, c] = T1[i, c]
+    for k in range(1, _EXACT_TERMS + 1):
+        big = 0.0
+        for i in range(nz):
+            for c in range(nz):
+                acc = 0.0
+                for m in range(nz):
+                    acc += T1[i, m] * M[m, c]
+                T2[i, c] = acc * h / k
+                big = max(big, abs(T2[i, c]))
+        for i in range(nz):
+            for c in range(nz):
+                T1[i, c] = T2[i, c]
+                Pm[i, c] += T2[i, c]
+        if big <= 1e-18:
+            break
+
+
+@njit(cache=True)
+def _exact_apply(M, sc, Pm, nz, n, t, y, z, ynew):
+    """``x(t + h)`` from a cached propagator ``Pm = exp(h M)`` (see :func:`_exact_step`)."""
+    _augment(M, sc, nz, n, t, y, z)
+    for i in range(n):
+        acc = 0.0
+        for m in range(nz):
+            acc += Pm[i, m] * z[m]
+        ynew[i] = acc
+
+
+@njit(cache=True)
+def _augment(M, sc, nz, n, t, y, z):
+    """The augmented state ``z = (x, s_0, s_1 cos(w_1 t), s_1 sin(w_1 t), ...)``, the
+    frequencies read off the rotation blocks ``(0, -w_j; w_j, 0)`` of ``M`` and the scales
+    ``s`` from ``sc`` (``M``'s columns are divided by them: see the kernel's set-up)."""
+    for i in range(n):
+        z[i] = y[i]
+    z[n] = sc[n]
+    for j in range((nz - n - 1) // 2):
+        om = M[n + 2 + 2 * j, n + 1 + 2 * j]
+        z[n + 1 + 2 * j] = sc[n + 1 + 2 * j] * np.cos(om * t)
+        z[n + 2 + 2 * j] = sc[n + 2 + 2 * j] * np.sin(om * t)
+
+
+@njit(cache=True)
+def _make_dense_any(exact, Mm, sc, nz, zv, zv1, xe, ev, p, dkind, didx, mode, nm,
+                    t, y, h, nY, n, nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1,
+                    w2, gx, hdx, jac, xt, ft):
+    """Dense output of the step just taken: the Taylor terms of an exact step, else the
+    Runge-Kutta interpolant (:func:`_make_dense`)."""
+    if exact:
+        _exact_step(Mm, sc, nz, n, t, y, h, zv, zv1, Q, xe)
+        return 0
+    return _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_fsal, P, Q,
+                       ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
 
 
 @njit(cache=True)
@@ -893,6 +1007,67 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     s_ext = A.shape[0]
     deg = P.shape[1]
     n_events = etab.shape[0]
+    # exact propagation of affine modes: their augmented matrices and the largest step with
+    # ||h M||_inf <= 1 (the Taylor sum of _exact_step then converges in _EXACT_TERMS terms)
+    nz = 0
+    if iopt.shape[0] > IO_EXACT and iopt[IO_EXACT] != 0:
+        abuf = np.zeros(1)
+        ev(W_AFFINE, -1, t0, x0, p, abuf)
+        nz = int(abuf[0])
+    aff_ok = np.zeros(nm, dtype=np.int64)
+    aff_M = np.zeros((nm, max(nz, 1), max(nz, 1)))
+    aff_h = np.zeros(nm)
+    aff_s = np.ones((nm, max(nz, 1)))
+    if nz > 0:
+        abuf = np.zeros(1 + nz * nz)
+        for m in range(nm):
+            ev(W_AFFINE, m, t0, x0, p, abuf)
+            if abuf[0] == 0.0:
+                continue
+            for i in range(nz):
+                for c in range(nz):
+                    aff_M[m, i, c] = abuf[1 + i * nz + c]
+            # scale the constant and each (cos, sin) pair of z by the largest coefficient
+            # multiplying it (z = (x, s_0, s_1 cos, s_1 sin, ...), those columns of M divided
+            # by s): the step bound ||h M|| <= 1 then reflects the dynamics, not the units of
+            # b or of the forcing amplitude (a ball in flight: b = -g)
+            for c in range(n, nz):
+                aff_s[m, c] = 1.0
+            for c in range(n, nz):
+                if c > n and (c - n) % 2 == 0:
+                    continue  # the sin column shares the scale of its cos column
+                big = 0.0
+                for i in range(n):
+                    big = max(big, abs(aff_M[m, i, c]))
+                    if c > n:
+                        big = max(big, abs(aff_M[m, i, c + 1]))
+                if big > 1.0 and np.isfinite(big):
+                    aff_s[m, c] = big
+                    if c > n:
+                        aff_s[m, c + 1] = big
+            for c in range(n, nz):
+                for i in range(n):
+                    aff_M[m, i, c] /= aff_s[m, c]
+            nrm = 0.0
+            for i in range(nz):
+                row = 0.0
+                for c in range(nz):
+                    row += abs(aff_M[m, i, c])
+                nrm = max(nrm, row)
+            if not np.isfinite(nrm):
+                continue
+            aff_ok[m] = 1
+            aff_h[m] = 1.0 / nrm if nrm > 0.0 else np.inf
+
+        deg = max(deg, _EXACT_TERMS)
+    zv = np.zeros(max(nz, 1))
+    zv1 = np.zeros(max(nz, 1))
+    xe = np.zeros(n)
+    # propagator exp(h M) per mode for the step length aff_ph (most steps have the same one)
+    aff_P = np.zeros((nm, max(nz, 1), max(nz, 1)))
+    aff_ph = np.full(nm, -1.0)
+    T1 = np.zeros((max(nz, 1), max(nz, 1)))
+    T2 = np.zeros((max(nz, 1), max(nz, 1)))
     n_sw = stab.shape[0]
     order = 5.0 if method == 0 else 8.0
 
@@ -1113,6 +1288,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
         if stats[0] >= max_steps:
             status = ST_MAX_STEPS
             break
+        exact_now = nz > 0 and dkind == REGULAR and nvar == 0 and aff_ok[mode] == 1
+        if exact_now:
+            h = min(h, aff_h[mode])
         h = min(h, hmax, t_end - t)
         if h < 4.0 * _ulp(t):
             if t_end - t <= 4.0 * _ulp(t):
@@ -1121,30 +1299,54 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             status = ST_STEP_TOO_SMALL
             break
 
-        # ---- one RK step (stages written out here: this is the hot loop)
-        fast = dkind == REGULAR and nvar == 0
-        for st in range(1, s_fsal + 1):
-            cst = t + C[st] * h
-            for i in range(nY):
-                acc = 0.0
-                for m in range(st):
-                    acc += A[st, m] * K[m, i]
-                ytmp[i] = y[i] + h * acc
-            if fast:
-                ev(W_F, mode, cst, ytmp, p, K[st])
+        q_made = False
+        if exact_now:
+            # ---- one exact step of an affine mode (no error: the step is limited only by
+            # the convergence of the Taylor sum, the largest step and the events)
+            if h == min(aff_h[mode], hmax):
+                # a full step: one product with the propagator, made once per mode and run
+                if h != aff_ph[mode]:
+                    _exact_propagator(aff_M[mode], nz, h, aff_P[mode], T1, T2)
+                    aff_ph[mode] = h
+                _exact_apply(aff_M[mode], aff_s[mode], aff_P[mode], nz, n, t, y, zv, ynew)
             else:
-                _rhs(ev, p, dkind, didx, mode, nm, cst, ytmp, n, nvar, K[st], etab, stab,
-                     slide_c, w1, w2, gx, hdx, jac, xt, ft)
-        stats[2] += s_fsal
-        # the FSAL stage was evaluated at y + h sum B K = the new solution
-        finite = True
-        for i in range(nY):
-            ynew[i] = ytmp[i]
-            if not (np.isfinite(K[s_fsal, i]) and np.isfinite(ynew[i])):
-                finite = False
-        err = _error_norm(K, E, method, s_fsal, y, ynew, h, 0, n, rtol, atol) if finite else np.inf
-        if nvar and finite:
-            err = max(err, _error_norm(K, E, method, s_fsal, y, ynew, h, n, nY, rtol, atol))
+                # a shorter one (before an event, t_end, or a moving surface): the Taylor sum
+                # of the vector, whose terms are the dense output
+                _exact_step(aff_M[mode], aff_s[mode], nz, n, t, y, h, zv, zv1, Q, ynew)
+                q_made = True
+            ev(W_F, mode, t + h, ynew, p, K[s_fsal])
+            stats[2] += 1
+            err = 0.0
+            for i in range(n):
+                if not (np.isfinite(K[s_fsal, i]) and np.isfinite(ynew[i])):
+                    err = np.inf
+            finite = err == 0.0
+        else:
+            # ---- one RK step (stages written out here: this is the hot loop)
+            fast = dkind == REGULAR and nvar == 0
+            for st in range(1, s_fsal + 1):
+                cst = t + C[st] * h
+                for i in range(nY):
+                    acc = 0.0
+                    for m in range(st):
+                        acc += A[st, m] * K[m, i]
+                    ytmp[i] = y[i] + h * acc
+                if fast:
+                    ev(W_F, mode, cst, ytmp, p, K[st])
+                else:
+                    _rhs(ev, p, dkind, didx, mode, nm, cst, ytmp, n, nvar, K[st], etab, stab,
+                         slide_c, w1, w2, gx, hdx, jac, xt, ft)
+            stats[2] += s_fsal
+            # the FSAL stage was evaluated at y + h sum B K = the new solution
+            finite = True
+            for i in range(nY):
+                ynew[i] = ytmp[i]
+                if not (np.isfinite(K[s_fsal, i]) and np.isfinite(ynew[i])):
+                    finite = False
+            err = (_error_norm(K, E, method, s_fsal, y, ynew, h, 0, n, rtol, atol) if finite
+                   else np.inf)
+            if nvar and finite:
+                err = max(err, _error_norm(K, E, method, s_fsal, y, ynew, h, n, nY, rtol, atol))
         if not (err <= 1.0):
             stats[1] += 1
             if not finite:
@@ -1157,11 +1359,12 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             continue
         stats[0] += 1
         # dense output coefficients are made only when needed (stored steps, interior samples)
-        q_ready = False
-        if save_all:
-            stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C,
-                                    s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx,
-                                    jac, xt, ft)
+        q_ready = q_made
+        if save_all and not q_ready:
+            stats[2] += _make_dense_any(exact_now, aff_M[mode], aff_s[mode], nz, zv, zv1, xe, ev,
+                                        p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C,
+                                        s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx,
+                                        jac, xt, ft)
             q_ready = True
         t_new = t + h
 
@@ -1203,9 +1406,10 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     # Hermite fit must reproduce h at the midpoint, or the step is retaken
                     # shorter.
                     if not q_ready:
-                        stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar,
-                                                K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c,
-                                                w1, w2, gx, hdx, jac, xt, ft)
+                        stats[2] += _make_dense_any(exact_now, aff_M[mode], aff_s[mode], nz, zv,
+                                                    zv1, xe, ev, p, dkind, didx, mode, nm, t, y, h,
+                                                    nY, n, nvar, K, A, C, s_fsal, P, Q, ytmp, etab,
+                                                    stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
                         q_ready = True
                     _dense_eval(y, Q, 0.5, nY, deg, xs)
                     hm = _watch_value(ev, p, WF_SURFACE, widx[w], wmode[w], nm, t + 0.5 * h, xs,
@@ -1245,9 +1449,10 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                         thetas[ns] = rb
                         ns += 1
                 if ns > 1 and not q_ready:
-                    stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K,
-                                            A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2,
-                                            gx, hdx, jac, xt, ft)
+                    stats[2] += _make_dense_any(exact_now, aff_M[mode], aff_s[mode], nz, zv, zv1,
+                                                xe, ev, p, dkind, didx, mode, nm, t, y, h, nY, n,
+                                                nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab,
+                                                slide_c, w1, w2, gx, hdx, jac, xt, ft)
                     q_ready = True
                 for q in range(1, ns):
                     _dense_eval(y, Q, thetas[q], nY, deg, xs)
@@ -1267,9 +1472,10 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     vals[w, 0] = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t, y, n,
                                               buf, fbuf, hdx)
                 if not q_ready:
-                    stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K,
-                                            A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2,
-                                            gx, hdx, jac, xt, ft)
+                    stats[2] += _make_dense_any(exact_now, aff_M[mode], aff_s[mode], nz, zv, zv1,
+                                                xe, ev, p, dkind, didx, mode, nm, t, y, h, nY, n,
+                                                nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab,
+                                                slide_c, w1, w2, gx, hdx, jac, xt, ft)
                     q_ready = True
                 _dense_eval(y, Q, 0.5, nY, deg, xs)
                 vals[w, 1] = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t + 0.5 * h,
@@ -1300,9 +1506,10 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     continue
                 if _crosses(prev_v, vq, wdir[w]):
                     if not q_ready:
-                        stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n,
-                                                nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab,
-                                                slide_c, w1, w2, gx, hdx, jac, xt, ft)
+                        stats[2] += _make_dense_any(exact_now, aff_M[mode], aff_s[mode], nz, zv,
+                                                    zv1, xe, ev, p, dkind, didx, mode, nm, t, y, h,
+                                                    nY, n, nvar, K, A, C, s_fsal, P, Q, ytmp, etab,
+                                                    stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
                         q_ready = True
                     # locate by Illinois on the dense output within [prev_th, th]
                     a_th = prev_th
@@ -1386,9 +1593,10 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 n_nodes += 1
             if sdt > 0.0 and s0 + sk * sdt <= t_new:
                 if not q_ready:
-                    stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar,
-                                            K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c,
-                                            w1, w2, gx, hdx, jac, xt, ft)
+                    stats[2] += _make_dense_any(exact_now, aff_M[mode], aff_s[mode], nz, zv, zv1,
+                                                xe, ev, p, dkind, didx, mode, nm, t, y, h, nY, n,
+                                                nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab,
+                                                slide_c, w1, w2, gx, hdx, jac, xt, ft)
                     q_ready = True
                 samp, n_samp, sk = _take_samples(t, h, y, Q, nY, n, deg, s0, sdt, sk, t_end,
                                                  samp, n_samp, xs)
@@ -1406,15 +1614,22 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             continue
 
         # ---- an event inside the step: land exactly on it with a shortened step, then
-        # polish the time with Newton on the watch function (h / hdot) for surfaces
+        # polish the time with Newton on the watch function (h / hdot) for surfaces. The
+        # dense output of an exact step is the exact flow: there the landing "step" is its
+        # evaluation, and the step's Taylor terms are rescaled to the shorter interval.
         w = best
         h_ev = best_th * h
         for i in range(nY):
             Kland[0, i] = K[0, i]
         for polish in range(8):
-            _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, nvar, Kland, A, C, s_fsal,
-                       ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
-            stats[2] += s_fsal
+            if exact_now:
+                _dense_eval(y, Q, h_ev / h, nY, deg, ytmp)
+                ev(W_F, mode, t + h_ev, ytmp, p, Kland[s_fsal])
+                stats[2] += 1
+            else:
+                _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, nvar, Kland, A, C,
+                           s_fsal, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
+                stats[2] += s_fsal
             stats[5] += 1
             for i in range(nY):
                 ynew[i] = ytmp[i]
@@ -1437,10 +1652,18 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             if abs(dt) <= 2.0 * _ulp(t + h_ev) or h_ev + dt <= 0.0 or h_ev + dt > h:
                 break
             h_ev += dt
-        # landing-step dense output (extra stages for DOP853)
-        stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, nvar, Kland, A,
-                                C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac,
-                                xt, ft)
+        # landing-step dense output (extra stages for DOP853; Taylor terms rescaled)
+        if exact_now:
+            ratio = h_ev / h
+            scale = 1.0
+            for k in range(deg):
+                scale *= ratio
+                for i in range(n):
+                    Q[i, k] *= scale
+        else:
+            stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, nvar, Kland,
+                                    A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2, gx,
+                                    hdx, jac, xt, ft)
         t_ev = t + h_ev
         if sdt > 0.0:
             # samples up to the event (one at the event time takes the state before it)

@@ -11,14 +11,15 @@ from .. import __version__
 from ..errors import SolveError, Status
 from ..model import compile_model, load_model
 from ..model.codegen import CompiledModel
-from ._kernel import (IO_DIDX0, IO_DKIND0, IO_N, IO_STOP_COUNT, IO_STOP_MASK, IO_STOP_REF,
-                      VAR_NONE, VAR_SEGMENTS, run_kernel)
+from ..model.affine import affine_structure
+from ._kernel import (IO_DIDX0, IO_DKIND0, IO_EXACT, IO_N, IO_STOP_COUNT, IO_STOP_MASK,
+                      IO_STOP_REF, VAR_NONE, VAR_SEGMENTS, run_kernel)
 from ._variational import assemble_segments
 from .tableaus import METHODS
 from .trajectory import EVENT_KINDS, EventRecord, Trajectory
 
 #: Default options of :func:`simulate` (each documented there).
-DEFAULTS = dict(method="RK45", rtol=1e-10, atol=1e-12, first_step=None, max_step=math.inf,
+DEFAULTS = dict(method="RK45", exact=False, rtol=1e-10, atol=1e-12, first_step=None, max_step=math.inf,
                 max_steps=1_000_000, max_events=100_000, chatter=True, chatter_ratio=1e-4,
                 chatter_velocity=None, sliding="convex", sliding_gain=0.0, variational=False,
                 dense=True, mode=None, throw=True)
@@ -90,6 +91,15 @@ def simulate(model, x0, t_span, params: Mapping[str, float] | None = None, **opt
         Parameter values overriding the model defaults, by name.
     method : {'RK45', 'DOP853'}
         Dormand-Prince 5(4) (default) or the 8th-order Dormand-Prince pair.
+    exact : bool
+        Propagate the modes that are affine in the state with harmonic forcing,
+        ``x' = A x + b + sum_j c_j cos(w_j t) + d_j sin(w_j t)`` (impact and friction
+        oscillators with linear springs, a ball in flight, relay feedback of a linear plant),
+        by the exact flow ``exp(h M)`` of the system augmented with the forcing (Van Loan
+        1978; :mod:`pwsdyn.model.affine`) instead of ``method``: the solution, its dense
+        output and the events on it are then exact to rounding, whatever ``rtol``. ``method``
+        still integrates the other modes, sticking, sliding and the variational equations.
+        Default False. A ``ValueError`` names the reason of each mode if none is affine.
     rtol, atol : float
         Local error tolerances (defaults 1e-10, 1e-12).
     first_step, max_step : float
@@ -182,6 +192,8 @@ def _time_span(t_span):
 def _check_options(opts):
     if opts["method"] not in METHODS:
         raise ValueError(f"`method` must be one of {sorted(METHODS)}, got {opts['method']!r}")
+    if not isinstance(opts["exact"], (bool, np.bool_)):
+        raise ValueError(f"`exact` must be True or False, got {opts['exact']!r}")
     for k in ("rtol", "atol"):
         v = opts[k]
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
@@ -207,6 +219,19 @@ def _max_step(model, p, max_step) -> float:
 
 
 _TABLES: dict = {}
+_AFFINE_CHECKED: set = set()
+
+
+def _check_exact(model) -> None:
+    """``exact=True`` needs at least one affine mode; say why each mode is not one."""
+    if model.hash in _AFFINE_CHECKED:
+        return
+    aff = affine_structure(model)
+    if not aff.any:
+        why = "; ".join(f"mode {m.name!r}: {r}" for m, r in zip(model.modes, aff.reasons))
+        raise ValueError(f"`exact=True` needs a mode that is affine in the states with harmonic "
+                         f"forcing; model {model.name!r} has none ({why})")
+    _AFFINE_CHECKED.add(model.hash)
 
 
 def kernel_tables(cm: CompiledModel, sliding: str = "convex"):
@@ -270,6 +295,9 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
         iopt[IO_STOP_MASK], iopt[IO_STOP_REF], iopt[IO_STOP_COUNT] = stop
     iopt[IO_DKIND0] = 0 if dkind0 is None else dkind0
     iopt[IO_DIDX0] = -1 if didx0 is None else didx0
+    if opts["exact"]:
+        _check_exact(model)
+        iopt[IO_EXACT] = 1
     fopt = np.array([opts["rtol"], opts["atol"], opts["first_step"] or 0.0,
                      _max_step(model, p, opts["max_step"]), opts["chatter_ratio"],
                      -1.0 if opts["chatter_velocity"] is None else opts["chatter_velocity"],

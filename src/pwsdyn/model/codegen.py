@@ -32,6 +32,7 @@ import sympy as sp
 from numba import types
 from sympy.printing.pycode import PythonCodePrinter
 
+from .affine import affine_structure
 from .discontinuities import U_SYMBOL
 from .spec import Model
 
@@ -45,13 +46,17 @@ W_HHD = 13  # h and hdot together (one call per step in the event detection hot 
 # Utkin's equivalent control on switch ``idx``: the switch's family f(t, x, u) (n values),
 # hdot(u) = h_t + h_x f(t, x, u) and its u-derivative (one value each); u is read from out[0]
 W_FU, W_HDU, W_HDUD = 14, 15, 16
+# exact propagation of affine modes (:mod:`pwsdyn.model.affine`): with idx = -1 the dimension
+# nz of the augmented state (0 if no mode is affine); with idx = mode a flag (1 affine, 0 not)
+# followed by the augmented matrix M (nz x nz, row-major)
+W_AFFINE = 17
 
 #: Signature of the generated function: evaluate(which, idx, t, x, p, out) -> None
 EVALUATE_SIGNATURE = types.void(types.int64, types.int64, types.float64, types.float64[::1],
                                 types.float64[::1], types.float64[::1])
 EVALUATE_TYPE = types.FunctionType(EVALUATE_SIGNATURE)
 
-_CODEGEN_VERSION = "4"
+_CODEGEN_VERSION = "5"
 
 
 def cache_dir() -> Path:
@@ -149,6 +154,10 @@ def derivatives(model: Model) -> Derivatives:
         cases[(W_GT, j)] = [_clean(e) for e in g.diff(t)]
         cases[(W_GUARD, j)] = [ev.guard if ev.guard is not None else sp.true]
     assert all(len(v) in (1, 2, n, n * n) for v in cases.values())
+    aff = affine_structure(model)
+    cases[(W_AFFINE, -1)] = [sp.Integer(aff.dimension if aff.any else 0)]
+    for i, M in enumerate(aff.matrices):
+        cases[(W_AFFINE, i)] = [sp.Integer(0)] if M is None else [sp.Integer(1), *M]
     return Derivatives(cases)
 
 
