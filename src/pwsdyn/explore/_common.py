@@ -142,28 +142,25 @@ def period_estimate(points: np.ndarray, max_period: int, tol: float) -> int:
     return 0
 
 
-def state_times(events, t_lo: float, t_hi: float, initial: str = "") -> tuple[float, float]:
-    """Total time in sticking and in sliding states within ``[t_lo, t_hi]`` from an event log.
-
-    The discrete state after each event is ``mode_after`` (``stick:<event>``,
-    ``slide:<switch>`` or a mode name); ``initial`` is the state before the first event.
+def state_times(t, after, chatter, t_lo: float, t_hi: float, initial: int = 0
+                ) -> tuple[float, float]:
+    """Total time in sticking and in sliding states within ``[t_lo, t_hi]`` from the columns
+    of an event log (:class:`~pwsdyn.integrate.trajectory.EventLog`): event times ``t``, the
+    kind of discrete state after each event ``after`` (0 a mode, 1 sticking, 2 sliding) and
+    a mask of ``chatter`` records (which leave the state to the record that follows them);
+    ``initial`` is the kind of state before the first event.
     """
-    stick = slide = 0.0
-    state, t_prev = initial, t_lo
-    for e in events:
-        t = min(max(e.t, t_lo), t_hi)
-        if state.startswith("stick:"):
-            stick += t - t_prev
-        elif state.startswith("slide:"):
-            slide += t - t_prev
-        t_prev = t
-        if e.kind != "chatter":
-            state = e.mode_after
-    if state.startswith("stick:"):
-        stick += t_hi - t_prev
-    elif state.startswith("slide:"):
-        slide += t_hi - t_prev
-    return stick, slide
+    t = np.asarray(t, dtype=float)
+    keep = np.flatnonzero(~np.asarray(chatter, dtype=bool))
+    # the state after each event: that of the last non-chatter record up to it
+    last = np.full(len(t), -1)
+    last[keep] = keep
+    last = np.maximum.accumulate(last) if len(t) else last
+    after = np.asarray(after)
+    st_after = np.where(last >= 0, after[np.maximum(last, 0)] if len(t) else last, initial)
+    during = np.concatenate(([initial], st_after))
+    d = np.diff(np.concatenate(([t_lo], np.clip(t, t_lo, t_hi), [t_hi])))
+    return float(d[during == 1].sum()), float(d[during == 2].sum())
 
 
 def failed_status(traj) -> int:

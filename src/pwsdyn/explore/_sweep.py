@@ -40,6 +40,7 @@ import xarray as xr
 
 from .. import __version__
 from ..integrate.simulate import DEFAULTS, integrator_options, _check_options, _simulate_compiled, state_vector
+from ..integrate.trajectory import EventLog
 from ._common import (check_section, COUNTED_KINDS, DIVERGED, SECTION_MISSED, ModelContext,
                       check_bound, failed_status, model_payload, period_estimate, readmit,
                       state_times)
@@ -65,6 +66,21 @@ def _period_function(ctx: ModelContext):
         fn = None if fp is None else sp.lambdify(ctx.model.parameter_symbols, fp, "math")
         ctx._period_fn = fn
     return fn
+
+
+def _event_columns(events, n: int):
+    """Times, kinds, names, states before and kinds of discrete state after (0 mode,
+    1 sticking, 2 sliding) of an event log or a list of event records, as arrays."""
+    if isinstance(events, EventLog):
+        return (events.t, events.kind, events.name, events.x_before,
+                events.state_after[:, 0])
+    after = [1 if e.mode_after.startswith("stick:") else
+             2 if e.mode_after.startswith("slide:") else 0 for e in events]
+    return (np.array([e.t for e in events], dtype=float),
+            np.array([e.kind for e in events], dtype=object),
+            np.array([e.name for e in events], dtype=object),
+            np.array([e.x_before for e in events], dtype=float).reshape(len(events), n),
+            np.array(after, dtype=int))
 
 
 def run_window(ctx: ModelContext, x, p, T: float, phase: float, n_tr: int, n_s: int,
@@ -123,7 +139,7 @@ def run_window(ctx: ModelContext, x, p, T: float, phase: float, n_tr: int, n_s: 
             traj = _simulate_compiled(ctx.cm, xx, t_start, t_end, p, opts, sample=(t_w, T))
             status = failed_status(traj)
             nsteps = traj.stats.get("steps", 0)
-            events = list(traj.events)
+            events = traj.events
             ts, xs = traj.samples
             j = np.rint((ts - t_w) / T).astype(int)
             keep = (j >= 0) & (j < min(max_points, n_s))
@@ -136,21 +152,20 @@ def run_window(ctx: ModelContext, x, p, T: float, phase: float, n_tr: int, n_s: 
             status = failed_status(traj)
             x_end = traj.x_final.copy()
             nsteps = traj.stats.get("steps", 0)
-            events = list(traj.events)
+            events = traj.events
+    t, kind, name, xb, after = _event_columns(events, n)
+    in_window = (t >= t_w) & (t < t_end)
     if not strobe:
-        m = 0
-        for e in events:
-            if (e.name == section and e.kind in SECTION_KINDS
-                    and t_w <= e.t < t_end):
-                if m < max_points:
-                    pts[m] = e.x_before
-                    phs[m] = ((e.t - t_start) / T) % 1.0
-                m += 1
-    win = [e for e in events if t_w <= e.t < t_end]
-    counted = sum(1 for e in win if e.kind in COUNTED_KINDS)
-    before = [e for e in events if e.t < t_w and e.kind != "chatter"]
-    initial = before[-1].mode_after if before else ""
-    stick, slide = state_times([e for e in events if e.t < t_end], t_w, t_end, initial)
+        hits = np.flatnonzero(in_window & (name == section) & np.isin(kind, SECTION_KINDS))
+        m = min(len(hits), max_points)
+        pts[:m] = xb[hits[:m]]
+        phs[:m] = ((t[hits[:m]] - t_start) / T) % 1.0
+    counted = int(np.sum(in_window & np.isin(kind, COUNTED_KINDS)))
+    chatter = kind == "chatter"
+    before = np.flatnonzero((t < t_w) & ~chatter)
+    initial = int(after[before[-1]]) if len(before) else 0
+    upto = t < t_end
+    stick, slide = state_times(t[upto], after[upto], chatter[upto], t_w, t_end, initial)
     if status == 0 and not check_bound(x_end, bound):
         status = DIVERGED
     npts = int(np.sum(np.all(np.isfinite(pts), axis=1)))

@@ -16,7 +16,7 @@ from ._kernel import (IO_DIDX0, IO_DKIND0, IO_EXACT, IO_N, IO_STOP_COUNT, IO_STO
                       IO_STOP_REF, VAR_NONE, VAR_SEGMENTS, run_kernel)
 from ._variational import assemble_segments
 from .tableaus import METHODS
-from .trajectory import EVENT_KINDS, EventRecord, Trajectory
+from .trajectory import EventLog, Trajectory
 
 #: Default options of :func:`simulate` (each documented there).
 DEFAULTS = dict(method="RK45", exact=False, rtol=1e-10, atol=1e-12, first_step=None, max_step=math.inf,
@@ -326,27 +326,9 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
             label[key[i]] = _state_name(model, *nodes_s[i])
     run_names = np.array([label[key[i]] for i in starts], dtype=str)
     states = np.repeat(run_names, np.diff(np.append(starts, len(key))))
-    # event records (one Python object each: names looked up once per distinct code, the
-    # state vectors are rows of one copied array; sweeps log hundreds of events per call)
-    xb_all = ev_xb[:, :n].copy()
-    xa_all = ev_xa[:, :n].copy()
-    names: dict = {}
-
-    def state_name(k, i, m):
-        key = (k, i, m)
-        if key not in names:
-            names[key] = _state_name(model, k, i, m)
-        return names[key]
-
-    switch_kinds = ("crossing", "slide_start", "slide_end")
-    events = []
-    for r, row in enumerate(ev_info[:, :8].tolist()):
-        kind, ref, ok, oi, om, nk, ni, nmode = row
-        kname = EVENT_KINDS[kind]
-        name = model.switches[ref].name if kname in switch_kinds else model.events[ref].name
-        events.append(EventRecord(float(ev_t[r]), name, kname, xb_all[r], xa_all[r],
-                                  state_name(ok, oi, om), state_name(nk, ni, nmode),
-                                  float(ev_t2[r])))
+    # the event log as arrays; its records are made when it is read (sweeps read columns)
+    events = EventLog(model, ev_t, ev_t2, ev_info, ev_xb[:, :n].copy(), ev_xa[:, :n].copy(),
+                      _state_name)
     stat = dict(zip(("steps", "rejected_steps", "nfev", "events", "chatter", "landing_steps"),
                     (int(s) for s in stats)))
     params = dict(zip(model.parameters, (float(v) for v in p)))

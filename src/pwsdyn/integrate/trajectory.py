@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -56,6 +57,86 @@ class EventRecord:
                 f"{self.mode_before} -> {self.mode_after})")
 
 
+#: Event kinds logged on a switching surface (their ``name`` is the switch's).
+SWITCH_EVENT_KINDS = ("crossing", "slide_start", "slide_end")
+
+
+class EventLog(Sequence):
+    """The event log of a run: a read-only sequence of :class:`EventRecord` with its columns
+    as arrays.
+
+    The kernel returns the log as arrays; records are made only when the log is indexed or
+    iterated (a sweep logs hundreds of events per parameter value and reads the columns
+    only). The columns: ``t``, ``t_after``, ``kind_code`` (index into
+    :data:`EVENT_KINDS`), ``ref`` (event or switch index), ``x_before``, ``x_after``,
+    ``state_before``/``state_after`` (kernel discrete states ``(kind, index, mode)``, kind
+    0 a mode, 1 sticking, 2 sliding) and the derived ``kind`` and ``name``.
+    """
+
+    __slots__ = ("model", "t", "t_after", "kind_code", "ref", "x_before", "x_after",
+                 "state_before", "state_after", "_records", "_state_name")
+
+    def __init__(self, model, t, t_after, info, x_before, x_after, state_name):
+        self.model = model
+        self.t = t
+        self.t_after = t_after
+        self.kind_code = info[:, 0]
+        self.ref = info[:, 1]
+        self.state_before = info[:, 2:5]
+        self.state_after = info[:, 5:8]
+        self.x_before = x_before
+        self.x_after = x_after
+        self._state_name = state_name
+        self._records = None
+
+    @property
+    def kind(self) -> np.ndarray:
+        return np.array(EVENT_KINDS, dtype=object)[self.kind_code]
+
+    @property
+    def name(self) -> np.ndarray:
+        ev = np.array([e.name for e in self.model.events] or [""], dtype=object)
+        sw = np.array([s.name for s in self.model.switches] or [""], dtype=object)
+        on_switch = np.isin(self.kind_code, [EVENT_KINDS.index(k) for k in SWITCH_EVENT_KINDS])
+        return np.where(on_switch, sw[np.where(on_switch, self.ref, 0)],
+                        ev[np.where(on_switch, 0, self.ref)])
+
+    def _materialize(self) -> list:
+        if self._records is None:
+            names: dict = {}
+
+            def state(k, i, m):
+                key = (k, i, m)
+                if key not in names:
+                    names[key] = self._state_name(self.model, k, i, m)
+                return names[key]
+
+            kinds, evn = self.kind.tolist(), self.name.tolist()
+            sb, sa = self.state_before.tolist(), self.state_after.tolist()
+            t, t2 = self.t.tolist(), self.t_after.tolist()
+            self._records = [EventRecord(t[r], evn[r], kinds[r], self.x_before[r],
+                                         self.x_after[r], state(*sb[r]), state(*sa[r]), t2[r])
+                             for r in range(len(t))]
+        return self._records
+
+    def __len__(self):
+        return len(self.t)
+
+    def __getitem__(self, i):
+        return self._materialize()[i]
+
+    def __iter__(self):
+        return iter(self._materialize())
+
+    def __eq__(self, other):
+        if isinstance(other, Sequence):
+            return list(self) == list(other)
+        return NotImplemented
+
+    def __repr__(self):
+        return f"EventLog({len(self)} events)"
+
+
 @dataclass(eq=False)
 class Trajectory:
     """A simulated hybrid trajectory.
@@ -69,8 +150,9 @@ class Trajectory:
         States at those times.
     state : list[str]
         Discrete state (mode name, ``stick:<event>`` or ``slide:<switch>``) at each node.
-    events : list[EventRecord]
-        The event log, in time order. It is the hybrid orbit's segment signature.
+    events : sequence of EventRecord
+        The event log, in time order (an :class:`EventLog`, whose columns are also arrays,
+        or a list). It is the hybrid orbit's segment signature.
     status : Status
     message : str
     stats : dict
