@@ -623,3 +623,17 @@ def test_lyapunov_of_a_ball_stuck_on_its_table_is_superstable():
     assert 0.2 * w * w < 9.81
     assert np.all(np.isneginf(lyap.exponents))
     assert lyap.events.get("chatter", 0) <= 1   # not one per segment
+
+
+def test_state_times_from_event_columns():
+    """Sticking and sliding time in a window from the log's columns, by hand: stuck from 1
+    to 2 (a chatter record followed by stick), sliding from 3 to 4.5, then stuck to the end;
+    window [1.5, 6]."""
+    from pwsdyn.explore._common import state_times
+
+    t = np.array([0.5, 1.0, 1.0, 2.0, 3.0, 4.5, 5.0])
+    after = np.array([0, 0, 1, 0, 2, 0, 1])
+    chatter = np.array([False, True, False, False, False, False, False])
+    stick, slide = state_times(t, after, chatter, 1.5, 6.0, initial=0)
+    assert stick == pytest.approx(0.5 + 1.0) and slide == pytest.approx(1.5)
+    assert state_times(t[:0], after[:0], chatter[:0], 0.0, 2.0, initial=1) == (2.0, 0.0)

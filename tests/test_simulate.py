@@ -263,3 +263,26 @@ def test_dense_output_both_sides_of_a_jump():
     v = ev.x_after[1]
     np.testing.assert_allclose(traj(t)[:, 0], v * (t - ev.t) - G / 2 * (t - ev.t) ** 2,
                                atol=1e-12)
+
+
+@pytest.mark.parametrize("name, x0, params, t_end", [
+    ("bouncing-ball", {"y": 0.1, "v": 0.0}, dict(A=0.02, omega=25.0, e=0.3), 1.0),
+    ("stick-slip-oscillator", (0.0, 0.0), None, 30.0),
+])
+def test_event_log_columns_match_its_records(name, x0, params, t_end):
+    """The log's arrays and its records say the same (impact/chatter/stick/release on an
+    event; slide_start/slide_end on a switch, named after the switch)."""
+    traj = pwsdyn.simulate(name, x0, (0, t_end), params=params)
+    log = traj.events
+    recs = list(log)
+    assert len(recs) == len(log) > 3 and log == recs and log[-1] is recs[-1]
+    assert log.kind.tolist() == [e.kind for e in recs]
+    assert log.name.tolist() == [e.name for e in recs]
+    np.testing.assert_array_equal(log.t, [e.t for e in recs])
+    np.testing.assert_array_equal(log.x_before, np.array([e.x_before for e in recs]))
+    kinds = {"stick": 1, "slide": 2}
+    assert log.state_after[:, 0].tolist() == [kinds.get(e.mode_after.split(":")[0], 0)
+                                              for e in recs]
+    assert {e.kind for e in recs} >= ({"impact", "chatter", "stick", "release"}
+                                      if name == "bouncing-ball"
+                                      else {"slide_start", "slide_end"})
