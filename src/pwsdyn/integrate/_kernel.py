@@ -670,19 +670,6 @@ def _augment(M, sc, nz, n, t, y, z):
 
 
 @njit(cache=True)
-def _make_dense_any(exact, Mm, sc, nz, zv, zv1, xe, ev, p, dkind, didx, mode, nm,
-                    t, y, h, nY, n, nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1,
-                    w2, gx, hdx, jac, xt, ft):
-    """Dense output of the step just taken: the Taylor terms of an exact step, else the
-    Runge-Kutta interpolant (:func:`_make_dense`)."""
-    if exact:
-        _exact_step(Mm, sc, nz, n, t, y, h, zv, zv1, Q, xe)
-        return 0
-    return _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_fsal, P, Q,
-                       ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
-
-
-@njit(cache=True)
 def _dense_eval(y0, Q, theta, nY, deg, out):
     for i in range(nY):
         acc = 0.0
@@ -1361,10 +1348,12 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
         # dense output coefficients are made only when needed (stored steps, interior samples)
         q_ready = q_made
         if save_all and not q_ready:
-            stats[2] += _make_dense_any(exact_now, aff_M[mode], aff_s[mode], nz, zv, zv1, xe, ev,
-                                        p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C,
-                                        s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx,
-                                        jac, xt, ft)
+            if exact_now:
+                _exact_step(aff_M[mode], aff_s[mode], nz, n, t, y, h, zv, zv1, Q, xe)
+            else:
+                stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A,
+                                        C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2, gx,
+                                        hdx, jac, xt, ft)
             q_ready = True
         t_new = t + h
 
@@ -1406,10 +1395,12 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     # Hermite fit must reproduce h at the midpoint, or the step is retaken
                     # shorter.
                     if not q_ready:
-                        stats[2] += _make_dense_any(exact_now, aff_M[mode], aff_s[mode], nz, zv,
-                                                    zv1, xe, ev, p, dkind, didx, mode, nm, t, y, h,
-                                                    nY, n, nvar, K, A, C, s_fsal, P, Q, ytmp, etab,
-                                                    stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
+                        if exact_now:
+                            _exact_step(aff_M[mode], aff_s[mode], nz, n, t, y, h, zv, zv1, Q, xe)
+                        else:
+                            stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n,
+                                                    nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab,
+                                                    slide_c, w1, w2, gx, hdx, jac, xt, ft)
                         q_ready = True
                     _dense_eval(y, Q, 0.5, nY, deg, xs)
                     hm = _watch_value(ev, p, WF_SURFACE, widx[w], wmode[w], nm, t + 0.5 * h, xs,
@@ -1449,10 +1440,12 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                         thetas[ns] = rb
                         ns += 1
                 if ns > 1 and not q_ready:
-                    stats[2] += _make_dense_any(exact_now, aff_M[mode], aff_s[mode], nz, zv, zv1,
-                                                xe, ev, p, dkind, didx, mode, nm, t, y, h, nY, n,
-                                                nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab,
-                                                slide_c, w1, w2, gx, hdx, jac, xt, ft)
+                    if exact_now:
+                        _exact_step(aff_M[mode], aff_s[mode], nz, n, t, y, h, zv, zv1, Q, xe)
+                    else:
+                        stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar,
+                                                K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c,
+                                                w1, w2, gx, hdx, jac, xt, ft)
                     q_ready = True
                 for q in range(1, ns):
                     _dense_eval(y, Q, thetas[q], nY, deg, xs)
@@ -1472,10 +1465,12 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     vals[w, 0] = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t, y, n,
                                               buf, fbuf, hdx)
                 if not q_ready:
-                    stats[2] += _make_dense_any(exact_now, aff_M[mode], aff_s[mode], nz, zv, zv1,
-                                                xe, ev, p, dkind, didx, mode, nm, t, y, h, nY, n,
-                                                nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab,
-                                                slide_c, w1, w2, gx, hdx, jac, xt, ft)
+                    if exact_now:
+                        _exact_step(aff_M[mode], aff_s[mode], nz, n, t, y, h, zv, zv1, Q, xe)
+                    else:
+                        stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar,
+                                                K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c,
+                                                w1, w2, gx, hdx, jac, xt, ft)
                     q_ready = True
                 _dense_eval(y, Q, 0.5, nY, deg, xs)
                 vals[w, 1] = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t + 0.5 * h,
@@ -1506,10 +1501,12 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     continue
                 if _crosses(prev_v, vq, wdir[w]):
                     if not q_ready:
-                        stats[2] += _make_dense_any(exact_now, aff_M[mode], aff_s[mode], nz, zv,
-                                                    zv1, xe, ev, p, dkind, didx, mode, nm, t, y, h,
-                                                    nY, n, nvar, K, A, C, s_fsal, P, Q, ytmp, etab,
-                                                    stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
+                        if exact_now:
+                            _exact_step(aff_M[mode], aff_s[mode], nz, n, t, y, h, zv, zv1, Q, xe)
+                        else:
+                            stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n,
+                                                    nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab,
+                                                    slide_c, w1, w2, gx, hdx, jac, xt, ft)
                         q_ready = True
                     # locate by Illinois on the dense output within [prev_th, th]
                     a_th = prev_th
@@ -1593,10 +1590,12 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 n_nodes += 1
             if sdt > 0.0 and s0 + sk * sdt <= t_new:
                 if not q_ready:
-                    stats[2] += _make_dense_any(exact_now, aff_M[mode], aff_s[mode], nz, zv, zv1,
-                                                xe, ev, p, dkind, didx, mode, nm, t, y, h, nY, n,
-                                                nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab,
-                                                slide_c, w1, w2, gx, hdx, jac, xt, ft)
+                    if exact_now:
+                        _exact_step(aff_M[mode], aff_s[mode], nz, n, t, y, h, zv, zv1, Q, xe)
+                    else:
+                        stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar,
+                                                K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c,
+                                                w1, w2, gx, hdx, jac, xt, ft)
                     q_ready = True
                 samp, n_samp, sk = _take_samples(t, h, y, Q, nY, n, deg, s0, sdt, sk, t_end,
                                                  samp, n_samp, xs)
