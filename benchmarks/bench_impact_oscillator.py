@@ -91,9 +91,9 @@ def make_model(params: dict) -> dict:
 # ------------------------------------------------------------------------------------------
 # pwsdyn
 # ------------------------------------------------------------------------------------------
-def pwsdyn_run(model, t_end, rtol, atol, dense, method="RK45"):
+def pwsdyn_run(model, t_end, rtol, atol, dense, method="RK45", exact=False):
     return pwsdyn.simulate(model, X0, (0.0, t_end), method=method, rtol=rtol, atol=atol,
-                           dense=dense, max_steps=100_000_000)
+                           dense=dense, max_steps=100_000_000, exact=exact)
 
 
 def pwsdyn_impacts(traj):
@@ -388,8 +388,11 @@ def main(argv=None):
     # the 8th-order pair at the same tolerances: what a user gets by switching `method`
     pwsdyn_run(model, T, rtol, atol, False, "DOP853")
     tm_8 = Timer(lambda: pwsdyn_run(model, N * T, rtol, atol, False, "DOP853"))
+    # exact propagation of the affine free flight (exp(h M) of the forced system)
+    pwsdyn_run(model, T, rtol, atol, False, exact=True)
+    tm_xp = Timer(lambda: pwsdyn_run(model, N * T, rtol, atol, False, exact=True))
     time_interleaved([(tm_nd, args.repeats), (tm_d, args.repeats), (tm_8, args.repeats),
-                      (tm_sp, args.scipy_repeats)])
+                      (tm_xp, args.repeats), (tm_sp, args.scipy_repeats)])
     exact = ExactImpactOscillator(params)
     tm_ex = Timer(lambda: exact.impacts(Ns * T))
     tm_ex.run()
@@ -399,6 +402,7 @@ def main(argv=None):
     ti_nd, vp_nd, vm_nd = pwsdyn_impacts(traj_nd)
     ti_d, vp_d, _ = pwsdyn_impacts(traj_d)
     ti_8, vp_8, _ = pwsdyn_impacts(tm_8.result)
+    ti_xp, vp_xp, _ = pwsdyn_impacts(tm_xp.result)
     other = sorted({e.kind for e in traj_nd.events if e.kind != "impact"})
     dense_same = len(ti_d) == len(ti_nd) and bool(np.all(ti_d == ti_nd) and np.all(vp_d == vp_nd))
 
@@ -428,7 +432,8 @@ def main(argv=None):
     d_v_ps, _ = max_abs_diff(vp_nd, vp_sp, n_sp)
     err = {}
     for name, (ti, vp) in {"pwsdyn": (ti_nd, vp_nd), "scipy": (ti_sp, vp_sp),
-                           "pwsdyn_dop853": (ti_8, vp_8)}.items():
+                           "pwsdyn_dop853": (ti_8, vp_8),
+                           "pwsdyn_exact": (ti_xp, vp_xp)}.items():
         et, k_ex = max_abs_diff(ti, ti_ex, K)
         ev, _ = max_abs_diff(vp, vp_ex, K)
         et_all, _ = max_abs_diff(ti, ti_ex, len(ti_ex))
@@ -453,6 +458,7 @@ def main(argv=None):
         ("pwsdyn dense=False", N, tm_nd, err["pwsdyn"]),
         ("pwsdyn dense=True", N, tm_d, err["pwsdyn"]),
         ("pwsdyn DOP853 dense=F", N, tm_8, err["pwsdyn_dop853"]),
+        ("pwsdyn exact dense=F", N, tm_xp, err["pwsdyn_exact"]),
         (f"scipy solve_ivp {meth}*", Ns, tm_sp, err["scipy"]),
         ("exact (closed form)", Ns, tm_ex, None),
     ]
@@ -479,6 +485,9 @@ def main(argv=None):
     print(f"scipy {meth} / pwsdyn DOP853 at the same rtol/atol (dense=False): {ratio_8:.0f}x, "
           f"with errors vs exact {err['pwsdyn_dop853']['t']:.1e} (scipy "
           f"{err['scipy']['t']:.1e})")
+    ratio_xp = us(tm_sp.wall, Ns) / us(tm_xp.wall, N)
+    print(f"scipy {meth} / pwsdyn exact=True (dense=False): {ratio_xp:.0f}x, with errors vs "
+          f"exact {err['pwsdyn_exact']['t']:.1e} (scipy {err['scipy']['t']:.1e})")
     print(f"pwsdyn start-up in this process (excluded above): import {IMPORT_S:.2f} s (loads the "
           f"kernel from numba's cache), first simulate {first_call:.2f} s (of which loading the "
           f"model's generated function {cm.compile_seconds:.2f} s)")
@@ -517,6 +526,11 @@ def main(argv=None):
                                        "cpu_us_per_period": us(tm_nd.cpu, N)},
                        "dense_true": {"seconds": tm_d.wall, "us_per_period": us(tm_d.wall, N),
                                       "cpu_us_per_period": us(tm_d.cpu, N)},
+                       "dop853_dense_false": {"seconds": tm_8.wall,
+                                              "us_per_period": us(tm_8.wall, N)},
+                       "exact_dense_false": {"seconds": tm_xp.wall,
+                                             "us_per_period": us(tm_xp.wall, N),
+                                             "stats": tm_xp.result.stats},
                        "stats": traj_nd.stats, "dense_identical_impacts": dense_same},
             "scipy": {"periods": Ns, "repeats": args.scipy_repeats, "seconds": tm_sp.wall,
                       "us_per_period": us(tm_sp.wall, Ns), "cpu_us_per_period": us(tm_sp.cpu, Ns),
@@ -526,6 +540,7 @@ def main(argv=None):
                       "impacts": len(ti_ex)},
             "ratio_scipy_over_pwsdyn": {"dense_false": ratio_nd, "dense_true": ratio_d,
                                         "pwsdyn_dop853_dense_false": ratio_8,
+                                        "pwsdyn_exact_dense_false": ratio_xp,
                                         "dense_false_cpu_time": ratio_cpu},
             "agreement": {"tolerance": tol, "ok": agree, "impact_counts_match": count_ok,
                           "pwsdyn_vs_scipy": {"impacts": k_ps, "max_dt": d_t_ps,

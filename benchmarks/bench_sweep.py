@@ -22,11 +22,14 @@ Contenders (timings reported, never asserted):
   ``--scipy-max-impacts`` impacts in one period; that value is then reported as stuck.
 
 Both codes are also run with the 8th-order Dormand-Prince pair (``DOP853``, same
-tolerances): pwsdyn's full sweep serially, scipy's subset, extrapolated the same way.
+tolerances): pwsdyn's full sweep serially, scipy's subset, extrapolated the same way. pwsdyn
+also runs with ``exact=True``: the oscillator's free flight is affine with harmonic forcing,
+so it is propagated by the exact flow (matrix exponential of the system augmented with the
+forcing) instead of the Runge-Kutta pair, serially and on 2 workers.
 
-Accuracy check: from the same start, ``--scipy-periods`` periods at each subset value with both
-codes; the final states are compared at the values where the sweep found period 1 or 2 (on
-chaotic values the two codes' trajectories separate, as any two integrators' do).
+Accuracy check: from the same start, ``--scipy-periods`` periods at each subset value where
+the sweep found period 1 or 2 (on chaotic values any two integrators' trajectories separate)
+with every contender; final states against scipy DOP853 at rtol 1e-13, atol 1e-15.
 
 Run::
 
@@ -104,6 +107,34 @@ def scipy_sweep(omegas, periods, record_from, p, rtol, atol, max_impacts, x0=X0,
     return out, finals, stuck, nfev
 
 
+def _timed_serial_sweep(args):
+    """One serial sweep in a fresh process (for the machine's own scaling, below)."""
+    values, kw = args
+    import pwsdyn
+
+    model = pwsdyn.load_model("impact-oscillator")
+    pwsdyn.sweep(model, "omega", values[:2], X0, workers=1,
+                 **{**kw, "transient": 2, "samples": 2})
+    t0 = time.perf_counter()
+    pwsdyn.sweep(model, "omega", values, X0, workers=1, **kw)
+    return time.perf_counter() - t0
+
+
+def machine_scaling(values, kw, repeats=2):
+    """The same serial sweep in one process alone, then in two processes at once (no Dask,
+    nothing shared): ``t_alone / t_two`` is the parallel efficiency the machine itself allows
+    (shared caches, memory bandwidth, a host that maps vCPUs onto hyperthreads)."""
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    alone, two = [], []
+    with ctx.Pool(2) as pool:
+        for _ in range(repeats):
+            alone.append(pool.apply(_timed_serial_sweep, ((values, kw),)))
+            two.append(max(pool.map(_timed_serial_sweep, [(values, kw)] * 2)))
+    return min(alone), min(two)
+
+
 def machine_info():
     import numba
 
@@ -156,17 +187,25 @@ def main(argv=None):
           f"{args.stop}] x {args.periods} periods ({transient} transient + {samples} "
           f"recorded); RK45 rtol {args.rtol:g} atol {args.atol:g}")
 
-    # warm-up: compile/load the model and its section copy in this process
-    pwsdyn.sweep(model, "omega", omegas[:2], X0, workers=1, **{**kw, "transient": 2,
-                                                                 "samples": 2})
-    t0 = time.perf_counter()
-    c0 = time.process_time()
-    serial = pwsdyn.sweep(model, "omega", omegas, X0, workers=1, **kw)
-    t_serial = time.perf_counter() - t0
-    cpu_serial = time.process_time() - c0
+    # warm-up: compile/load the model in this process (and the kernel's exact path)
+    for ex in (False, True):
+        pwsdyn.sweep(model, "omega", omegas[:2], X0, workers=1, exact=ex,
+                     **{**kw, "transient": 2, "samples": 2})
     periods_total = args.values * args.periods
-    print(f"pwsdyn serial:        {t_serial:8.2f} s wall ({cpu_serial:.2f} s CPU), "
-          f"{1e6 * t_serial / periods_total:.1f} us/period")
+    # pwsdyn: serial runs of each contender (RK45, DOP853, exact propagation of the affine
+    # free flight), then RK45 and exact on a 2-worker cluster started beforehand, and with
+    # workers=2 (cluster started and stopped inside the call, as the CLI does)
+    contenders = {"RK45": dict(method="RK45"), "DOP853": dict(method="DOP853"),
+                  "exact": dict(exact=True)}
+    serial, pw = {}, {}
+    for name, opts in contenders.items():
+        t0 = time.perf_counter()
+        c0 = time.process_time()
+        serial[name] = pwsdyn.sweep(model, "omega", omegas, X0, workers=1, **opts, **kw)
+        pw[name] = {"serial_s": time.perf_counter() - t0, "serial_cpu_s": time.process_time() - c0}
+        print(f"pwsdyn {name:7s} serial:  {pw[name]['serial_s']:8.2f} s wall "
+              f"({pw[name]['serial_cpu_s']:.2f} s CPU), "
+              f"{1e6 * pw[name]['serial_s'] / periods_total:.2f} us/period")
 
     t0 = time.perf_counter()
     cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
@@ -176,94 +215,130 @@ def main(argv=None):
     client.run(lambda: __import__("pwsdyn.explore._common", fromlist=["x"]).ModelContext
                .get("impact-oscillator") and None)
     t_start = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    par = pwsdyn.sweep(model, "omega", omegas, X0, client=client, **kw)
-    t_par = time.perf_counter() - t0
+    same_all = True
+    for name in ("RK45", "exact"):
+        opts = contenders[name]
+        # one untimed run on the cluster: the workers load the kernel's code paths
+        pwsdyn.sweep(model, "omega", omegas[:4], X0, client=client, **opts,
+                     **{**kw, "transient": 2, "samples": 2})
+        t0 = time.perf_counter()
+        par = pwsdyn.sweep(model, "omega", omegas, X0, client=client, **opts, **kw)
+        pw[name]["2workers_s"] = time.perf_counter() - t0
+        pw[name]["identical_serial_parallel"] = bool(serial[name].identical(par))
+        pw[name]["parallel_efficiency"] = pw[name]["serial_s"] / (2 * pw[name]["2workers_s"])
+        same_all &= pw[name]["identical_serial_parallel"]
+        print(f"pwsdyn {name:7s} 2 workers: {pw[name]['2workers_s']:6.2f} s wall (cluster "
+              f"start-up {t_start:.2f} s not included), parallel efficiency "
+              f"{100 * pw[name]['parallel_efficiency']:.0f}%, identical to serial: "
+              f"{pw[name]['identical_serial_parallel']}")
     client.close()
     cluster.close()
-    same = bool(serial.identical(par))
-    t0 = time.perf_counter()
-    par2 = pwsdyn.sweep(model, "omega", omegas, X0, workers=2, **kw)
-    t_par_cold = time.perf_counter() - t0
-    same2 = bool(serial.identical(par2))
-    eff = t_serial / (2 * t_par)
-    print(f"pwsdyn 2 workers:     {t_par:8.2f} s wall (cluster start-up {t_start:.2f} s "
-          f"not included), parallel efficiency {100 * eff:.0f}%, identical to serial: {same}")
-    print(f"pwsdyn workers=2:     {t_par_cold:8.2f} s wall (cluster started and closed inside "
-          f"the call), identical to serial: {same2}")
+    for name in ("RK45", "exact"):
+        t0 = time.perf_counter()
+        par2 = pwsdyn.sweep(model, "omega", omegas, X0, workers=2, **contenders[name], **kw)
+        pw[name]["workers2_with_startup_s"] = time.perf_counter() - t0
+        same2 = bool(serial[name].identical(par2))
+        same_all &= same2
+        print(f"pwsdyn {name:7s} workers=2: {pw[name]['workers2_with_startup_s']:6.2f} s wall "
+              f"(cluster started and closed inside the call), identical to serial: {same2}")
 
-    # scipy on a subset, extrapolated per period; pwsdyn with DOP853 too (same tolerances)
+    # scipy on a subset, extrapolated per period
     sub = omegas[np.linspace(0, args.values - 1, args.scipy_values).round().astype(int)]
     ps = args.scipy_periods
-    per = {float(w): int(serial.period.sel(direction="up", omega=w)) for w in sub}
-    rows = {}
+    per = {float(w): int(serial["RK45"].period.sel(direction="up", omega=w)) for w in sub}
+    periodic = [w for w in sub if per[float(w)] in (1, 2)]
+    scipy_rows = {}
+    sp_final = {}
     for meth in ("RK45", "DOP853"):
-        if meth == "RK45":
-            t_pw, c_pw = t_serial, cpu_serial
-        else:
-            t0 = time.perf_counter()
-            c0 = time.process_time()
-            pwsdyn.sweep(model, "omega", omegas, X0, workers=1, method=meth, **kw)
-            t_pw = time.perf_counter() - t0
-            c_pw = time.process_time() - c0
         t0 = time.perf_counter()
         c0 = time.process_time()
-        sp_finals, sp_stuck, nfev = [], [], 0
+        sp_final[meth], stuck, nfev = {}, 0, 0
         for w in sub:  # each value from the same start, as in the accuracy check
             _, fin, st, nf = scipy_sweep([w], ps, ps, p, args.rtol, args.atol,
                                          args.scipy_max_impacts, method=meth)
-            sp_finals.append(fin[0])
-            sp_stuck.append(st[0])
+            sp_final[meth][float(w)] = None if st[0] else fin[0]
+            stuck += int(st[0])
             nfev += nf
         t_sp = time.perf_counter() - t0
         c_sp = time.process_time() - c0
         sp_per = t_sp / (len(sub) * ps)
-        sp_full = sp_per * periods_total
-        sp_full_cpu = c_sp / (len(sub) * ps) * periods_total
-        # accuracy: same start, ps periods, final states at values with period 1 or 2
-        diffs = []
-        for w, fin, st in zip(sub, sp_finals, sp_stuck):
-            if st or per[float(w)] not in (1, 2):
-                continue
-            tr = pwsdyn.simulate(model, X0, (0, ps * 2 * np.pi / w), {"omega": w},
-                                 rtol=args.rtol, atol=args.atol, method=meth, dense=False)
-            diffs.append(float(np.max(np.abs(tr.x_final - fin))))
-        rows[meth] = {"pwsdyn_serial_s": t_pw, "pwsdyn_serial_cpu_s": c_pw,
-                      "scipy_subset_s": t_sp, "scipy_subset_cpu_s": c_sp,
-                      "scipy_extrapolated_cpu_s": sp_full_cpu,
-                      "ratio_per_core_cpu": sp_full_cpu / c_pw,
-                      "scipy_us_per_period": 1e6 * sp_per, "scipy_extrapolated_s": sp_full,
-                      "scipy_evaluations_per_period": nfev / (len(sub) * ps),
-                      "scipy_stuck_values": int(np.sum(sp_stuck)),
-                      "ratio_per_core": sp_full / t_pw,
-                      "accuracy_max_abs_diff": max(diffs) if diffs else None,
-                      "accuracy_values": len(diffs)}
-        print(f"{meth}: pwsdyn serial {t_pw:.2f} s ({1e6 * t_pw / periods_total:.1f} us/period); "
-              f"scipy {t_sp:.2f} s for {len(sub)} values x {ps} periods "
-              f"({1e6 * sp_per:.0f} us/period, {nfev / (len(sub) * ps):.0f} evaluations/period,"
-              f" stuck at {int(np.sum(sp_stuck))} values), extrapolated {sp_full:.0f} s; "
-              f"ratio per core {sp_full / t_pw:.0f}x wall, {sp_full_cpu / c_pw:.0f}x CPU; "
-              f"pwsdyn vs scipy after {ps} periods at "
-              f"{len(diffs)} periodic values: max |dx| = "
-              f"{max(diffs) if diffs else float('nan'):.1e}")
-    print(f"ratio scipy RK45 / pwsdyn RK45 on 2 workers: "
-          f"{rows['RK45']['scipy_extrapolated_s'] / t_par:.0f}x")
+        scipy_rows[meth] = {"subset_s": t_sp, "subset_cpu_s": c_sp,
+                            "us_per_period": 1e6 * sp_per,
+                            "extrapolated_s": sp_per * periods_total,
+                            "extrapolated_cpu_s": c_sp / (len(sub) * ps) * periods_total,
+                            "evaluations_per_period": nfev / (len(sub) * ps),
+                            "stuck_values": stuck}
+        print(f"scipy {meth}: {t_sp:.2f} s for {len(sub)} values x {ps} periods "
+              f"({1e6 * sp_per:.0f} us/period, {nfev / (len(sub) * ps):.0f} evaluations/period, "
+              f"stuck at {stuck} values), extrapolated to {sp_per * periods_total:.0f} s")
+    # reference for the accuracy check: scipy DOP853 at rtol 1e-13, atol 1e-15 (same start,
+    # ps periods, values where the sweep found period 1 or 2: on chaotic values any two
+    # integrators separate)
+    ref = {}
+    for w in periodic:
+        _, fin, st, _ = scipy_sweep([w], ps, ps, p, 1e-13, 1e-15, args.scipy_max_impacts,
+                                    method="DOP853")
+        ref[float(w)] = None if st[0] else fin[0]
+
+    def error(final_of):
+        errs = [float(np.max(np.abs(final_of(w) - ref[float(w)]))) for w in periodic
+                if ref[float(w)] is not None and final_of(w) is not None]
+        return max(errs) if errs else None
+
+    for name, opts in contenders.items():
+        def pw_final(w, opts=opts):
+            return pwsdyn.simulate(model, X0, (0, ps * 2 * np.pi / w), {"omega": w},
+                                   rtol=args.rtol, atol=args.atol, dense=False,
+                                   **opts).x_final
+        pw[name]["error_vs_reference"] = error(pw_final)
+    for meth in scipy_rows:
+        scipy_rows[meth]["error_vs_reference"] = error(lambda w, m=meth: sp_final[m][float(w)])
+
+    for name in ("RK45", "exact"):
+        alone, two = machine_scaling(omegas, {**kw, **contenders[name]})
+        pw[name]["machine_alone_s"], pw[name]["machine_two_at_once_s"] = alone, two
+        pw[name]["machine_efficiency"] = alone / two
+        print(f"machine scaling, pwsdyn {name}: one serial sweep alone {alone:.2f} s, two at "
+              f"once in separate processes {two:.2f} s: efficiency {100 * alone / two:.0f}% "
+              f"without any coordination")
+
+    base = scipy_rows["RK45"]
+    print(f"\nper core (serial wall time; CPU ratios in the JSON), errors after {ps} periods "
+          f"at {len(periodic)} periodic values against scipy DOP853 at rtol 1e-13:")
+    for name in contenders:
+        for meth in ("RK45", "DOP853"):
+            pw[name][f"ratio_scipy_{meth}_per_core"] = (scipy_rows[meth]["extrapolated_s"]
+                                                        / pw[name]["serial_s"])
+            pw[name][f"ratio_scipy_{meth}_per_core_cpu"] = (
+                scipy_rows[meth]["extrapolated_cpu_s"] / pw[name]["serial_cpu_s"])
+        err = pw[name]["error_vs_reference"]
+        print(f"  pwsdyn {name:7s}: scipy RK45 / pwsdyn = "
+              f"{pw[name]['ratio_scipy_RK45_per_core']:6.0f}x, scipy DOP853 / pwsdyn = "
+              f"{pw[name]['ratio_scipy_DOP853_per_core']:5.0f}x; error "
+              f"{err if err is None else f'{err:.1e}'}")
+    for meth, row in scipy_rows.items():
+        err = row["error_vs_reference"]
+        print(f"  scipy  {meth:7s}: error {err if err is None else f'{err:.1e}'}")
+    for name in ("RK45", "exact"):
+        print(f"  2 workers, pwsdyn {name}: scipy RK45 / pwsdyn = "
+              f"{base['extrapolated_s'] / pw[name]['2workers_s']:.0f}x, efficiency "
+              f"{100 * pw[name]['parallel_efficiency']:.0f}% (the machine allows "
+              f"{100 * pw[name]['machine_efficiency']:.0f}%)")
     res = {"benchmark": "sweep", "machine": info, "values": args.values,
            "periods": args.periods, "transient": transient, "samples": samples,
            "rtol": args.rtol, "atol": args.atol, "omega": [args.start, args.stop],
-           "pwsdyn_serial_s": t_serial, "pwsdyn_serial_cpu_s": cpu_serial,
-           "pwsdyn_2workers_s": t_par, "cluster_startup_s": t_start,
-           "pwsdyn_workers2_with_startup_s": t_par_cold, "parallel_efficiency": eff,
-           "identical_serial_parallel": same and same2,
-           "scipy_subset_values": len(sub), "scipy_subset_periods": ps, "methods": rows,
+           "cluster_startup_s": t_start, "identical_serial_parallel": same_all,
+           "pwsdyn": pw, "scipy": scipy_rows,
+           "scipy_subset_values": len(sub), "scipy_subset_periods": ps,
+           "accuracy_values": len(periodic),
            "period_counts": {str(k): int(v) for k, v in zip(*np.unique(
-               serial.period.values, return_counts=True))}}
+               serial["RK45"].period.values, return_counts=True))}}
     if args.save:
         out = HERE / "results" / "sweep.json"
         out.parent.mkdir(exist_ok=True)
         out.write_text(json.dumps(res, indent=1))
         print(f"wrote {out}")
-    return 0 if (same and same2) else 2
+    return 0 if same_all else 2
 
 
 if __name__ == "__main__":
