@@ -948,7 +948,9 @@ def _kernel_signature():
                nt.int64)
 
 
-@njit(_kernel_signature(), cache=True)
+# nogil: a run holds no Python object, so a Dask worker's event loop (heartbeats, transfers)
+# and other threads go on while it integrates
+@njit(_kernel_signature(), cache=True, nogil=True)
 def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P, s_fsal):
     """Integrate from ``t0`` to ``t_end``. See the module docstring.
 
