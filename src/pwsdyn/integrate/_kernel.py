@@ -53,6 +53,19 @@ With ``FO_SAMPLE_DT > 0`` the state at ``FO_SAMPLE_T0 + k FO_SAMPLE_DT`` is reco
 step's dense output as the integration passes it (stroboscopic sections: no event, no landing
 step); across a chattering gap it is the linear interpolation the trajectory also uses.
 
+Exact propagation
+-----------------
+With ``iopt[IO_EXACT]`` the regular modes that are affine in the state with harmonic forcing
+(:mod:`pwsdyn.model.affine`) are not integrated but propagated by the exact flow
+``z(t + h) = exp(h M) z(t)`` of the state augmented with the forcing. Steps are limited to
+``||h M||_inf <= 1`` (after scaling the constant and forcing columns): a full step is one
+product with a propagator made once per mode and run (:func:`_exact_propagator`), any other
+step sums the Taylor series of the vector (:func:`_exact_step`), whose terms are the step's
+dense output -- the exact flow, so the event search runs on it and the landing on an event
+is its evaluation, the terms then rescaled to the shortened interval. Their error estimate
+is zero; sticking, sliding, non-affine modes and the variational equations stay on the
+Runge-Kutta pair.
+
 Variational equations
 ---------------------
 With ``variational`` the state is augmented by the n x n matrix ``Phi`` (row-major), integrated
