@@ -6,7 +6,7 @@ r = 0.8), ``--values`` (400) values of omega in [2.4, 3.4], ``--periods`` (400) 
 per value -- ``transient`` = 3/4 of them, the last quarter recorded at the stroboscopic
 section -- continuing the final state into the next value, one direction (up).
 
-Contenders (timings reported, never asserted):
+Contenders (timings reported, never asserted; pwsdyn: best of ``--repeats`` runs):
 
 * ``pwsdyn.sweep(..., workers=1)``: in-process, chunked as by default (16 chunks);
 * ``pwsdyn.sweep(..., client=...)`` on a ``LocalCluster`` of 2 single-threaded worker
