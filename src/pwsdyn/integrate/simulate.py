@@ -19,10 +19,10 @@ from .tableaus import METHODS
 from .trajectory import EventLog, Trajectory
 
 #: Default options of :func:`simulate` (each documented there).
-DEFAULTS = dict(method="RK45", exact=False, rtol=1e-10, atol=1e-12, first_step=None, max_step=math.inf,
-                max_steps=1_000_000, max_events=100_000, chatter=True, chatter_ratio=1e-4,
-                chatter_velocity=None, sliding="convex", sliding_gain=0.0, variational=False,
-                dense=True, mode=None, throw=True)
+DEFAULTS = dict(method="RK45", exact=False, rtol=1e-10, atol=1e-12, first_step=None,
+                max_step=math.inf, max_steps=1_000_000, max_events=100_000, chatter=True,
+                chatter_ratio=1e-4, chatter_velocity=None, sliding="convex", sliding_gain=0.0,
+                variational=False, dense=True, mode=None, throw=True)
 
 #: Sliding methods (option ``sliding``) and their kernel codes.
 SLIDING_METHODS = {"convex": 0, "utkin": 1}
