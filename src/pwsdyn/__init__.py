@@ -6,7 +6,9 @@ event-driven simulation, stability, periodic orbits and global analysis.
 
 __version__ = "0.1.0"
 
-from .errors import (ExpressionError as ExpressionError, ModelError as ModelError,
+from .errors import (ArgumentError as ArgumentError, ExpressionError as ExpressionError,
+                     ModelError as ModelError, PwsdynError as PwsdynError,
+                     StoreError as StoreError,
                      SolveError as SolveError, Status as Status)
 from .integrate import EventRecord as EventRecord, Trajectory as Trajectory, simulate as simulate
 from .model import Model as Model, compile_model as compile_model, load_model as load_model

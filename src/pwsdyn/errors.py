@@ -104,3 +104,16 @@ class SolveError(PwsdynError, RuntimeError):
         self.x = x
         self.mode = mode
         self.result = result
+
+
+class ArgumentError(PwsdynError, ValueError, TypeError):
+    """An argument of a pwsdyn function is of the wrong type, out of range or not finite.
+
+    Raised before any work is done; the message names the argument and what it must be. It is
+    both a ``ValueError`` and a ``TypeError`` so that code catching either keeps working.
+    """
+
+
+class StoreError(PwsdynError, OSError):
+    """A result store on disk cannot be used: locked by another run, corrupted, truncated or
+    tampered with. The message names the file; nothing in the store is overwritten."""
