@@ -52,6 +52,11 @@ FILIPPOV, CONTINUOUS = "filippov", "continuous"
 #: Most distinct surfaces in one mode (2**k variants).
 MAX_SURFACES_PER_MODE = 8
 
+#: Most modes a model may have once its modes are split: each variant is compiled with its
+#: derivatives, surfaces and switches, and compilation grows faster than the number of modes
+#: (16 modes of one field with four ``sign`` terms compile in about 7 s, 64 in minutes).
+MAX_SPLIT_MODES = 16
+
 _JUMP = (sp.sign, sp.Heaviside)
 _KINK = (sp.Abs, sp.Max, sp.Min)
 _DISC = _JUMP + _KINK
@@ -277,7 +282,8 @@ def expand_discontinuities(modes, surfaces, events, switches, initial_mode, defi
     Raises
     ------
     ModelError
-        A mode with more than ``MAX_SURFACES_PER_MODE`` distinct surfaces.
+        A mode with more than ``MAX_SURFACES_PER_MODE`` distinct surfaces, or a split that
+        would give more than ``MAX_SPLIT_MODES`` modes.
     """
     from .spec import Mode, Switch
 
@@ -299,6 +305,15 @@ def expand_discontinuities(modes, surfaces, events, switches, initial_mode, defi
             raise ModelError(f"mode {m.name!r} has more than {MAX_SURFACES_PER_MODE} distinct "
                              f"switching surfaces ({', '.join(registry.label(k) for k in found)}"
                              f"); write it as explicit modes and switches", field=f"modes.{m.name}")
+        total = len(new_modes) + 2 ** len(found) + sum(
+            1 for later in modes[modes.index(m) + 1:]
+            if not any(has_discontinuities(e) for e in later.rhs))
+        if total > MAX_SPLIT_MODES:
+            raise ModelError(f"splitting mode {m.name!r} at its {len(found)} switching surfaces "
+                             f"({', '.join(registry.label(k) for k in found)}) would give the "
+                             f"model at least {total} modes; at most {MAX_SPLIT_MODES} are "
+                             "allowed. Write the modes and switches explicitly, or use fewer "
+                             "discontinuous terms per field", field=f"modes.{m.name}")
         first = len(new_modes)
         index = {}
         for pattern in itertools.product((1, -1), repeat=len(found)):

@@ -15,6 +15,7 @@ import math
 import operator
 
 import sympy as sp
+from sympy.calculus.accumulationbounds import AccumBounds
 
 from ..errors import ExpressionError
 
@@ -30,6 +31,9 @@ FUNCTIONS = {
     "Max": sp.Max, "Min": sp.Min, "max": sp.Max, "min": sp.Min,
 }
 
+# the SymPy classes those names build (and DiracDelta, the derivative of sign and Heaviside)
+_FUNCTION_CLASSES = {f for f in FUNCTIONS.values() if isinstance(f, type)} | {sp.DiracDelta}
+
 #: Number of arguments each function takes: (min, max); max None = any number.
 ARITY = {name: (1, 1) for name in FUNCTIONS}
 ARITY.update({"atan2": (2, 2), "arctan2": (2, 2), "log": (1, 2), "Max": (1, None),
@@ -38,6 +42,21 @@ ARITY.update({"atan2": (2, 2), "arctan2": (2, 2), "log": (1, 2), "Max": (1, None
 #: Largest exponent allowed in a power of two numbers (``9**9**9`` would be computed exactly
 #: by SymPy and never finish).
 MAX_NUMERIC_EXPONENT = 1000
+
+#: Largest size of one expression once definitions are substituted, counted as its distinct
+#: subexpressions plus, for each product of m factors, m**2 (its derivative is a sum of m
+#: products of m - 1 factors): symbolic differentiation and code generation grow with it. A
+#: product of 300 distinct factors costs 90,000 and would take seconds to differentiate and
+#: minutes to compile; the largest field of the built-in models costs under 100.
+MAX_EXPRESSION_COST = 20_000
+#: Largest syntax tree of one expression's text (a 500-term polynomial has 3,500 nodes).
+MAX_SYNTAX_NODES = 10_000
+
+#: Deepest nesting accepted (SymPy, the code printer and numba recurse on it).
+MAX_DEPTH = 100
+
+# every number must be a finite double: 2**1024 is the first power of two that is not
+_LOG2_DOUBLE_MAX = 1024.0
 
 #: Constants an expression may use.
 CONSTANTS = {"pi": sp.pi, "e_const": sp.E, "inf": sp.oo}
@@ -50,6 +69,43 @@ _CMPOPS = {
     ast.Lt: sp.StrictLessThan, ast.LtE: sp.LessThan,
     ast.Gt: sp.StrictGreaterThan, ast.GtE: sp.GreaterThan,
 }
+
+
+def check_expression(expr, fail, text="") -> None:
+    """Refuse an expression that holds a non-finite or complex constant (``0/0``, ``x/0``,
+    ``log(0)``, ``sqrt(-1)``, ``sin(inf)``) or a number outside double precision, or that is
+    too large: ``fail(message)`` raises.
+
+    Such a constant would make the vector field NaN or infinite everywhere, or fail to
+    compile; saying so at load names the field."""
+    what = f" {text[:200]!r}" if text else ""
+    if not isinstance(expr, sp.Basic):
+        return
+    nodes, stack, cost = set(), [expr], 0
+    while stack:
+        e = stack.pop()
+        if e in nodes:
+            continue
+        nodes.add(e)
+        cost += 1 + (len(e.args) ** 2 if isinstance(e, sp.Mul) else 0)
+        if cost > MAX_EXPRESSION_COST:
+            fail(f"expression{what} is too large to differentiate and compile in reasonable "
+                 f"time once its definitions are substituted (size over {MAX_EXPRESSION_COST}; "
+                 "simplify it)")
+        if e in (sp.nan, sp.zoo, sp.oo, -sp.oo) or isinstance(e, AccumBounds):
+            fail(f"expression{what} evaluates to the non-finite value {e} (a division by zero, "
+                 "log(0), inf - inf, ...)")
+        if e is sp.I:
+            fail(f"expression{what} has a complex value (square root or logarithm of a "
+                 "negative number, ...)")
+        if isinstance(e, sp.Number):
+            try:
+                ok = math.isfinite(float(e))
+            except (OverflowError, TypeError, ValueError):
+                ok = False
+            if not ok:
+                fail(f"the number {str(e)[:40]} in expression{what} is outside double precision")
+        stack.extend(e.args)
 
 
 def parse_expression(text, names: dict, *, field: str = "", source: str | None = None,
@@ -78,12 +134,23 @@ def parse_expression(text, names: dict, *, field: str = "", source: str | None =
     if isinstance(text, bool):
         fail(f"expected an expression, got the boolean {text!r}")
     if isinstance(text, (int, float)):
+        if isinstance(text, float) and not math.isfinite(text):
+            fail(f"the number {text!r} is not finite")
+        if isinstance(text, int) and abs(text).bit_length() > _LOG2_DOUBLE_MAX:
+            fail("the integer is too large for double precision")
         return sp.Float(text) if isinstance(text, float) else sp.Integer(text)
     if isinstance(text, sp.Basic):
         allowed = set(names.values())
         unknown = sorted(str(s) for s in text.free_symbols if s not in allowed)
         if unknown:
             fail(f"unknown name(s) {', '.join(repr(u) for u in unknown)} in expression")
+        # a SymPy object may hold any function, whose name the code printer would write out
+        foreign = sorted({type(f).__name__ for f in text.atoms(sp.Function)
+                          if type(f) not in _FUNCTION_CLASSES})
+        if foreign:
+            fail(f"function(s) {', '.join(foreign)} are not allowed; allowed functions are "
+                 f"{', '.join(sorted(FUNCTIONS))}")
+        check_expression(text, fail)
         return text
     if not isinstance(text, str):
         fail(f"expected an expression string, got {type(text).__name__}")
@@ -100,18 +167,40 @@ def parse_expression(text, names: dict, *, field: str = "", source: str | None =
     except (MemoryError, RecursionError):
         # CPython's parser gives up on very deep nesting ('-' * 10000 + '1')
         fail("expression nested too deeply (or too long a chain of operators) to parse")
+    n_nodes = sum(1 for _ in ast.walk(tree))
+    if n_nodes > MAX_SYNTAX_NODES:
+        fail(f"expression has {n_nodes} syntax nodes; at most {MAX_SYNTAX_NODES} are "
+             "allowed (split it into definitions or simplify it)")
+
+    def number(value):
+        """A literal as a SymPy number, refused unless it is a finite double."""
+        if isinstance(value, float) and not math.isfinite(value):
+            fail(f"the number in {text!r} is not finite in double precision")
+        if isinstance(value, int) and abs(value).bit_length() > _LOG2_DOUBLE_MAX:
+            fail(f"the integer in {text!r} is too large for double precision")
+        return sp.Integer(value) if isinstance(value, int) else sp.Float(value)
+
+    def power(base, expo):
+        # two numbers: refuse a result outside the range of doubles before SymPy computes it
+        # exactly (9**999 has 954 digits, ((9**999)**999)**999 would never finish)
+        if base.is_number and expo.is_number and expo.is_real and base not in (0, 1, -1):
+            if abs(float(expo)) > MAX_NUMERIC_EXPONENT:
+                fail(f"the power in {text!r} has a numeric exponent larger than "
+                     f"{MAX_NUMERIC_EXPONENT}; write the number as a literal")
+            b = abs(complex(base))
+            if b != 0.0 and abs(float(expo) * math.log2(b)) > _LOG2_DOUBLE_MAX:
+                fail(f"the power in {text!r} is outside the range of double precision")
+        return base ** expo
 
     def walk(node, depth=0):
-        if depth > 200:
-            fail("expression nested too deeply")
+        if depth > MAX_DEPTH:
+            fail(f"expression nested deeper than {MAX_DEPTH} levels")
         if isinstance(node, ast.Expression):
             return walk(node.body, depth + 1)
         if isinstance(node, ast.Constant):
             if isinstance(node.value, bool) or not isinstance(node.value, (int, float)):
                 fail(f"only numeric literals are allowed, not {node.value!r}")
-            if isinstance(node.value, float) and not math.isfinite(node.value):
-                fail(f"the number in {text!r} is not finite in double precision")
-            return sp.Integer(node.value) if isinstance(node.value, int) else sp.Float(node.value)
+            return number(node.value)
         if isinstance(node, ast.Name):
             if node.id in names:
                 return names[node.id]
@@ -130,17 +219,24 @@ def parse_expression(text, names: dict, *, field: str = "", source: str | None =
                     and not isinstance(node.op, ast.Pow):
                 spine.append(node)
                 node = node.left
+            # runs of + and - (or * and /) are built as one n-ary Add (Mul): adding terms one at
+            # a time re-flattens the sum each time, quadratic in its length
             val = walk(node, depth + 1)
+            run, family = [val], None
             for op_node in reversed(spine):
-                val = _BINOPS[type(op_node.op)](val, walk(op_node.right, depth + 1))
-            return val
+                op, right = type(op_node.op), walk(op_node.right, depth + 1)
+                fam = sp.Add if op in (ast.Add, ast.Sub) else sp.Mul
+                if fam is not family and family is not None:
+                    run = [family(*run)]
+                family = fam
+                if op is ast.Sub:
+                    right = -right
+                elif op is ast.Div:
+                    right = sp.Pow(right, -1)
+                run.append(right)
+            return family(*run) if family is not None else val
         if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Pow):
-            base, expo = walk(node.left, depth + 1), walk(node.right, depth + 1)
-            if (base.is_number and expo.is_number and expo.is_real
-                    and abs(float(expo)) > MAX_NUMERIC_EXPONENT and base not in (0, 1, -1)):
-                fail(f"the power in {text!r} has a numeric exponent larger than "
-                     f"{MAX_NUMERIC_EXPONENT}; write the number as a literal")
-            return base ** expo
+            return power(walk(node.left, depth + 1), walk(node.right, depth + 1))
         if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
             val = walk(node.operand, depth + 1)
             return -val if isinstance(node.op, ast.USub) else val
@@ -182,7 +278,16 @@ def parse_expression(text, names: dict, *, field: str = "", source: str | None =
                 return sp.Not(walk(node.operand, depth + 1))
         fail(f"construct {type(node).__name__} is not allowed in expression {text!r}")
 
-    expr = walk(tree)
+    try:
+        expr = walk(tree)
+    except ExpressionError:
+        raise
+    except RecursionError:
+        fail(f"expression nested deeper than SymPy can handle: {text[:80]!r}")
+    except Exception as exc:  # noqa: BLE001 -- SymPy raises many types on degenerate input
+        # ('Invalid NaN comparison', "The argument 'I' is not comparable", ...)
+        fail(f"cannot evaluate {text[:200]!r}: {type(exc).__name__}: {exc}")
+    check_expression(expr, fail, text)
     is_condition = isinstance(expr, (sp.core.relational.Relational,
                                      sp.logic.boolalg.BooleanFunction,
                                      sp.logic.boolalg.BooleanAtom)) and not isinstance(expr, sp.Expr)

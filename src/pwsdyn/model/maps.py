@@ -26,9 +26,6 @@ from __future__ import annotations
 
 import functools
 import hashlib
-import importlib.util
-import os
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -38,16 +35,17 @@ import sympy as sp
 from numba import njit, types
 
 from ..errors import ModelError
-from .codegen import _Printer, cache_dir
+from .cache import header, load_module
+from .codegen import _Printer
 from .expressions import parse_expression
-from .spec import SymbolicSystem
+from .spec import SymbolicSystem, check_identifiers
 
 #: Signature of a generated map function: step(x, p, out, jac, want_jac) -> piece.
 MAP_STEP_SIGNATURE = types.int64(types.float64[::1], types.float64[::1], types.float64[::1],
                                  types.float64[::1], types.int64)
 MAP_STEP_TYPE = types.FunctionType(MAP_STEP_SIGNATURE)
 
-_MAP_CODEGEN_VERSION = "1"
+_MAP_CODEGEN_VERSION = "2"
 _NAME_OK = "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ_0123456789"
 _TOP_KEYS = {"name", "kind", "description", "source", "reference", "states", "parameters",
              "definitions", "map", "pieces", "defaults", "notes"}
@@ -106,11 +104,18 @@ class MapModel(SymbolicSystem):
 
     @functools.cached_property
     def hash(self) -> str:
-        """A hash of everything that defines the compiled map (not its description)."""
+        """A short hash (16 hex digits) of the map, for display and provenance; :attr:`digest`
+        is the full one."""
+        return self.digest[:16]
+
+    @functools.cached_property
+    def digest(self) -> str:
+        """SHA-256 (64 hex digits) of everything that defines the compiled map (not its
+        description); names the compiled module in the cache."""
         parts = ["map", self.name, repr(self.states), repr(list(self.parameters))]
         for pc in self.pieces:
             parts.append(f"piece {pc.name}: {sp.srepr(pc.condition)} {sp.srepr(pc.exprs)}")
-        return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:16]
+        return hashlib.sha256("\n".join(parts).encode()).hexdigest()
 
     def __repr__(self):
         return (f"MapModel({self.name!r}, states={list(self.states)}, "
@@ -129,16 +134,16 @@ def map_model_from_dict(data: dict, origin: str = "<dict>", text: str | None = N
     ModelError
         A malformed map model; the message names the source and the field.
     """
-    from .spec import _NAME_RE, _RESERVED, _Where, states_and_parameters
+    from .spec import _RESERVED, _Where, _is_name, check_model_name, states_and_parameters
 
     W = _Where(origin, text)
     unknown = sorted(set(data) - _TOP_KEYS)
     if unknown:
         raise W.error(f"unknown top-level key(s) {unknown} for a map model; allowed keys are "
                       f"{sorted(_TOP_KEYS)}", unknown[0])
-    name = data.get("name")
-    if not isinstance(name, str) or not name:
+    if "name" not in data:
         raise W.error("missing required field `name`", "name")
+    name = check_model_name(data["name"], W)
     states, parameters = states_and_parameters(data, W, "map")
 
     names = {s: sp.Symbol(s, real=True) for s in states}
@@ -148,7 +153,7 @@ def map_model_from_dict(data: dict, origin: str = "<dict>", text: str | None = N
         raise W.error("`definitions` must be a table of name = expression", "definitions")
     definitions = {}
     for k, v in defs_raw.items():
-        if not _NAME_RE.match(k) or k in names or k in _RESERVED:
+        if not _is_name(k) or k in names or k in _RESERVED:
             raise W.error(f"invalid or clashing definition name {k!r}", f"definitions.{k}")
         definitions[k] = names[k] = parse_expression(
             v, names, field=f"definitions.{k}", source=origin,
@@ -189,7 +194,7 @@ def map_model_from_dict(data: dict, origin: str = "<dict>", text: str | None = N
                 raise W.error(f"unknown key(s) {bad} in piece; allowed keys are "
                               f"{sorted(_PIECE_KEYS)}", f"{pre}.{bad[0]}")
             pname = pc.get("name", f"piece{i}")
-            if not isinstance(pname, str) or not _NAME_RE.match(pname):
+            if not _is_name(pname):
                 raise W.error(f"invalid piece name {pname!r}", f"{pre}.name")
             if "map" not in pc:
                 raise W.error(f"piece {pname!r} has no `map`", f"{pre}.map")
@@ -231,15 +236,22 @@ def map_model_from_dict(data: dict, origin: str = "<dict>", text: str | None = N
 # ======================================================================================
 
 def generate_map_source(model: MapModel) -> str:
-    """Python/numba source of the map's ``step`` function (value and Jacobian per piece)."""
+    """Python/numba source of the map's ``step`` function (value and Jacobian per piece), as
+    written to the cache."""
+    body = _generate_map_body(model)
+    return header("map", _MAP_CODEGEN_VERSION, model.digest, body) + "\n" + body
+
+
+def _generate_map_body(model: MapModel) -> str:
+    """The module's text after its header line: only identifiers and numbers (the map's name
+    and other text never reach it)."""
+    check_identifiers(model.states, model.parameters, origin=model.origin)
     pr = _Printer()
     X = sp.Matrix(model.state_symbols)
     rename = {sym: sp.Symbol(f"s_{sym.name}", real=True) for sym in model.state_symbols}
     rename.update({sym: sp.Symbol(f"p_{sym.name}", real=True)
                    for sym in model.parameter_symbols})
     lines = [
-        f"# Generated by pwsdyn map codegen v{_MAP_CODEGEN_VERSION} for map {model.name!r}"
-        f" (hash {model.hash}). Do not edit.",
         "import math",
         "import numba",
         "from pwsdyn.model.maps import MAP_STEP_SIGNATURE",
@@ -286,25 +298,19 @@ _COMPILED: dict[str, CompiledMap] = {}
 
 def compile_map(model: MapModel) -> CompiledMap:
     """Generate, cache on disk (by model hash) and compile the map's ``step`` function."""
-    key = model.hash
+    key = model.digest
     if key in _COMPILED:
         return _COMPILED[key]
-    path = cache_dir() / f"map_{key}_v{_MAP_CODEGEN_VERSION}.py"
-    if not path.exists():
-        tmp = path.with_suffix(f".tmp{os.getpid()}")
-        tmp.write_text(generate_map_source(model))
-        os.replace(tmp, path)
-    modname = f"pwsdyn_models.map_{key}_v{_MAP_CODEGEN_VERSION}"
-    module = sys.modules.get(modname)
-    if module is None:
-        spec = importlib.util.spec_from_file_location(modname, path)
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[modname] = module
-        spec.loader.exec_module(module)
     n = model.n_states
-    module.step(np.zeros(n), np.zeros(max(1, len(model.parameters))), np.zeros(n),
-                np.zeros(n * n), 1)
-    cm = CompiledMap(model, module.step, path)
+
+    def warm_up(step):
+        step(np.zeros(n), np.zeros(max(1, len(model.parameters))), np.zeros(n),
+             np.zeros(n * n), 1)
+
+    step, path = load_module("map", _MAP_CODEGEN_VERSION, key,
+                             lambda: _generate_map_body(model), model_name=model.name,
+                             attribute="step", warm_up=warm_up)
+    cm = CompiledMap(model, step, path)
     _COMPILED[key] = cm
     return cm
 

@@ -32,8 +32,47 @@ from .expressions import parse_expression
 #: Name of the independent variable in expressions.
 TIME = "t"
 EVENT_KINDS = ("impact", "transition")
-_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
-_RESERVED = {TIME, "pi", "e_const", "inf"}
+#: Longest name of a state, parameter, definition, mode, event or switch.
+MAX_NAME_LENGTH = 64
+#: Longest model name (free text, shown in files and figures; never part of generated code).
+MAX_MODEL_NAME_LENGTH = 128
+# ``\Z``, not ``$``: ``$`` also matches before a final newline ("x\n" is not a name)
+_NAME_RE = re.compile(rf"[A-Za-z_][A-Za-z0-9_]{{0,{MAX_NAME_LENGTH - 1}}}\Z")
+# time, the constants of expressions, and the switching variable of Utkin's family
+# (pwsdyn.model.discontinuities.U_SYMBOL): a state of that name would be the same symbol
+_RESERVED = {TIME, "pi", "e_const", "inf", "u_switch"}
+
+
+def _is_name(s) -> bool:
+    """An identifier of at most :data:`MAX_NAME_LENGTH` ASCII letters, digits and ``_``."""
+    return isinstance(s, str) and _NAME_RE.match(s) is not None
+
+
+def check_identifiers(states, parameters, origin: str = "<model>") -> None:
+    """Refuse state and parameter names that are not plain identifiers or are reserved: they
+    become identifiers of generated code (:mod:`pwsdyn.model.codegen`)."""
+    for kind, names in (("state", states), ("parameter", parameters)):
+        for s in names:
+            if not _is_name(s) or s in _RESERVED:
+                raise ModelError(f"invalid {kind} name {s!r}: names are identifiers of at most "
+                                 f"{MAX_NAME_LENGTH} ASCII letters, digits and '_', not "
+                                 f"{sorted(_RESERVED)}", source=origin)
+
+
+def check_model_name(name, W: "_Where") -> str:
+    """The model's ``name``: text of 1 to :data:`MAX_MODEL_NAME_LENGTH` printable characters
+    (no control characters, line breaks or bidirectional overrides, which could rewrite what
+    a terminal or a file shows)."""
+    if not isinstance(name, str) or not name.strip():
+        raise W.error("`name` must be a non-empty string", "name")
+    if len(name) > MAX_MODEL_NAME_LENGTH:
+        raise W.error(f"`name` is {len(name)} characters long; at most "
+                      f"{MAX_MODEL_NAME_LENGTH} are allowed", "name")
+    bad = next((c for c in name if not c.isprintable()), None)
+    if bad is not None:
+        raise W.error(f"`name` contains the non-printable character U+{ord(bad):04X}; use "
+                      "printable characters only", "name")
+    return name
 
 
 @dataclass(frozen=True)
@@ -220,7 +259,14 @@ class Model(SymbolicSystem):
     # --- identity ------------------------------------------------------------------------
     @functools.cached_property
     def hash(self) -> str:
-        """A hash of everything that defines the compiled model (not its description)."""
+        """A short hash (16 hex digits) of everything that defines the compiled model, for
+        display and provenance; :attr:`digest` is the full one."""
+        return self.digest[:16]
+
+    @functools.cached_property
+    def digest(self) -> str:
+        """SHA-256 (64 hex digits) of everything that defines the compiled model (not its
+        description); names the compiled module in the cache."""
         parts = [self.name, repr(self.states), repr(list(self.parameters))]
         parts += [f"mode {m.name}: " + sp.srepr(m.rhs) for m in self.modes]
         parts += [f"surface {s.name}: " + sp.srepr(s.expr) for s in self.surfaces]
@@ -230,7 +276,7 @@ class Model(SymbolicSystem):
         for s in self.switches:
             parts.append(f"switch {s.name} {s.surface} {s.above} {s.below} {s.kind} "
                          f"{sp.srepr(s.family)}")
-        return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:16]
+        return hashlib.sha256("\n".join(parts).encode()).hexdigest()
 
     def __repr__(self):
         return (f"Model({self.name!r}, states={list(self.states)}, modes={list(self.mode_names)}, "
@@ -359,8 +405,10 @@ def states_and_parameters(data: dict, W: "_Where", what: str) -> tuple[list, dic
         raise W.error(f"a {what} needs at least one state (a non-empty list `states`)",
                       "states")
     for s in states:
-        if not isinstance(s, str) or not _NAME_RE.match(s) or s in _RESERVED:
-            raise W.error(f"invalid state name {s!r}", "states", str(s))
+        if not _is_name(s) or s in _RESERVED:
+            raise W.error(f"invalid state name {s!r}: a state is an identifier of at most "
+                          f"{MAX_NAME_LENGTH} ASCII letters, digits and '_', not one of "
+                          f"{sorted(_RESERVED)}", "states", str(s))
     if len(set(states)) != len(states):
         raise W.error("duplicate state names", "states")
     params_raw = data.get("parameters", {})
@@ -368,8 +416,10 @@ def states_and_parameters(data: dict, W: "_Where", what: str) -> tuple[list, dic
         raise W.error("`parameters` must be a table of name = default value", "parameters")
     parameters = {}
     for k, v in params_raw.items():
-        if not _NAME_RE.match(k) or k in _RESERVED or k in states:
-            raise W.error(f"invalid or clashing parameter name {k!r}", f"parameters.{k}")
+        if not _is_name(k) or k in _RESERVED or k in states:
+            raise W.error(f"invalid or clashing parameter name {k!r}: a parameter is an "
+                          f"identifier of at most {MAX_NAME_LENGTH} ASCII letters, digits and "
+                          f"'_', not a state or one of {sorted(_RESERVED)}", f"parameters.{k}")
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise W.error(f"parameter {k!r} must have a numeric default, got {v!r}",
                           f"parameters.{k}")
@@ -403,7 +453,7 @@ def model_from_dict(data: dict, origin: str = "<dict>", text: str | None = None)
                           f", got {type(val).__name__}", prefix + key)
         return val
 
-    name = need("name", str)
+    name = check_model_name(need("name", str), W)
     need("states", list)
     states, parameters = states_and_parameters(data, W, "model")
 
@@ -418,7 +468,7 @@ def model_from_dict(data: dict, origin: str = "<dict>", text: str | None = None)
         raise W.error("`definitions` must be a table of name = expression", "definitions")
     definitions = {}
     for k, v in defs_raw.items():
-        if not _NAME_RE.match(k) or k in names or k in _RESERVED:
+        if not _is_name(k) or k in names or k in _RESERVED:
             raise W.error(f"invalid or clashing definition name {k!r}", f"definitions.{k}")
         expr = parse_expression(v, names, field=f"definitions.{k}", source=origin,
                                 line=W.line(k, v if isinstance(v, str) else None))
@@ -436,7 +486,7 @@ def model_from_dict(data: dict, origin: str = "<dict>", text: str | None = None)
         raise W.error("a model needs at least one mode", "modes")
     modes = []
     for mname, rhs in modes_raw.items():
-        if not _NAME_RE.match(mname):
+        if not _is_name(mname):
             raise W.error(f"invalid mode name {mname!r}", f"modes.{mname}")
         if not isinstance(rhs, dict):
             raise W.error(f"mode {mname!r} must be a table of state = derivative", f"modes.{mname}")
@@ -481,7 +531,7 @@ def model_from_dict(data: dict, origin: str = "<dict>", text: str | None = None)
             raise W.error(f"unknown key(s) {bad} in event; allowed keys are {sorted(_EVENT_KEYS)}",
                           pre + bad[0])
         ename = ev.get("name", f"event{i}")
-        if not isinstance(ename, str) or not _NAME_RE.match(ename.replace("-", "_")):
+        if not isinstance(ename, str) or not _is_name(ename.replace("-", "_")):
             raise W.error(f"invalid event name {ename!r}", pre + "name")
         if ename in seen:
             raise W.error(f"duplicate event name {ename!r}", pre + "name", ename)
@@ -535,6 +585,8 @@ def model_from_dict(data: dict, origin: str = "<dict>", text: str | None = None)
         if not isinstance(sw, dict):
             raise W.error("each switch must be a table", f"switches[{i}]")
         sname = sw.get("name", f"switch{i}")
+        if not isinstance(sname, str) or not _is_name(sname.replace("-", "_")):
+            raise W.error(f"invalid switch name {sname!r}", pre + "name")
         for key in ("surface", "above", "below"):
             if key not in sw:
                 raise W.error(f"switch {sname!r} needs `{key}`", pre + key)
