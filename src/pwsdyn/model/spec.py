@@ -65,13 +65,13 @@ def check_model_name(name, W: "_Where") -> str:
     a terminal or a file shows)."""
     if not isinstance(name, str) or not name.strip():
         raise W.error("`name` must be a non-empty string", "name")
-    if len(name) > MAX_MODEL_NAME_LENGTH:
-        raise W.error(f"`name` is {len(name)} characters long; at most "
-                      f"{MAX_MODEL_NAME_LENGTH} are allowed", "name")
     bad = next((c for c in name if not c.isprintable()), None)
     if bad is not None:
         raise W.error(f"`name` contains the non-printable character U+{ord(bad):04X}; use "
                       "printable characters only", "name")
+    if len(name) > MAX_MODEL_NAME_LENGTH:
+        raise W.error(f"`name` is {len(name)} characters long; at most "
+                      f"{MAX_MODEL_NAME_LENGTH} are allowed", "name")
     return name
 
 
