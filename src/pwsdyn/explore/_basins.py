@@ -264,21 +264,27 @@ def basins(model, grid: Mapping[str, object], x0=None, *, params=None, transient
 
     results: dict[int, dict] = {}
     st = None
-    if store is not None:
+    if store is not None:   # takes the store's lock, held until st.close()
         st = ChunkStore(store, "basins", model.name, model.hash, settings, len(tasks))
-        for i in st.done():
-            with_ds = st.read(i)
-            results[i] = {k: with_ds[k].values for k in with_ds.data_vars}
-
-    def on_result(i, res):
-        results[i] = res
+    try:
         if st is not None:
-            st.write(i, xr.Dataset({k: (("start",) + tuple(f"d{j}" for j in range(v.ndim - 1)),
-                                        v) for k, v in res.items()}, attrs={"chunk": i}))
+            for i in st.done():
+                with_ds = st.read(i)
+                results[i] = {k: with_ds[k].values for k in with_ds.data_vars}
 
-    todo = [i for i in range(len(tasks)) if i not in results]
-    run_chunks(basins_chunk, tasks, todo, on_result, workers=workers, client=client,
-               scheduler=scheduler, progress=progress, desc="basins", n_done=len(results))
+        def on_result(i, res):
+            results[i] = res
+            if st is not None:
+                st.write(i, xr.Dataset({k: (("start",) + tuple(f"d{j}"
+                                                               for j in range(v.ndim - 1)),
+                                            v) for k, v in res.items()}, attrs={"chunk": i}))
+
+        todo = [i for i in range(len(tasks)) if i not in results]
+        run_chunks(basins_chunk, tasks, todo, on_result, workers=workers, client=client,
+                   scheduler=scheduler, progress=progress, desc="basins", n_done=len(results))
+    finally:
+        if st is not None:
+            st.close()
     fp = {k: np.concatenate([results[i][k] for i in range(len(tasks))])
           for k in results[0]} if tasks else {}
     labels, table = classify(fp, match_tol)

@@ -478,19 +478,24 @@ def sweep(model, param: str, values: Sequence[float], x0=None, *, transient: int
 
     results: dict[int, dict] = {}
     st = None
-    if store is not None:
+    if store is not None:   # takes the store's lock, held until st.close()
         st = ChunkStore(store, "sweep", model.name, model.hash, settings, len(tasks))
-        for i in st.done():
-            results[i] = _from_chunk_dataset(st.read(i))
-
-    def on_result(i, res):
-        results[i] = res
+    try:
         if st is not None:
-            st.write(i, _chunk_dataset(res, i))
+            for i in st.done():
+                results[i] = _from_chunk_dataset(st.read(i))
 
-    todo = [i for i in range(len(tasks)) if i not in results]
-    run_chunks(sweep_chunk, tasks, todo, on_result, workers=workers, client=client,
-               scheduler=scheduler, progress=progress, desc="sweep", n_done=len(results))
+        def on_result(i, res):
+            results[i] = res
+            if st is not None:
+                st.write(i, _chunk_dataset(res, i))
+
+        todo = [i for i in range(len(tasks)) if i not in results]
+        run_chunks(sweep_chunk, tasks, todo, on_result, workers=workers, client=client,
+                   scheduler=scheduler, progress=progress, desc="sweep", n_done=len(results))
+    finally:
+        if st is not None:
+            st.close()
     ds = _assemble(model, vals, tasks, results, dirs, settings, lyapunov)
     if out_path is not None:
         from ..io import save_dataset
