@@ -162,9 +162,9 @@ def test_defaults_table_is_used(tmp_path):
     traj = load_trajectory(out)
     np.testing.assert_array_equal(traj.x[0], [0.5, 0.0])
     assert traj.t_end == 2.0 and traj.params["e"] == 0.5
-    # the command line wins over the defaults
+    # the command line wins over the defaults (--force: the first run's file is replaced)
     res = _run(["simulate", str(model), "--x0", "1,0", "-p", "e=0.9", "--t-end", "1",
-                "--out", str(out)])
+                "--out", str(out), "--force"])
     assert res.exit_code == 0, res.output
     traj = load_trajectory(out)
     np.testing.assert_array_equal(traj.x[0], [1.0, 0.0])

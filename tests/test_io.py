@@ -228,14 +228,17 @@ def test_model_read_differently_warns(tmp_path):
 def test_save_overwrites_atomically(trajectories, tmp_path):
     path = tmp_path / "run.nc"
     save_dataset(trajectories["vibrating"], path)  # a Trajectory is accepted too
-    save_dataset(trajectories["belt"].to_dataset(), path)
+    with pytest.raises(FileExistsError, match="run.nc"):  # only when asked to
+        save_dataset(trajectories["belt"].to_dataset(), path)
+    assert load_trajectory(path).model.name != "belt-test"
+    save_dataset(trajectories["belt"].to_dataset(), path, overwrite=True)
     assert load_trajectory(path).model.name == "belt-test"
     before = path.read_bytes()
 
     bad = trajectories["vibrating"].to_dataset()
     bad.attrs["not_storable"] = {"a": 1}  # NetCDF attributes cannot be dicts
     with pytest.raises(Exception):
-        save_dataset(bad, path)
+        save_dataset(bad, path, overwrite=True)
     # the old file is intact and no temporary file is left behind
     assert path.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run.nc"]

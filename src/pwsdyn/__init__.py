@@ -7,7 +7,8 @@ event-driven simulation, stability, periodic orbits and global analysis.
 __version__ = "0.1.0"
 
 from .errors import (ArgumentError as ArgumentError, ExpressionError as ExpressionError,
-                     ModelError as ModelError, PwsdynError as PwsdynError,
+                     ModelError as ModelError, OutputExistsError as OutputExistsError,
+                     PwsdynError as PwsdynError,
                      StoreError as StoreError,
                      SolveError as SolveError, Status as Status)
 from .integrate import EventRecord as EventRecord, Trajectory as Trajectory, simulate as simulate

@@ -8,18 +8,96 @@ orbit by Newton shooting and prints its period, signature and Floquet multiplier
 
 Errors in the arguments or the model, and failed simulations, are reported as one line
 ``Error: ...`` without a traceback: exit code 2 for a bad argument (click's convention for
-usage errors), 1 for a model that cannot be loaded or a simulation that fails.
+usage errors), 1 for a model that cannot be loaded or a simulation that fails. Every error of
+pwsdyn's own (:class:`pwsdyn.PwsdynError`) is reported that way (exit code 1); any other
+exception is a bug and shows its traceback.
+
+Output files (``--out``, ``--plot`` and the second figure ``<plot>-lyapunov.<ext>`` of
+``sweep --lyapunov --plot``) are checked before any work starts: the directory must exist
+and be writable, the suffix must be one the writer knows (NetCDF: ``.nc`` ...; figures: the
+formats matplotlib writes, e.g. ``.png``, ``.pdf``, ``.svg``) and an existing file is never
+replaced unless ``--force`` is given (exit code 2 for a wrong suffix, 1 for the others). The
+data are written before the figure; if the figure still cannot be written at the end and no
+``--out`` was given, the data are saved next to it as ``<plot stem>.nc`` (``-1``, ``-2``...
+if that exists) and the error message says where. A sweep store (``--store``) is a resumable
+directory: it is resumed, never replaced.
+
+Text that comes from a model or a file (names, descriptions, messages) is printed through one
+sanitiser, :func:`_safe`: control characters (C0, C1, ESC, DEL) and Unicode bidirectional
+controls are shown as escapes (``\\x1b``, ``\\u202e``), so a model cannot drive the terminal.
 """
 
 from __future__ import annotations
 
 import math
+import re
 import textwrap
+import warnings
+from pathlib import Path
 
 import click
 
 #: End time used when neither ``--t-end`` nor the model's ``[defaults]`` give one.
 FALLBACK_T_END = 10.0
+
+
+# ======================================================================================
+# terminal output: model-provided text is never printed raw
+# ======================================================================================
+
+#: Characters printed as escapes: C0 and C1 controls (ESC starts terminal escape sequences),
+#: DEL, the Unicode bidirectional controls (U+202E reverses what follows), line and paragraph
+#: separators, and lone surrogates (which cannot be encoded at all).
+_UNSAFE = re.compile("[\x00-\x1f\x7f-\x9f\u061c\u200e\u200f\u2028\u2029\u202a-\u202e"
+                     "\u2066-\u2069\ud800-\udfff]")
+_NAMED_ESCAPES = {"\t": "\\t", "\n": "\\n", "\r": "\\r"}
+
+
+def _escape(match) -> str:
+    ch = match.group()
+    if ch in _NAMED_ESCAPES:
+        return _NAMED_ESCAPES[ch]
+    code = ord(ch)
+    return f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}"
+
+
+def _safe(text) -> str:
+    """``text`` with every control character shown as a visible escape (``\\x1b``,
+    ``\\u202e``, ``\\n``): the one sanitiser for text from models and files."""
+    return _UNSAFE.sub(_escape, str(text))
+
+
+def _oneline(text) -> str:
+    """``text`` on one line (runs of blanks and line breaks become one space), sanitised."""
+    return _safe(" ".join(re.split(r"[ \t\r\n]+", str(text).strip())))
+
+
+def _echo(text="", err: bool = False):
+    """``click.echo`` for text that may hold model-provided strings: each line sanitised."""
+    click.echo("\n".join(_safe(line) for line in str(text).split("\n")), err=err)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None):
+    # warnings raised during a command may quote a model or a file: one sanitised line
+    _echo(f"warning: {_oneline(message)}", err=True)
+
+
+class _Group(click.Group):
+    """The command group: every pwsdyn error is one clean ``Error:`` line, click's own
+    messages and warnings are sanitised (they may quote model-provided names)."""
+
+    def invoke(self, ctx):
+        from .errors import PwsdynError
+
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            try:
+                return super().invoke(ctx)
+            except click.ClickException as exc:
+                exc.message = _safe(exc.message)
+                raise
+            except PwsdynError as exc:
+                _fail(exc)
 
 
 # ======================================================================================
@@ -137,7 +215,7 @@ def _resolve_defaults(model, defaults, x0, t0, t_end, params):
             x0 = defaults["x0"]
         else:
             x0 = [0.0] * model.n_states
-            click.echo(f"note: no --x0 given and model {model.name!r} has no defaults.x0; "
+            _echo(f"note: no --x0 given and model {model.name!r} has no defaults.x0; "
                        f"starting from zero ({', '.join(f'{s}=0' for s in model.states)})",
                        err=True)
     if t_end is None:
@@ -145,7 +223,7 @@ def _resolve_defaults(model, defaults, x0, t0, t_end, params):
             t_end = float(defaults["t_end"])
         else:
             t_end = FALLBACK_T_END
-            click.echo(f"note: no --t-end given and model {model.name!r} has no "
+            _echo(f"note: no --t-end given and model {model.name!r} has no "
                        f"defaults.t_end; using t_end = {FALLBACK_T_END:g}", err=True)
     if t0 is None:
         t0 = float(defaults.get("t0", 0.0))
@@ -157,10 +235,129 @@ def _fmt(v: float) -> str:
 
 
 # ======================================================================================
+# output files: checked before the work, never replaced without --force, data first
+# ======================================================================================
+
+#: Suffixes accepted for the NetCDF files of --out.
+NETCDF_SUFFIXES = (".nc", ".nc4", ".netcdf", ".cdf", ".h5", ".hdf5")
+
+_FORCE_HELP = "Replace existing output files (default: refuse to overwrite them)."
+
+
+def _check_outputs(force: bool, outputs) -> None:
+    """Check every output file before any work: ``outputs`` holds ``(option, path, kind)``
+    with kind ``"data"`` (NetCDF) or ``"figure"``; ``None`` paths are skipped.
+
+    A suffix the writer does not know is a bad argument (exit 2); a missing or unwritable
+    directory, or an existing file without ``--force``, exits with 1. (The files cannot
+    collide: data and figure suffixes differ, and the Lyapunov figure has its own stem.)
+    """
+    from .io import _check_output_path
+    from .plot import figure_formats
+
+    for option, path, kind in outputs:
+        if path is None:
+            continue
+        p = Path(path)
+        suffix = p.suffix.lower()
+        hint = option.split()[0]
+        if kind == "data":
+            if suffix not in NETCDF_SUFFIXES:
+                raise click.BadParameter(
+                    f"{str(path)!r}: the data are written as NetCDF; give a file name ending "
+                    f"in {', '.join(NETCDF_SUFFIXES)}", param_hint=hint)
+        else:
+            formats = figure_formats()
+            if (suffix[1:] or "png") not in formats:
+                raise click.BadParameter(
+                    f"{str(path)!r}: unknown figure format {p.suffix!r}; supported formats: "
+                    f"{', '.join('.' + f for f in formats)}", param_hint=hint)
+        try:
+            _check_output_path(p, overwrite=force, hint="pass --force to replace it")
+        except OSError as exc:
+            _fail(f"{option}: {exc}")
+
+
+def _lyapunov_path(plot):
+    """The second figure of ``sweep --lyapunov --plot P``: ``<stem>-lyapunov<suffix>``."""
+    p = Path(plot)
+    return p.with_name(p.stem + "-lyapunov" + p.suffix)
+
+
+def _save_data(dataset, out, force: bool) -> None:
+    """Write --out (``dataset`` is an xarray Dataset) or exit with one error line."""
+    from .io import save_dataset
+
+    try:
+        save_dataset(dataset, out, overwrite=force)
+    except (OSError, ValueError, TypeError) as exc:
+        _fail(exc)
+    _echo(f"wrote       {out}")
+
+
+def _rescue_data(dataset, plot):
+    """Save the data of a figure that could not be written next to it: ``<stem>.nc`` (then
+    ``<stem>-1.nc``... if taken), else in the current directory. Returns ``(path, None)`` or
+    ``(None, the last error)``; never replaces a file."""
+    from .errors import OutputExistsError
+    from .io import save_dataset
+
+    try:
+        ds = dataset()
+    except Exception as exc:  # the data could not even be assembled: say so
+        return None, exc
+    p = Path(plot)
+    err = None
+    for directory in dict.fromkeys([p.parent, Path(".")]):
+        for k in range(10):
+            cand = directory / (f"{p.stem}.nc" if k == 0 else f"{p.stem}-{k}.nc")
+            try:
+                return save_dataset(ds, cand, overwrite=False), None
+            except OutputExistsError:
+                continue
+            except Exception as exc:  # this directory cannot take it: try the next one
+                err = exc
+                break
+    return None, err
+
+
+def _write_figures(figures, out, dataset):
+    """Draw and write the figures of --plot, after the data: ``figures`` holds
+    ``(path, draw)`` pairs, ``draw()`` writes ``path``.
+
+    If that fails, the data are not lost: they are in --out when it was given, else they are
+    saved next to the (first) figure as ``<stem>.nc`` (:func:`_rescue_data`). Returns
+    ``None`` or the error message (which says where the data are); an unexpected exception
+    (a bug) is raised after that message is printed.
+    """
+    from .errors import PwsdynError
+
+    plot = first = figures[0][0]
+    try:
+        for plot, draw in figures:
+            draw()
+            _echo(f"wrote       {plot}")
+        return None
+    except Exception as exc:
+        msg = f"could not write the figure {str(plot)!r}: {exc}"
+        if out is not None:
+            msg += f"; the data are in {str(out)!r}"
+        else:
+            saved, err = _rescue_data(dataset, first)
+            msg += (f"; the data were saved to {str(saved)!r} instead" if saved is not None
+                    else f"; the data could not be saved either ({err})")
+        if isinstance(exc, (OSError, ValueError, TypeError, PwsdynError)):
+            return msg
+        click.echo(f"Error: {_oneline(msg)}", err=True)
+        raise
+
+
+# ======================================================================================
 # commands
 # ======================================================================================
 
-@click.group(invoke_without_command=True, context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=_Group, invoke_without_command=True,
+             context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="pwsdyn", prog_name="pwsdyn")
 @click.pass_context
 def main(ctx):
@@ -183,19 +380,21 @@ def models_cmd():
         try:
             model = pwsdyn.load_model(name)
         except Exception as exc:  # list the rest of the zoo even if one file is broken
-            click.echo(f"{name}\n  failed to load: {exc}\n", err=True)
+            _echo(f"{name}\n  failed to load: {_oneline(exc)}\n", err=True)
             failed += 1
             continue
         desc = model.description.strip().splitlines()[0] if model.description.strip() else ""
         # a listing, not the documentation: one line per model
         desc = textwrap.shorten(desc, width=90, placeholder=" ...")
-        click.echo(click.style(model.name, bold=True) + (f"  {desc}" if desc else ""))
-        click.echo(f"  states:     {', '.join(model.states)}")
+        # sanitised before styling: the bold escape sequence is ours, nothing in it is the model's
+        click.echo(click.style(_safe(model.name), bold=True)
+                   + (f"  {_safe(desc)}" if desc else ""))
+        _echo(f"  states:     {', '.join(model.states)}")
         params = ", ".join(f"{k}={_fmt(v)}" for k, v in model.parameters.items())
-        click.echo(f"  parameters: {params or '(none)'}")
+        _echo(f"  parameters: {params or '(none)'}")
         modes = ", ".join(model.mode_names)
-        click.echo(f"  modes:      {modes}")
-        click.echo("")
+        _echo(f"  modes:      {modes}")
+        _echo("")
     if failed:
         raise SystemExit(1)
 
@@ -222,11 +421,13 @@ def models_cmd():
               default=None, help="Sliding vector field on Filippov surfaces: Filippov's convex "
                                  "combination (default) or Utkin's equivalent control.")
 @click.option("--out", "out", type=click.Path(dir_okay=False), default=None,
-              help="Write the trajectory to this NetCDF file.")
+              help="Write the trajectory to this NetCDF file (.nc).")
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
-              help="Write a figure of the trajectory to this PNG file.")
+              help="Write a figure of the trajectory to this file (PNG; PDF, SVG... by "
+                   "suffix).")
+@click.option("--force", is_flag=True, help=_FORCE_HELP)
 def simulate_cmd(model, params, x0, t0, t_end, rtol, atol, method, exact, mode, sliding, out,
-                 plot):
+                 plot, force):
     """Simulate MODEL (a built-in name, see `pwsdyn models`, or a TOML file).
 
     Prints a summary; with --out and --plot also writes the trajectory and a figure.
@@ -241,6 +442,7 @@ def simulate_cmd(model, params, x0, t0, t_end, rtol, atol, method, exact, mode, 
 
     cli_params = _parse_params(params)
     cli_x0 = _parse_x0(x0)
+    _check_outputs(force, [("--out", out, "data"), ("--plot", plot, "figure")])
     try:
         mdl = pwsdyn.load_model(model)
         defaults = _model_defaults(mdl)
@@ -278,19 +480,18 @@ def simulate_cmd(model, params, x0, t0, t_end, rtol, atol, method, exact, mode, 
 
     _print_summary(traj)
     # a failed run is still written: its data and figure show where and why it stopped
-    try:
-        if out is not None:
-            from .io import save_dataset
+    if out is not None:
+        _save_data(traj.to_dataset(), out, force)
+    if plot is not None:
+        from .plot import plot_trajectory
 
-            save_dataset(traj.to_dataset(), out)
-            click.echo(f"wrote       {out}")
-        if plot is not None:
-            from .plot import plot_trajectory
-
-            plot_trajectory(traj, path=plot)
-            click.echo(f"wrote       {plot}")
-    except (OSError, ValueError) as exc:
-        _fail(exc)
+        problem = _write_figures(
+            [(plot, lambda: plot_trajectory(traj, path=plot, overwrite=force))], out,
+            traj.to_dataset)
+        if problem is not None:
+            if not traj.status.failed:
+                _fail(problem)
+            _echo(f"Error: {_oneline(problem)}", err=True)
     if traj.status.failed:
         _fail(f"the simulation stopped early ({traj.status.name}) at t={traj.t_final:.17g} in "
               f"{traj.state[-1]}: {traj.message}")
@@ -367,9 +568,10 @@ _EXPLORE_OPTIONS = [
                       "exactly (matrix exponential) instead of by the Runge-Kutta pair."),
     click.option("--no-progress", "no_progress", is_flag=True, help="No progress bar."),
     click.option("--out", type=click.Path(dir_okay=False), default=None,
-                 help="Write the dataset to this NetCDF file (never overwritten)."),
+                 help="Write the dataset to this NetCDF file (.nc)."),
     click.option("--plot", type=click.Path(dir_okay=False), default=None,
-                 help="Write the figure to this PNG file."),
+                 help="Write the figure to this file (PNG; PDF, SVG... by suffix)."),
+    click.option("--force", is_flag=True, help=_FORCE_HELP),
 ]
 
 
@@ -379,19 +581,29 @@ def _explore_options(fn):
     return fn
 
 
-def _finish_explore(ds, out, store_path, remove_store, plot, plot_fn):
+def _finish_explore(ds, out, store_path, remove_store, figures, force):
+    """Write --out (then remove the default store), then the ``figures`` (see
+    :func:`_write_figures`)."""
     import shutil
 
+    from .io import save_dataset
+
     if out is not None:
-        click.echo(f"wrote       {out}")
+        try:
+            save_dataset(ds, out, overwrite=force)
+        except (OSError, ValueError, TypeError) as exc:
+            kept = ""
+            if store_path is not None and store_path.is_dir():
+                kept = (f"; the results are kept in the store {str(store_path)!r}: the same "
+                        f"command resumes from it")
+            _fail(f"{exc}{kept}")
+        _echo(f"wrote       {out}")
         if remove_store and store_path is not None and store_path.is_dir():
             shutil.rmtree(store_path, ignore_errors=True)
-    if plot is not None:
-        try:
-            plot_fn(ds, path=plot)
-        except (OSError, ValueError) as exc:
-            _fail(exc)
-        click.echo(f"wrote       {plot}")
+    if figures:
+        problem = _write_figures(figures, out, lambda: ds)
+        if problem is not None:
+            _fail(problem)
 
 
 def _explore_errors():
@@ -416,7 +628,7 @@ def _explore_errors():
 @_explore_options
 def sweep_cmd(model, param, start, stop, num, direction, lyapunov, state, sets, x0, transient,
               samples, section, workers, scheduler, chunk_size, store, rtol, atol, method,
-              exact, no_progress, out, plot):
+              exact, no_progress, out, plot, force):
     """Brute-force bifurcation diagram of MODEL in parameter --param.
 
     For each of --num values from --from to --to, run --transient forcing periods, record
@@ -436,6 +648,9 @@ def sweep_cmd(model, param, start, stop, num, direction, lyapunov, state, sets, 
 
     if num < 1:
         raise click.BadParameter(f"must be at least 1, got {num}", param_hint="--num")
+    lyap_plot = _lyapunov_path(plot) if plot is not None and lyapunov else None
+    _check_outputs(force, [("--out", out, "data"), ("--plot", plot, "figure"),
+                           ("--plot (its Lyapunov figure)", lyap_plot, "figure")])
     mdl, params, x0v, options = _explore_common(model, sets, x0, method, rtol, atol, exact)
     if param not in mdl.parameters:
         raise click.BadParameter(f"unknown parameter {param!r} for model {mdl.name!r}; "
@@ -448,29 +663,27 @@ def sweep_cmd(model, param, start, stop, num, direction, lyapunov, state, sets, 
                           samples=100 if samples is None else samples, section=section,
                           direction=direction, lyapunov=lyapunov, workers=workers,
                           scheduler=scheduler, chunk_size=chunk_size, store=store_path,
-                          out=out, progress=not no_progress, **options)
+                          out=None, progress=not no_progress, **options)
     except _explore_errors() as exc:
         _fail(exc)
     per = ds.period.values
-    click.echo(f"model       {mdl.name} (hash {mdl.hash})")
-    click.echo(f"swept       {param} from {_fmt(values[0])} to {_fmt(values[-1])} "
-               f"({num} values, {', '.join(map(str, ds.direction.values))})")
-    click.echo("periods     " + ", ".join(
+    _echo(f"model       {mdl.name} (hash {mdl.hash})")
+    _echo(f"swept       {param} from {_fmt(values[0])} to {_fmt(values[-1])} "
+          f"({num} values, {', '.join(map(str, ds.direction.values))})")
+    _echo("periods     " + ", ".join(
         f"{k if k else 'none'}: {int(np.sum(per == k))}" for k in np.unique(per)))
     nbad = int(np.sum(ds.status.values != 0))
     if nbad:
-        click.echo(f"failed      {nbad} value(s) failed or diverged (status != 0)")
+        _echo(f"failed      {nbad} value(s) failed or diverged (status != 0)")
 
-    def both(d, path):
-        fig = plot_bifurcation(d, state=state, path=path)
-        if lyapunov:
-            from pathlib import Path as _P
-
-            p = _P(path)
-            plot_lyapunov(d, path=p.with_name(p.stem + "-lyapunov" + p.suffix))
-        return fig
-
-    _finish_explore(ds, out, store_path, remove_store, plot, both)
+    figures = []
+    if plot is not None:
+        figures.append((plot, lambda: plot_bifurcation(ds, state=state, path=plot,
+                                                       overwrite=force)))
+    if lyap_plot is not None:
+        figures.append((lyap_plot, lambda: plot_lyapunov(ds, path=lyap_plot, overwrite=force)))
+    # the data go to --out here, not in pwsdyn.sweep: --force applies and the figure follows
+    _finish_explore(ds, out, store_path, remove_store, figures, force)
 
 
 @main.command("basins")
@@ -487,7 +700,7 @@ def sweep_cmd(model, param, start, stop, num, direction, lyapunov, state, sets, 
 @_explore_options
 def basins_cmd(model, xname, x_from, x_to, x_num, yname, y_from, y_to, y_num, sets, x0,
                transient, samples, section, workers, scheduler, chunk_size, store, rtol,
-               atol, method, exact, no_progress, out, plot):
+               atol, method, exact, no_progress, out, plot, force):
     """Basins of attraction of MODEL on a grid of initial conditions.
 
     \b
@@ -501,6 +714,7 @@ def basins_cmd(model, xname, x_from, x_to, x_num, yname, y_from, y_to, y_num, se
     import pwsdyn
     from .plot import plot_basins
 
+    _check_outputs(force, [("--out", out, "data"), ("--plot", plot, "figure")])
     mdl, params, x0v, options = _explore_common(model, sets, x0, method, rtol, atol, exact)
     grid = {}
     for name, a, b, n, hint in ((xname, x_from, x_to, x_num, "--x"),
@@ -524,11 +738,11 @@ def basins_cmd(model, xname, x_from, x_to, x_num, yname, y_from, y_to, y_num, se
         ds = pwsdyn.basins(mdl, grid, x0v, params=params, transient=transient,
                            samples=32 if samples is None else samples, section=section,
                            workers=workers, scheduler=scheduler, chunk_size=chunk_size,
-                           store=store_path, out=out, progress=not no_progress, **options)
+                           store=store_path, out=None, progress=not no_progress, **options)
     except _explore_errors() as exc:
         _fail(exc)
-    click.echo(f"model       {mdl.name} (hash {mdl.hash})")
-    click.echo("grid        " + " x ".join(f"{k}: {len(v)}" for k, v in grid.items()))
+    _echo(f"model       {mdl.name} (hash {mdl.hash})")
+    _echo("grid        " + " x ".join(f"{k}: {len(v)}" for k, v in grid.items()))
     for b, f in zip(ds.basin.values, ds.fraction.values):
         if f == 0:
             continue
@@ -538,8 +752,12 @@ def basins_cmd(model, xname, x_from, x_to, x_num, yname, y_from, y_to, y_num, se
             what += f", {float(ds.attractor_events_per_period.values[b]):.3g} events/period"
         else:
             what = "diverged" if b == -1 else "failed"
-        click.echo(f"basin {int(b):>3}   {100 * f:6.2f}%  {what}")
-    _finish_explore(ds, out, store_path, remove_store, plot, plot_basins)
+        _echo(f"basin {int(b):>3}   {100 * f:6.2f}%  {what}")
+
+    figures = []
+    if plot is not None:
+        figures.append((plot, lambda: plot_basins(ds, path=plot, overwrite=force)))
+    _finish_explore(ds, out, store_path, remove_store, figures, force)
 
 
 @main.command("orbit")
@@ -576,9 +794,11 @@ def basins_cmd(model, xname, x_from, x_to, x_num, yname, y_from, y_to, y_num, se
 @click.option("--out", "out", type=click.Path(dir_okay=False), default=None,
               help="Write one period with its monodromy and multipliers to this NetCDF file.")
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
-              help="Write a figure of the orbit with its events and multipliers (PNG).")
+              help="Write a figure of the orbit with its events and multipliers (PNG; PDF, "
+                   "SVG... by suffix).")
+@click.option("--force", is_flag=True, help=_FORCE_HELP)
 def orbit_cmd(model, params, x0, t0, period, periods, transient, mode, nodes, tol, rtol, atol,
-              method, out, plot):
+              method, out, plot, force):
     """Find a periodic orbit of MODEL by Newton shooting and print its Floquet multipliers.
 
     Prints the period, the signature (the events over one period) and the multipliers; with
@@ -596,6 +816,7 @@ def orbit_cmd(model, params, x0, t0, period, periods, transient, mode, nodes, to
 
     cli_params = _parse_params(params)
     cli_x0 = _parse_x0(x0)
+    _check_outputs(force, [("--out", out, "data"), ("--plot", plot, "figure")])
     try:
         mdl = pwsdyn.load_model(model)
         defaults = _model_defaults(mdl)
@@ -638,23 +859,25 @@ def orbit_cmd(model, params, x0, t0, period, periods, transient, mode, nodes, to
                                         periods=periods, mode=mode, **options)
     except OrbitError as exc:
         if exc.history:
-            click.echo("newton residuals: " + " ".join(f"{r:.2e}" for r in exc.history),
+            _echo("newton residuals: " + " ".join(f"{r:.2e}" for r in exc.history),
                        err=True)
         _fail(f"no periodic orbit ({exc.reason}): {exc}")
     except (ModelError, SolveError, ValueError, TypeError) as exc:
         _fail(exc)
-    click.echo(orbit.summary())
-    try:
-        if out is not None:
-            orbit.save(out)
-            click.echo(f"wrote       {out}")
-        if plot is not None:
-            from .plot import plot_orbit
+    _echo(orbit.summary())
+    if out is not None:
+        try:
+            data = orbit.to_dataset()
+        except (ValueError, TypeError) as exc:
+            _fail(exc)
+        _save_data(data, out, force)
+    if plot is not None:
+        from .plot import plot_orbit
 
-            plot_orbit(orbit, path=plot)
-            click.echo(f"wrote       {plot}")
-    except (OSError, ValueError) as exc:
-        _fail(exc)
+        problem = _write_figures([(plot, lambda: plot_orbit(orbit, path=plot, overwrite=force))],
+                                 out, orbit.to_dataset)
+        if problem is not None:
+            _fail(problem)
 
 
 def _print_summary(traj):
@@ -684,12 +907,15 @@ def _print_summary(traj):
         f"final       t={_fmt(traj.t_final)}: {final} (in {traj.state[-1]})",
         f"status      {traj.status.name}: {traj.message}",
     ]
-    click.echo("\n".join(lines))
+    _echo("\n".join(lines))
 
 
 def _fail(exc, code: int = 1):
-    """Print ``Error: ...`` on one line (no traceback) and exit with ``code``."""
-    text = " ".join(str(exc).split())
+    """Print ``Error: ...`` on one line, sanitised (no traceback), and exit with ``code``."""
+    from .io import OVERWRITE_HINT
+
+    # a file that appeared while the command ran: the CLI's way to replace it is --force
+    text = _oneline(exc).replace(OVERWRITE_HINT, "pass --force to replace it")
     click.echo(f"Error: {text}", err=True)
     raise SystemExit(code)
 

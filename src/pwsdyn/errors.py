@@ -117,3 +117,8 @@ class ArgumentError(PwsdynError, ValueError, TypeError):
 class StoreError(PwsdynError, OSError):
     """A result store on disk cannot be used: locked by another run, corrupted, truncated or
     tampered with. The message names the file; nothing in the store is overwritten."""
+
+
+class OutputExistsError(PwsdynError, FileExistsError):
+    """An output file exists and replacing it was not asked for (``overwrite=True`` in the
+    API, ``--force`` on the command line). The message names the file; nothing is written."""

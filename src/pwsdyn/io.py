@@ -419,12 +419,11 @@ def _engine_hint():
         raise
 
 
-def save_dataset(ds, path) -> Path:
+def save_dataset(ds, path, *, overwrite: bool = False) -> Path:
     """Write a dataset (or a trajectory) to a NetCDF-4 file, atomically.
 
-    The data go to a temporary file in the same directory, which then replaces ``path`` in one
-    step (``os.replace``), so ``path`` is never left half-written: it holds the old content or
-    the new one. An existing file is overwritten.
+    The data go to a temporary file in the same directory, which is then moved to ``path`` in
+    one step, so ``path`` is never left half-written.
 
     Parameters
     ----------
@@ -432,6 +431,10 @@ def save_dataset(ds, path) -> Path:
         A trajectory is converted with :func:`trajectory_to_dataset`.
     path : str or pathlib.Path
         The file to write (conventionally ``*.nc``).
+    overwrite : bool
+        ``False`` (default): an existing ``path`` is refused with
+        :class:`~pwsdyn.OutputExistsError` and left alone. ``True``: it is replaced (it holds
+        the old content or the new one, never a mix).
 
     Returns
     -------
@@ -440,6 +443,8 @@ def save_dataset(ds, path) -> Path:
 
     Raises
     ------
+    OutputExistsError
+        If ``path`` exists and ``overwrite`` is false (also a ``FileExistsError``).
     FileNotFoundError
         If the directory of ``path`` does not exist.
     """
@@ -449,28 +454,70 @@ def save_dataset(ds, path) -> Path:
         else:
             raise TypeError(f"`ds` must be an xarray.Dataset or a Trajectory, got "
                             f"{type(ds).__name__}")
+
     def write(tmp):
         with _engine_hint():
             ds.to_netcdf(tmp, engine=ENGINE)
 
-    return atomic_write(path, write)
+    return atomic_write(path, write, overwrite=overwrite)
 
 
-def atomic_write(path, write) -> Path:
-    """Write a file through ``write(tmp_path)`` and move it into place in one step, so a
-    failed write never leaves a half-written file or destroys the old one."""
+#: How to ask for an existing file to be replaced, in the API (the CLI says ``--force``).
+OVERWRITE_HINT = "pass overwrite=True to replace it"
+
+
+def _check_output_path(path, *, overwrite: bool = False, hint: str = OVERWRITE_HINT) -> Path:
+    """Check that ``path`` can be written, before any work is done; return it as a Path.
+
+    Its directory must exist and be writable, ``path`` must not be a directory and, unless
+    ``overwrite``, must not exist (:class:`~pwsdyn.OutputExistsError`, whose message ends
+    with ``hint``). Raises ``FileNotFoundError``, ``NotADirectoryError``,
+    ``IsADirectoryError`` or ``PermissionError`` naming the path otherwise.
+    """
+    from .errors import OutputExistsError
+
     path = Path(path)
     directory = path.parent if str(path.parent) else Path(".")
-    if not directory.is_dir():
-        raise FileNotFoundError(f"cannot write {str(path)!r}: directory {str(directory)!r} "
-                                f"does not exist")
     if path.is_dir():
         raise IsADirectoryError(f"cannot write {str(path)!r}: it is a directory")
+    if not directory.is_dir():
+        # name the first ancestor that exists and is no directory, else the missing one
+        for anc in [directory, *directory.parents]:
+            if anc.exists() or anc.is_symlink():
+                if not anc.is_dir():
+                    raise NotADirectoryError(f"cannot write {str(path)!r}: {str(anc)!r} is "
+                                             f"not a directory")
+                break
+        raise FileNotFoundError(f"cannot write {str(path)!r}: directory {str(directory)!r} "
+                                f"does not exist")
+    if not overwrite and (path.exists() or path.is_symlink()):
+        raise OutputExistsError(f"output file {str(path)!r} exists; nothing was overwritten "
+                                f"({hint})")
+    # os.access also reports a read-only file system (EROFS), even to root
+    if not os.access(directory, os.W_OK | os.X_OK):
+        raise PermissionError(f"cannot write {str(path)!r}: directory {str(directory)!r} is "
+                              f"not writable")
+    return path
+
+
+def atomic_write(path, write, *, overwrite: bool = False) -> Path:
+    """Write a file through ``write(tmp_path)`` and move it into place in one step, so a
+    failed write never leaves a half-written file or destroys the old one.
+
+    With ``overwrite=False`` (default) an existing ``path`` is refused before ``write`` is
+    called (:class:`~pwsdyn.OutputExistsError`), and the final move never replaces a file that
+    appeared in the meantime. With ``overwrite=True`` an existing file is replaced.
+    """
+    path = _check_output_path(path, overwrite=overwrite)
+    directory = path.parent if str(path.parent) else Path(".")
     # hidden name in the same directory: os.replace is atomic only within one file system
     tmp = directory / f".{path.name}.{uuid.uuid4().hex}.tmp"
     try:
         write(tmp)
-        os.replace(tmp, path)
+        if overwrite:
+            os.replace(tmp, path)
+        else:
+            _move_no_clobber(tmp, path)
     except BaseException:
         try:
             tmp.unlink()
@@ -478,6 +525,25 @@ def atomic_write(path, write) -> Path:
             pass
         raise
     return path
+
+
+def _move_no_clobber(tmp: Path, path: Path) -> None:
+    """Move ``tmp`` to ``path`` unless ``path`` exists (then OutputExistsError)."""
+    from .errors import OutputExistsError
+
+    exists = OutputExistsError(f"output file {str(path)!r} exists; nothing was overwritten "
+                               f"({OVERWRITE_HINT})")
+    try:
+        os.link(tmp, path)  # fails if path exists: no window between check and move
+    except FileExistsError:
+        raise exists from None
+    except OSError:
+        # file systems without hard links: check, then move (a small window remains)
+        if path.exists() or path.is_symlink():
+            raise exists from None
+        os.replace(tmp, path)
+        return
+    tmp.unlink()
 
 
 def open_dataset(path, *, lazy: bool = False) -> xr.Dataset:

@@ -4,6 +4,10 @@ Figures are built on :class:`matplotlib.figure.Figure` directly, without ``pyplo
 figure state, nothing is shown, no GUI backend is needed, and the user's backend choice is left
 alone. A returned figure displays in a notebook and can be saved with ``fig.savefig``.
 
+A figure written through the ``path`` argument of the functions here never replaces an
+existing file unless ``overwrite=True`` (:class:`~pwsdyn.OutputExistsError` otherwise); the
+path (directory, format, existing file) is checked before the figure is drawn.
+
 This module only reads result objects; the numerical code never imports it.
 """
 
@@ -228,7 +232,7 @@ def _title(traj) -> str:
 # ======================================================================================
 
 def plot_trajectory(traj, path=None, states=None, phase=None, *, num: int = 4000,
-                    title: str | None = None) -> Figure:
+                    title: str | None = None, overwrite: bool = False) -> Figure:
     """A figure of a trajectory: time series, phase plane, events and event surfaces.
 
     Panels: on the left the time series of each state; on the right the phase plane of two
@@ -246,7 +250,8 @@ def plot_trajectory(traj, path=None, states=None, phase=None, *, num: int = 4000
         A result of :func:`pwsdyn.simulate`.
     path : str or pathlib.Path, optional
         Also save the figure there (PNG at 120 dpi unless the suffix names another format).
-        The file is written atomically (temporary file, then rename).
+        The file is written atomically (temporary file, then rename). The path is checked
+        before the figure is drawn (directory, format, existing file).
     states : sequence of str or int, optional
         States shown as time series (default: all), by name or index.
     phase : (str or int, str or int), optional
@@ -257,6 +262,9 @@ def plot_trajectory(traj, path=None, states=None, phase=None, *, num: int = 4000
         runs get up to three per stored step, at most 60000 unless ``num`` is larger.
     title : str, optional
         Replaces the default title (model name and parameter values).
+    overwrite : bool
+        Replace an existing file at ``path``; by default it is refused with
+        :class:`~pwsdyn.OutputExistsError` before anything is drawn.
 
     Returns
     -------
@@ -272,6 +280,8 @@ def plot_trajectory(traj, path=None, states=None, phase=None, *, num: int = 4000
     for attr in ("t", "x", "events", "model", "sample"):
         if not hasattr(traj, attr):
             raise TypeError(f"`traj` must be a Trajectory, got {type(traj).__name__}")
+    if path is not None:
+        _check_figure_path(path, overwrite)
     model = traj.model
     names = list(model.states)
     n = len(names)
@@ -388,11 +398,12 @@ def plot_trajectory(traj, path=None, states=None, phase=None, *, num: int = 4000
         fig.legend([h for h, _ in items], [lab for _, lab in items], loc="outside lower center",
                    ncol=min(len(items), 4), frameon=False, fontsize="small")
     if path is not None:
-        _save_figure(fig, path)
+        _save_figure(fig, path, overwrite)
     return fig
 
 
-def plot_orbit(orbit, path=None, states=None, phase=None, *, num: int = 4000) -> Figure:
+def plot_orbit(orbit, path=None, states=None, phase=None, *, num: int = 4000,
+               overwrite: bool = False) -> Figure:
     """A figure of a periodic orbit: one period with its events, and its Floquet multipliers.
 
     The panels of :func:`plot_trajectory` for ``orbit.trajectory`` (time series, phase plane,
@@ -405,7 +416,7 @@ def plot_orbit(orbit, path=None, states=None, phase=None, *, num: int = 4000) ->
         A result of :func:`pwsdyn.find_periodic_orbit`.
     path : str or pathlib.Path, optional
         Also save the figure there.
-    states, phase, num
+    states, phase, num, overwrite
         As for :func:`plot_trajectory`.
 
     Returns
@@ -417,6 +428,8 @@ def plot_orbit(orbit, path=None, states=None, phase=None, *, num: int = 4000) ->
             raise TypeError(f"`orbit` must be a PeriodicOrbit, got {type(orbit).__name__}")
     if orbit.trajectory is None:
         raise ValueError("the orbit has no trajectory to plot")
+    if path is not None:
+        _check_figure_path(path, overwrite)
     mult = np.atleast_1d(np.asarray(orbit.multipliers if orbit.multipliers is not None else [],
                                     dtype=complex))
     stab = "stable" if orbit.stable else "unstable"
@@ -439,7 +452,7 @@ def plot_orbit(orbit, path=None, states=None, phase=None, *, num: int = 4000) ->
     ins.tick_params(labelsize="x-small")
     ins.set_title("Floquet multipliers", fontsize="x-small")
     if path is not None:
-        _save_figure(fig, path)
+        _save_figure(fig, path, overwrite)
     return fig
 
 
@@ -515,11 +528,40 @@ def _draw_contours(ax, contours, phase_ij, handles):
     ax.set_ylim(ylim)
 
 
-def _save_figure(fig: Figure, path) -> Path:
+def figure_formats() -> list:
+    """The figure formats (file suffixes) matplotlib can write: ``png``, ``pdf``, ``svg``..."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    return sorted(FigureCanvasBase.get_supported_filetypes())
+
+
+def _figure_format(path) -> str:
+    """The format of a figure file from its suffix (no suffix: PNG); refuses an unknown one."""
+    from .errors import ArgumentError
+
+    suffix = Path(path).suffix
+    fmt = suffix[1:].lower() or "png"
+    if fmt not in figure_formats():
+        raise ArgumentError(f"cannot write the figure {str(path)!r}: unknown format "
+                            f"{suffix!r}; supported formats: {', '.join(figure_formats())}")
+    return fmt
+
+
+def _check_figure_path(path, overwrite: bool = False) -> str:
+    """Check a figure path before drawing: its format, directory and an existing file."""
+    from .io import _check_output_path
+
+    fmt = _figure_format(path)
+    _check_output_path(path, overwrite=overwrite)
+    return fmt
+
+
+def _save_figure(fig: Figure, path, overwrite: bool = False) -> Path:
     from .io import atomic_write
 
-    fmt = Path(path).suffix[1:].lower() or "png"
-    return atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=120, format=fmt))
+    fmt = _figure_format(path)
+    return atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=120, format=fmt),
+                        overwrite=overwrite)
 
 
 # ======================================================================================
@@ -544,7 +586,8 @@ def _sweep_param(ds):
     return ds.attrs["parameter"]
 
 
-def plot_bifurcation(ds, state=None, path=None, *, markersize: float = 1.0) -> Figure:
+def plot_bifurcation(ds, state=None, path=None, *, markersize: float = 1.0,
+                     overwrite: bool = False) -> Figure:
     """Bifurcation diagram of a :func:`pwsdyn.sweep` result.
 
     Top: the section points of ``state`` against the parameter, the up and down sweeps in
@@ -560,12 +603,16 @@ def plot_bifurcation(ds, state=None, path=None, *, markersize: float = 1.0) -> F
         the velocity of the zoo's mechanical models -- for an event section).
     path : str or Path, optional
         Also save the figure there (PNG, PDF, SVG by extension).
+    overwrite : bool
+        Replace an existing file at ``path`` (default: refused, see :func:`plot_trajectory`).
 
     Returns
     -------
     matplotlib.figure.Figure
     """
     pname = _sweep_param(ds)
+    if path is not None:
+        _check_figure_path(path, overwrite)
     states = [str(s) for s in ds.state.values]
     if state is None:
         state = states[0] if ds.attrs.get("section") == "stroboscopic" else states[-1]
@@ -603,16 +650,19 @@ def plot_bifurcation(ds, state=None, path=None, *, markersize: float = 1.0) -> F
     ax.legend(loc="best", fontsize=8, markerscale=6)
     ax2.grid(True, lw=0.3)
     if path is not None:
-        _save_figure(fig, path)
+        _save_figure(fig, path, overwrite)
     return fig
 
 
-def plot_lyapunov(ds, path=None) -> Figure:
+def plot_lyapunov(ds, path=None, *, overwrite: bool = False) -> Figure:
     """Lyapunov exponents against the parameter (a :func:`pwsdyn.sweep` run with
-    ``lyapunov=True``): every exponent, up and down sweeps in two colours, zero marked."""
+    ``lyapunov=True``): every exponent, up and down sweeps in two colours, zero marked.
+    ``path`` and ``overwrite`` as for :func:`plot_bifurcation`."""
     pname = _sweep_param(ds)
     if "lyapunov" not in ds:
         raise ValueError("the sweep has no Lyapunov exponents: run it with lyapunov=True")
+    if path is not None:
+        _check_figure_path(path, overwrite)
     fig = Figure(figsize=(8.0, 4.0), layout="constrained")
     ax = fig.subplots()
     pv = ds[pname].values
@@ -630,19 +680,22 @@ def plot_lyapunov(ds, path=None) -> Figure:
     ax.legend(fontsize=8, ncols=2)
     ax.grid(True, lw=0.3)
     if path is not None:
-        _save_figure(fig, path)
+        _save_figure(fig, path, overwrite)
     return fig
 
 
-def plot_basins(ds, path=None) -> Figure:
+def plot_basins(ds, path=None, *, overwrite: bool = False) -> Figure:
     """Basins of attraction of a :func:`pwsdyn.basins` result: one categorical colour per
     attractor, black for divergence, grey for failed runs, and a legend with each attractor's
-    period, events per period and basin fraction."""
+    period, events per period and basin fraction. ``path`` and ``overwrite`` as for
+    :func:`plot_bifurcation`."""
     from matplotlib.colors import BoundaryNorm, ListedColormap
     from matplotlib.patches import Patch
 
     if ds.attrs.get("kind") != "basins":
         raise ValueError("expected the dataset of pwsdyn.basins (attribute kind = 'basins')")
+    if path is not None:
+        _check_figure_path(path, overwrite)
     lab = ds.label
     dims = lab.dims
     K = ds.sizes["attractor"]
@@ -685,5 +738,5 @@ def plot_basins(ds, path=None) -> Figure:
               title="attractor")
     ax.set_title(f"{ds.attrs.get('model', '')}: basins of attraction")
     if path is not None:
-        _save_figure(fig, path)
+        _save_figure(fig, path, overwrite)
     return fig

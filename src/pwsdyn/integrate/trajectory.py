@@ -362,8 +362,12 @@ class Trajectory:
 
         return trajectory_from_dataset(ds)
 
-    def save(self, path):
-        """Write the trajectory to a NetCDF file."""
+    def save(self, path, overwrite: bool = False):
+        """Write the trajectory to a NetCDF file (atomically); returns the path.
+
+        An existing file is refused with :class:`~pwsdyn.OutputExistsError` (nothing is
+        written) unless ``overwrite=True``. Read it back with :func:`pwsdyn.io.load_trajectory`.
+        """
         from ..io import save_dataset
 
-        save_dataset(self.to_dataset(), path)
+        return save_dataset(self.to_dataset(), path, overwrite=overwrite)

@@ -223,11 +223,12 @@ class PeriodicOrbit:
         })
         return ds
 
-    def save(self, path):
-        """Write :meth:`to_dataset` to a NetCDF file."""
+    def save(self, path, overwrite: bool = False):
+        """Write :meth:`to_dataset` to a NetCDF file; an existing file is refused
+        (:class:`~pwsdyn.OutputExistsError`) unless ``overwrite=True``."""
         from ..io import save_dataset
 
-        return save_dataset(self.to_dataset(), path)
+        return save_dataset(self.to_dataset(), path, overwrite=overwrite)
 
 
 def _fmt_complex(m) -> str:
