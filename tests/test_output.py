@@ -373,14 +373,16 @@ def _assert_clean(text):
     assert "\\x1b]0;pwned\\x07" in text and "\\x9b" in text and "\\u202e" in text
 
 
-def _evil_model(tmp_path):
+def _evil_model(tmp_path, monkeypatch):
+    """The model file above, loaded with the load-time check of its name switched off (it
+    refuses control characters): the CLI must be safe on its own, for any text a model or a
+    saved file carries."""
     path = tmp_path / "evil.toml"
     path.write_text(EVIL_MODEL)
-    try:
-        model = pwsdyn.load_model(path)
-    except ModelError:
-        pytest.skip("model names with control characters are refused at load time")
-    return path, model
+    with pytest.raises(ModelError, match="non-printable"):
+        pwsdyn.load_model(path)
+    monkeypatch.setattr(pwsdyn.model.spec, "check_model_name", lambda name, W: name)
+    return path, pwsdyn.load_model(path)
 
 
 def test_safe_escapes_controls_and_keeps_text():
@@ -392,15 +394,15 @@ def test_safe_escapes_controls_and_keeps_text():
     assert _safe("\ud800") == "\\ud800"
 
 
-def test_simulate_summary_is_sanitised(tmp_path):
-    path, model = _evil_model(tmp_path)
+def test_simulate_summary_is_sanitised(tmp_path, monkeypatch):
+    path, model = _evil_model(tmp_path, monkeypatch)
     res = _run(["simulate", path], color=True)  # color: click strips nothing itself
     assert res.exit_code == 0, res.output
     _assert_clean(res.output)
 
 
-def test_error_messages_are_sanitised(tmp_path):
-    path, model = _evil_model(tmp_path)
+def test_error_messages_are_sanitised(tmp_path, monkeypatch):
+    path, model = _evil_model(tmp_path, monkeypatch)
     res = _run(["simulate", path, "--x0", "1,2"], color=True)  # click's own message
     assert res.exit_code == 2
     _assert_clean(res.output)
@@ -411,7 +413,7 @@ def test_error_messages_are_sanitised(tmp_path):
 
 
 def test_models_listing_is_sanitised(tmp_path, monkeypatch):
-    path, model = _evil_model(tmp_path)
+    path, model = _evil_model(tmp_path, monkeypatch)
 
     def load(name, **kwargs):
         if name == "broken":

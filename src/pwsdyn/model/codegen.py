@@ -156,6 +156,14 @@ def derivatives(model: Model) -> Derivatives:
         cases[(W_GT, j)] = [_clean(e) for e in g.diff(t)]
         cases[(W_GUARD, j)] = [ev.guard if ev.guard is not None else sp.true]
     assert all(len(v) in (1, 2, n, n * n) for v in cases.values())
+    # derivatives of finite expressions are finite where they exist; refuse a constant that
+    # is not (it would be NaN at every point, or not compile)
+    for (which, idx), exprs in cases.items():
+        for e in exprs:
+            if isinstance(e, sp.Basic) and e.has(sp.I, sp.nan, sp.zoo, sp.oo, -sp.oo):
+                raise ModelError(f"a derivative of model {model.name!r} (quantity {which}, "
+                                 f"index {idx}) has the non-finite or complex value {e}",
+                                 source=model.origin)
     aff = affine_structure(model)
     cases[(W_AFFINE, -1)] = [sp.Integer(aff.dimension if aff.any else 0)]
     for i, M in enumerate(aff.matrices):

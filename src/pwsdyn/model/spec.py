@@ -27,7 +27,7 @@ from typing import Any, Mapping
 import sympy as sp
 
 from ..errors import ModelError
-from .expressions import parse_expression
+from .expressions import check_expression, parse_expression
 
 #: Name of the independent variable in expressions.
 TIME = "t"
@@ -620,6 +620,20 @@ def model_from_dict(data: dict, origin: str = "<dict>", text: str | None = None)
             variables=tuple(names[s] for s in states) + (t,))
     except ModelError as exc:
         raise W.error(exc.reason, exc.field or "modes") from None
+    # a variant of a split mode can hold a constant its parent did not: Min(x, -5)**-0.5 is
+    # (-5)**-0.5, complex, where x > -5
+    def refuse(prefix, fieldname):
+        def fail(msg):
+            raise W.error(f"{prefix}: {msg}", fieldname)
+        return fail
+
+    for mode in modes:
+        for s, e in zip(states, mode.rhs):
+            check_expression(e, refuse(f"in mode {mode.name!r}",
+                                       f"modes.{mode.name.split('[', 1)[0]}.{s}"))
+    for sw in switches:
+        for e in sw.family or ():
+            check_expression(e, refuse(f"in the sliding family of switch {sw.name!r}", "modes"))
     return Model(name=name, states=tuple(states), parameters=parameters, modes=tuple(modes),
                  surfaces=tuple(surfaces), events=tuple(events), switches=tuple(switches),
                  description=desc, reference=ref, definitions=definitions, forcing_period=fp,
