@@ -30,9 +30,10 @@ import numpy as np
 import xarray as xr
 
 from .. import __version__
-from ..errors import Status
-from ..integrate.simulate import DEFAULTS, integrator_options, _check_options, state_vector
-from ._common import check_section, DIVERGED, ModelContext, model_payload, period_estimate
+from .. import _validate as V
+from ..errors import ArgumentError, Status
+from ..integrate.simulate import DEFAULTS, check_mode, integrator_options, state_vector
+from ._common import check_common, check_section, check_time_unit, DIVERGED, ModelContext, model_payload, period_estimate
 from ._executor import run_chunks
 from ._store import ChunkStore
 from ._sweep import _period_function, _settings_json, run_window
@@ -178,8 +179,10 @@ def basins(model, grid: Mapping[str, object], x0=None, *, params=None, transient
 
     Raises
     ------
-    ValueError
-        An empty grid axis, an unknown or repeated state, non-finite values, ...
+    ArgumentError
+        (a ``ValueError``) Before any work: an empty grid axis, an unknown or repeated state,
+        non-finite values, counts that are not ints in range, tolerances outside (0, 1), a
+        forcing period that is not a positive finite number, ...
 
     Examples
     --------
@@ -189,53 +192,60 @@ def basins(model, grid: Mapping[str, object], x0=None, *, params=None, transient
     >>> float(ds.fraction.sum())
     1.0
     """
-    from ..model import load_model
-
-    model = load_model(model)
+    c = check_common(transient=transient, samples=samples, samples_min=2, phase=phase,
+                     period=period, max_period=max_period, period_tol=period_tol, bound=bound,
+                     chunk_size=chunk_size, workers=workers, progress=progress, store=store,
+                     out=out, scheduler=scheduler)
+    transient, samples, phase, period = c["transient"], c["samples"], c["phase"], c["period"]
+    max_period, period_tol, bound, chunk_size = (c["max_period"], c["period_tol"], c["bound"],
+                                                 c["chunk_size"])
+    match_tol = V.tolerance("match_tol", match_tol)
+    model = V.model(model, caller="basins()")
     is_map = bool(getattr(model, "is_map", False))
     if not isinstance(grid, Mapping) or not 1 <= len(grid) <= 2:
-        raise ValueError("`grid` must be a dict of one or two entries: state name -> values")
+        raise ArgumentError("`grid` must be a dict of one or two entries: state name -> values, "
+                            f"got {V.describe(grid)}")
     axes = []
     for name, v in grid.items():
-        if name not in model.states:
-            raise ValueError(f"`grid` names unknown state {name!r}; states are "
-                             f"{list(model.states)}")
-        arr = np.asarray(v, dtype=float).reshape(-1)
+        if not isinstance(name, str) or name not in model.states:
+            raise ArgumentError(f"`grid` names unknown state {name!r}; states are "
+                                f"{list(model.states)}")
+        if V.is_real(v) or v is None or isinstance(v, (str, bytes)):
+            raise ArgumentError(f"`grid` axis {name!r} must be a sequence of numbers, got "
+                                f"{V.describe(v)}")
+        arr = V.vector(f"grid[{name!r}]", v, finite=False)
         if arr.size == 0:
-            raise ValueError(f"`grid` axis {name!r} has zero size: give at least one value")
+            raise ArgumentError(f"`grid` axis {name!r} has zero size: give at least one value")
         if not np.all(np.isfinite(arr)):
-            raise ValueError(f"`grid` axis {name!r} must be finite")
+            raise ArgumentError(f"`grid` axis {name!r} must be finite")
         axes.append((name, arr))
     if len(axes) == 2 and axes[0][0] == axes[1][0]:
-        raise ValueError("the two `grid` axes must be different states")
-    for nm_, v, lo in (("transient", transient, 0), ("samples", samples, 2)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-            raise ValueError(f"`{nm_}` must be an integer >= {lo}, got {v!r}")
+        raise ArgumentError("the two `grid` axes must be different states")
+    p = model.parameter_vector(params)
     if is_map:
         if section != "stroboscopic" or options:
-            raise ValueError(f"model {model.name!r} is a map: `section` and integrator "
-                             "options apply to flows only")
+            raise ArgumentError(f"model {model.name!r} is a map: `section` and integrator "
+                                "options apply to flows only")
     else:
         check_section(model, section)
         if period is None and model.forcing_period is None:
-            raise ValueError(f"model {model.name!r} is autonomous: give `period`")
-        integrator_options(options, "basins()")
+            raise ArgumentError(f"model {model.name!r} is autonomous: give `period`")
+        check_mode(model, integrator_options(options, "basins()"))
+        check_time_unit(model, p, period, phase, transient + samples)
     if x0 is None:
         x0 = (model.spec.get("defaults") or {}).get("x0")
     base = state_vector(model, x0) if x0 is not None else np.zeros(model.n_states)
-    p = model.parameter_vector(params)
     if max_period is None:
         max_period = max(1, min(samples // 4, 64))
-    opts = {**DEFAULTS, **options, "dense": False, "throw": False, "variational": False}
-    if not is_map:
-        _check_options(opts)
     shape = tuple(len(a) for _, a in axes)
+    m = float(np.prod([float(k) for k in shape]))
+    n = model.n_states
+    V.memory(f"basins() on a grid of {' x '.join(map(str, shape))} starts",
+             8.0 * m * (2 * n + max_period * n + 8) + 8.0 * samples * (n + 1))
+    opts = {**DEFAULTS, **options, "dense": False, "throw": False, "variational": False}
     rows = shape[0]
     if chunk_size is None:
         chunk_size = max(1, math.ceil(rows / 16))
-    if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) \
-            or chunk_size < 1:
-        raise ValueError(f"`chunk_size` must be a positive integer, got {chunk_size!r}")
     out_path = Path(out) if out is not None else None
     if out_path is not None and out_path.exists():
         raise FileExistsError(f"output file {str(out_path)!r} exists; nothing was overwritten "

@@ -17,8 +17,12 @@ step for the section.
 from __future__ import annotations
 
 
+import math
+
 import numpy as np
 
+from .. import _validate as V
+from ..errors import ArgumentError
 from ..model import compile_model, load_model
 
 #: Event kinds counted in "events per period" (state changes -- stick, release, slide start
@@ -33,7 +37,7 @@ SECTION_MISSED = -3
 def model_payload(model) -> dict:
     """What a worker needs to rebuild ``model``: its spec dict and origin (picklable)."""
     if not model.spec:
-        raise ValueError(f"model {model.name!r} has no spec dict (it was not made by "
+        raise ArgumentError(f"model {model.name!r} has no spec dict (it was not made by "
                          "pwsdyn.load_model); build it with load_model to use it here")
     return {"spec": model.spec, "origin": model.origin, "hash": model.hash}
 
@@ -170,9 +174,70 @@ def check_section(model, section: str) -> None:
     """``section`` is 'stroboscopic' or the name of an event or switch of the flow ``model``."""
     if section != "stroboscopic":
         names = {e.name for e in model.events} | {s.name for s in model.switches}
-        if section not in names:
-            raise ValueError(f"`section` must be 'stroboscopic' or an event of model "
+        if not isinstance(section, str) or section not in names:
+            raise ArgumentError(f"`section` must be 'stroboscopic' or an event of model "
                              f"{model.name!r} ({sorted(names)}), got {section!r}")
+
+
+#: Largest number of Dask worker processes accepted.
+MAX_WORKERS = 4096
+
+
+def check_common(*, transient, samples, samples_min, phase, period, max_period, period_tol,
+                 bound, chunk_size, workers, progress, store=None, out=None, scheduler=None
+                 ) -> dict:
+    """The arguments that :func:`pwsdyn.sweep` and :func:`pwsdyn.basins` share, checked and
+    normalised (``max_period``, ``chunk_size`` may be None: defaults chosen later)."""
+    return dict(
+        transient=V.integer("transient", transient, lo=0),
+        samples=V.integer("samples", samples, lo=samples_min),
+        phase=V.number("phase", phase, lo=-1e6, hi=1e6),
+        period=V.positive("period", period, allow_none=True),
+        max_period=V.integer("max_period", max_period, lo=1, allow_none=True),
+        period_tol=V.tolerance("period_tol", period_tol),
+        bound=V.positive("bound", bound, allow_inf=True),
+        chunk_size=V.integer("chunk_size", chunk_size, lo=1, allow_none=True),
+        workers=V.integer("workers", workers, lo=1, hi=MAX_WORKERS, allow_none=True),
+        progress=V.flag("progress", progress),
+        store=V.path("store", store), out=V.path("out", out),
+        scheduler=V.text("scheduler", scheduler, allow_none=True))
+
+
+def check_time_unit(model, p, period, phase: float, n_periods: int, *, pidx=None,
+                    values=(None,), param: str | None = None) -> None:
+    """The time unit ``T`` of a window of ``n_periods`` (``period``, else the forcing period
+    at each of ``values`` of parameter ``pidx``) is a positive finite number, and the window
+    from ``phase * T`` and each period in it are resolvable in double-precision time
+    (:func:`pwsdyn._validate.time_window`). Flows only."""
+    p = np.array(p, dtype=float)
+    fn = None if period is not None else model.forcing_period_function
+    for v in values:
+        if v is not None:
+            v = float(v)
+            p[pidx] = v
+        if period is not None:
+            T = float(period)
+        else:
+            try:
+                T = float(fn(*(float(q) for q in p)))
+                got = repr(T)
+            except (ArithmeticError, ValueError, TypeError) as exc:
+                T, got = math.nan, f"undefined ({exc})"
+            if not (math.isfinite(T) and T > 0):
+                at = (f" at {param} = {v!r}" if v is not None else "")
+                raise ArgumentError(
+                    f"the forcing period {model.forcing_period} of model {model.name!r} must be "
+                    f"a positive finite number, got {got}{at}"
+                    + (f": remove that value from `values` (or give `period`)"
+                       if v is not None else ": check `params` (or give `period`)"))
+        name = "values" if (v is not None and period is None) else "period"
+        t_start = phase * T
+        V.time_window(name, t_start, max(n_periods, 1) * T,
+                      what=f"the window of {n_periods} period(s) of {T!r}"
+                      + (f" at {param} = {v!r}" if v is not None else ""))
+        V.time_window(name, t_start + (max(n_periods, 1) - 1) * T, T,
+                      what=f"one period ({T!r}) at the end of the window"
+                      + (f" at {param} = {v!r}" if v is not None else ""))
 
 
 def check_bound(x: np.ndarray, bound: float) -> bool:

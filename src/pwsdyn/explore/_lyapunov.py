@@ -26,7 +26,10 @@ from typing import Mapping
 import numpy as np
 
 from .. import __version__
-from ..integrate.simulate import integrator_options, _simulate_compiled, state_vector
+from .. import _validate as V
+from ..errors import ArgumentError
+from ..integrate.simulate import check_mode, integrator_options, _simulate_compiled, state_vector
+from ..stability._context import forcing_period
 from ._common import ModelContext, check_bound, failed_status, readmit
 
 
@@ -176,8 +179,11 @@ def lyapunov_spectrum(model, x0, params: Mapping[str, float] | None = None, *,
 
     Raises
     ------
-    ValueError
-        Bad arguments (a non-positive duration, an autonomous flow without ``segment``, ...).
+    ArgumentError
+        (a ``ValueError``) Before any work: a non-positive duration, an autonomous flow
+        without ``segment``, a non-finite ``t0``, a run not resolved in double-precision time
+        from ``t0`` (see :mod:`pwsdyn._validate`), a ``duration`` whose per-segment records
+        would exceed ``pwsdyn._validate.MEMORY_LIMIT``, ...
 
     Examples
     --------
@@ -186,23 +192,22 @@ def lyapunov_spectrum(model, x0, params: Mapping[str, float] | None = None, *,
     >>> bool(res.exponents[0] > 0)
     True
     """
-    from ..model import load_model
-
-    model = load_model(model)
-    for name, v in (("transient", transient), ("duration", duration)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
-            raise ValueError(f"`{name}` must be a non-negative integer, got {v!r}")
-    if duration < 1:
-        raise ValueError(f"`duration` must be at least 1, got {duration!r}")
-    ctx = ModelContext.get(model)
+    transient = V.integer("transient", transient, lo=0)
+    duration = V.integer("duration", duration, lo=1)
+    segment = V.positive("segment", segment, allow_none=True)
+    t0 = V.number("t0", t0)
+    bound = V.positive("bound", bound, allow_inf=True)
+    model = V.model(model, caller="lyapunov_spectrum()")
     p = model.parameter_vector(params)
     x = state_vector(model, x0)
+    n = model.n_states
     prov = {"model": model.name, "model_hash": model.hash, "pwsdyn_version": __version__,
             "params": dict(zip(model.parameters, map(float, p)))}
-    if ctx.is_map:
+    if getattr(model, "is_map", False):
         if options or segment is not None:
-            raise TypeError("integrator options and `segment` apply to flows only, not to "
-                            f"map {model.name!r}")
+            raise ArgumentError("integrator options and `segment` apply to flows only, not to "
+                                f"map {model.name!r}")
+        ctx = ModelContext.get(model)
         from ..model.maps import MAP_DIVERGED, MAP_OK, lyapunov_kernel
 
         st, ex, xe, done = lyapunov_kernel(ctx.cm.step, x, p if p.size else np.zeros(1),
@@ -212,14 +217,22 @@ def lyapunov_spectrum(model, x0, params: Mapping[str, float] | None = None, *,
                                 prov)
     opts = {**integrator_options(options, "lyapunov_spectrum()"), "dense": False,
             "throw": False}
+    check_mode(model, opts)
     if segment is None:
-        segment = model.forcing_period_value(params)
-        if segment is None:
-            raise ValueError(f"model {model.name!r} is autonomous: give `segment`, the time "
-                             "between re-orthonormalisations")
-    segment = float(segment)
-    if not (np.isfinite(segment) and segment > 0):
-        raise ValueError(f"`segment` must be a positive number, got {segment!r}")
+        segment = forcing_period(model, p)       # checked: positive and finite
+        if segment is not None:
+            segment = model.forcing_period_value(params)
+        else:
+            raise ArgumentError(f"model {model.name!r} is autonomous: give `segment`, the time "
+                                "between re-orthonormalisations")
+    total = (transient + duration) * segment
+    V.time_window("t0", t0, total, what=f"the run of {transient} + {duration} segments of "
+                  f"{segment!r}")
+    V.time_window("segment", t0 + total - segment, segment,
+                  what="the last segment of the run")
+    # per segment: its start state and running estimates (n floats each), and the events
+    V.memory(f"lyapunov_spectrum() with duration={duration}", 8.0 * duration * (2 * n + 2))
+    ctx = ModelContext.get(model)
     t = float(t0)
     status = 0
     if transient:

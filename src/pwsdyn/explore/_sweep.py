@@ -39,9 +39,12 @@ import sympy as sp
 import xarray as xr
 
 from .. import __version__
-from ..integrate.simulate import DEFAULTS, integrator_options, _check_options, _simulate_compiled, state_vector
+from .. import _validate as V
+from ..errors import ArgumentError
+from ..integrate.simulate import (DEFAULTS, check_mode, integrator_options, _simulate_compiled,
+                                  state_vector)
 from ..integrate.trajectory import EventLog
-from ._common import (check_section, COUNTED_KINDS, DIVERGED, SECTION_MISSED, ModelContext,
+from ._common import (check_common, check_section, check_time_unit, COUNTED_KINDS, DIVERGED, SECTION_MISSED, ModelContext,
                       check_bound, failed_status, model_payload, period_estimate, readmit,
                       state_times)
 from ._executor import run_chunks
@@ -367,8 +370,12 @@ def sweep(model, param: str, values: Sequence[float], x0=None, *, transient: int
 
     Raises
     ------
-    ValueError
-        Empty or non-finite values, an unknown parameter, section or direction, bad counts.
+    ArgumentError
+        (a ``ValueError``) Before any work: empty, repeated or non-finite values, an unknown
+        parameter, section or direction, counts that are not ints in range, tolerances
+        outside (0, 1), a value where the forcing period is not a positive finite number or
+        is not resolved in double-precision time over the window (``2*pi/omega`` at
+        ``omega = 0``), result arrays beyond ``pwsdyn._validate.MEMORY_LIMIT``.
     StoreMismatchError
         ``store`` holds results of another model or other settings.
     FileExistsError
@@ -382,68 +389,71 @@ def sweep(model, param: str, values: Sequence[float], x0=None, *, transient: int
     >>> ds.sizes["mu"], int(ds.period.sel(direction="up").min())
     (5, 0)
     """
-    from ..model import load_model
-
-    model = load_model(model)
+    c = check_common(transient=transient, samples=samples, samples_min=1, phase=phase,
+                     period=period, max_period=max_period, period_tol=period_tol, bound=bound,
+                     chunk_size=chunk_size, workers=workers, progress=progress, store=store,
+                     out=out, scheduler=scheduler)
+    transient, samples, phase, period = c["transient"], c["samples"], c["phase"], c["period"]
+    max_period, period_tol, bound, chunk_size = (c["max_period"], c["period_tol"], c["bound"],
+                                                 c["chunk_size"])
+    direction = V.choice("direction", direction, DIRECTIONS)
+    warmup = V.integer("warmup", warmup, lo=0)
+    lyapunov = V.flag("lyapunov", lyapunov)
+    max_points = V.integer("max_points", max_points, lo=1, allow_none=True)
+    model = V.model(model, caller="sweep()")
     is_map = bool(getattr(model, "is_map", False))
-    if param not in model.parameters:
-        raise ValueError(f"unknown parameter {param!r} for model {model.name!r}; parameters "
-                         f"are {list(model.parameters)}")
-    vals = np.asarray(values, dtype=float).reshape(-1) if np.ndim(values) else None
-    if vals is None or vals.size == 0:
-        raise ValueError(f"`values` of {param!r} must be a non-empty sequence of numbers, got "
-                         f"{values!r}")
+    if not isinstance(param, str) or param not in model.parameters:
+        raise ArgumentError(f"unknown parameter {V.describe(param)} for model {model.name!r}; "
+                            f"`param` must be one of {list(model.parameters)}")
+    if V.is_real(values) or isinstance(values, (str, bytes)) or values is None:
+        raise ArgumentError(f"`values` of {param!r} must be a non-empty sequence of numbers, "
+                            f"got {V.describe(values)}")
+    vals = V.vector("values", values, finite=False)
+    if vals.size == 0:
+        raise ArgumentError(f"`values` of {param!r} must be a non-empty sequence of numbers, got "
+                            f"{V.describe(values)}")
     if not np.all(np.isfinite(vals)):
-        raise ValueError(f"`values` of {param!r} must be finite")
+        raise ArgumentError(f"`values` of {param!r} must be finite, got {V.describe(values)}")
     vals = np.sort(vals)
     if np.any(np.diff(vals) == 0):
-        raise ValueError(f"`values` of {param!r} must be distinct")
-    if direction not in DIRECTIONS:
-        raise ValueError(f"`direction` must be one of {DIRECTIONS}, got {direction!r}")
-    for name, v, lo in (("transient", transient, 0), ("samples", samples, 1),
-                        ("warmup", warmup, 0)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-            raise ValueError(f"`{name}` must be an integer >= {lo}, got {v!r}")
-    if params and param in params:
-        raise ValueError(f"`params` must not set the swept parameter {param!r}")
+        raise ArgumentError(f"`values` of {param!r} must be distinct")
+    base = V.mapping("params", params)
+    if param in base:
+        raise ArgumentError(f"`params` must not set the swept parameter {param!r}")
+    p = model.parameter_vector(base)
+    pidx = list(model.parameters).index(param)
     if is_map:
         if section != "stroboscopic":
-            raise ValueError(f"model {model.name!r} is a map: every iterate is recorded; "
-                             "`section` applies to flows only")
+            raise ArgumentError(f"model {model.name!r} is a map: every iterate is recorded; "
+                                "`section` applies to flows only")
         if options:
-            raise TypeError(f"integrator options {sorted(options)} apply to flows, not to map "
-                            f"{model.name!r}")
+            raise ArgumentError(f"integrator options {sorted(options, key=str)} apply to "
+                                f"flows, not to map {model.name!r}")
     else:
         check_section(model, section)
         if period is None and model.forcing_period is None:
-            raise ValueError(f"model {model.name!r} is autonomous: give `period`, the time "
-                             "unit of `transient` and `samples`")
-        integrator_options(options, "sweep()")
-    if period is not None and not (math.isfinite(float(period)) and float(period) > 0):
-        raise ValueError(f"`period` must be a positive number, got {period!r}")
+            raise ArgumentError(f"model {model.name!r} is autonomous: give `period`, the time "
+                                "unit of `transient` and `samples`")
+        check_mode(model, integrator_options(options, "sweep()"))
+        check_time_unit(model, p, period, phase, transient + samples, pidx=pidx,
+                        values=vals, param=param)
     if x0 is None:
         x0 = (model.spec.get("defaults") or {}).get("x0")
         if x0 is None:
-            raise ValueError(f"give `x0`: model {model.name!r} has no [defaults] x0")
+            raise ArgumentError(f"give `x0`: model {model.name!r} has no [defaults] x0")
     x0v = state_vector(model, x0)
-    base = dict(params or {})
-    p = model.parameter_vector(base)
-    pidx = list(model.parameters).index(param)
-    max_points = samples if max_points is None else int(max_points)
-    if max_points < 1:
-        raise ValueError(f"`max_points` must be positive, got {max_points!r}")
+    max_points = samples if max_points is None else max_points
     if max_period is None:
         max_period = max(1, min(samples // 4, 64))
+    nd = 2 if direction == "both" else 1
+    n = model.n_states
+    V.memory(f"sweep() of {len(vals)} values with max_points={max_points}",
+             8.0 * nd * len(vals) * (max_points * (n + 1) + 3 * n + 8))
     opts = {**DEFAULTS, **options, "dense": False, "throw": False}
     opts.pop("variational", None)
     opts["variational"] = False
-    if not is_map:
-        _check_options(opts)
     if chunk_size is None:
         chunk_size = max(1, math.ceil(len(vals) / 16))
-    if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) \
-            or chunk_size < 1:
-        raise ValueError(f"`chunk_size` must be a positive integer, got {chunk_size!r}")
     out_path = Path(out) if out is not None else None
     if out_path is not None and out_path.exists():
         raise FileExistsError(f"output file {str(out_path)!r} exists; nothing was overwritten "

@@ -8,8 +8,9 @@ from typing import Mapping
 import numpy as np
 
 from .. import __version__
-from ..errors import SolveError, Status
-from ..model import compile_model, load_model
+from .. import _validate as V
+from ..errors import ArgumentError, SolveError, Status
+from ..model import compile_model
 from ..model.codegen import CompiledModel
 from ..model.affine import affine_structure
 from ._kernel import (IO_DIDX0, IO_DKIND0, IO_EXACT, IO_N, IO_STOP_COUNT, IO_STOP_MASK,
@@ -29,42 +30,45 @@ SLIDING_METHODS = {"convex": 0, "utkin": 1}
 
 
 def integrator_options(options: Mapping, caller: str, reserved=()) -> dict:
-    """``options`` merged over :data:`DEFAULTS`, after rejecting unknown names and those the
-    caller sets itself (``reserved``), with a ``TypeError`` naming ``caller``."""
+    """``options`` merged over :data:`DEFAULTS` and checked (:func:`check_options`), after
+    rejecting unknown names and those the caller sets itself (``reserved``), with an
+    :class:`~pwsdyn.errors.ArgumentError` (a ``TypeError``) naming ``caller``."""
     bad = sorted(set(options) & set(reserved))
     if bad:
-        raise TypeError(f"{caller}: option(s) {bad} are set by {caller} itself; remove them")
-    unknown = sorted(set(options) - set(DEFAULTS))
+        raise ArgumentError(f"{caller}: option(s) {bad} are set by {caller} itself; remove them")
+    unknown = sorted(set(options) - set(DEFAULTS), key=str)
     if unknown:
-        raise TypeError(f"{caller} got unexpected keyword argument(s) {unknown}; integrator "
-                        f"options are {sorted(set(DEFAULTS) - set(reserved))}")
-    return {**DEFAULTS, **options}
+        raise ArgumentError(f"{caller} got unexpected keyword argument(s) {unknown}; "
+                            f"integrator options are {sorted(set(DEFAULTS) - set(reserved))}")
+    opts = {**DEFAULTS, **options}
+    check_options(opts)
+    return opts
 
 
 def state_vector(model, x0, *, name: str = "x0") -> np.ndarray:
-    """``x0`` as a float vector: a sequence in state order or a dict by state name."""
-    n = model.n_states
-    if isinstance(x0, Mapping):
-        unknown = sorted(set(x0) - set(model.states))
-        if unknown:
-            raise ValueError(f"`{name}` names unknown state(s) {unknown}; states are "
-                             f"{list(model.states)}")
-        missing = [s for s in model.states if s not in x0]
-        if missing:
-            raise ValueError(f"`{name}` is missing state(s) {missing}")
-        vec = np.array([float(x0[s]) for s in model.states])
-    else:
-        try:
-            vec = np.asarray(x0, dtype=float).reshape(-1)
-        except (TypeError, ValueError):
-            raise ValueError(f"`{name}` must be a sequence of numbers or a dict by state name, "
-                             f"got {x0!r}") from None
-        if vec.shape != (n,):
-            raise ValueError(f"`{name}` must have {n} entries (states {list(model.states)}), "
-                             f"got {vec.size}")
-    if not np.all(np.isfinite(vec)):
-        raise ValueError(f"`{name}` must be finite, got {vec}")
-    return vec
+    """``x0`` as a float vector: a sequence in state order or a dict by state name.
+
+    Raises :class:`~pwsdyn.errors.ArgumentError` naming ``name`` for a wrong type, length,
+    unknown or missing state, an entry that is not a real number, or a non-finite entry."""
+    if x0 is None:
+        raise V.fail(name, f"a sequence of {model.n_states} numbers or a dict by state name",
+                     x0)
+    return V.vector(name, x0, size=model.n_states, names=model.states)
+
+
+def check_mode(model, opts) -> None:
+    """The ``mode`` option names a mode of ``model`` (or is None)."""
+    mode = opts.get("mode")
+    if mode is None:
+        return
+    if not isinstance(mode, str):
+        raise V.fail("mode", f"None or a mode name of model {model.name!r} "
+                     f"{list(model.mode_names)}", mode)
+    try:
+        model.mode_index(mode)
+    except ValueError:
+        raise ArgumentError(f"`mode` must be a mode of model {model.name!r}: unknown mode "
+                            f"{mode!r}; modes are {list(model.mode_names)}") from None
 
 
 def _state_name(model, kind: int, idx: int, mode: int) -> str:
@@ -86,7 +90,9 @@ def simulate(model, x0, t_span, params: Mapping[str, float] | None = None, **opt
     x0 : sequence or dict
         Initial state, in state order or by state name.
     t_span : (float, float) or float
-        ``(t0, t_end)``, or ``t_end`` with ``t0 = 0``.
+        ``(t0, t_end)``, or ``t_end`` with ``t0 = 0``: finite, ``t_end > t0``, and at least
+        1024 units of the time resolution ``eps * max(1, |t|)`` long (``(1e16, 1e16 + 2)`` is
+        refused: doubles are 2 apart there; see :mod:`pwsdyn._validate`).
     params : dict, optional
         Parameter values overriding the model defaults, by name.
     method : {'RK45', 'DOP853'}
@@ -158,6 +164,14 @@ def simulate(model, x0, t_span, params: Mapping[str, float] | None = None, **opt
     -------
     Trajectory
 
+    Raises
+    ------
+    ArgumentError
+        (a ``ValueError`` and ``TypeError``) Before any work: a bad model, state, time span,
+        parameter or option, naming it and what it must be.
+    SolveError
+        The run failed (with ``throw=True``).
+
     Examples
     --------
     >>> import pwsdyn
@@ -166,48 +180,72 @@ def simulate(model, x0, t_span, params: Mapping[str, float] | None = None, **opt
     'impact'
     """
     opts = integrator_options(options, "simulate()")
-    model = load_model(model)
-    cm = compile_model(model)
+    model = V.model(model, kind="flow", caller="simulate()")
     p = model.parameter_vector(params)
     x = state_vector(model, x0)
     t0, t_end = _time_span(t_span)
+    check_mode(model, opts)
+    if opts["exact"]:
+        _check_exact(model)
+    cm = compile_model(model)
     return _simulate_compiled(cm, x, t0, t_end, p, opts)
 
 
-def _time_span(t_span):
-    if np.ndim(t_span) == 0:
-        t0, t_end = 0.0, float(t_span)
+def _time_span(t_span, name: str = "t_span"):
+    """``(t0, t_end)`` from ``t_span``: finite, ``t_end > t0`` and resolvable in double
+    precision (:func:`pwsdyn._validate.time_span`: at least 1024 units ``eps max(1, |t|)``)."""
+    must = "(t0, t_end) or t_end, with finite numbers"
+    if V.is_real(t_span):
+        t0, t_end = 0.0, V.number(name, t_span, must=must)
     else:
+        if isinstance(t_span, (str, bytes, Mapping)) or not hasattr(t_span, "__len__"):
+            raise V.fail(name, must, t_span)
         ts = list(t_span)
         if len(ts) != 2:
-            raise ValueError(f"`t_span` must be (t0, t_end) or t_end, got {t_span!r}")
-        t0, t_end = float(ts[0]), float(ts[1])
-    if not (math.isfinite(t0) and math.isfinite(t_end)):
-        raise ValueError(f"`t_span` must be finite, got {t_span!r}")
-    if not t_end > t0:
-        raise ValueError(f"`t_span` must have t_end > t0, got {t_span!r}")
+            raise ArgumentError(f"`{name}` must be (t0, t_end) or t_end, got "
+                                f"{V.describe(t_span)}")
+        t0, t_end = (V.number(name, v, must=must) for v in ts)
+    V.time_span(name, t0, t_end)
     return t0, t_end
 
 
-def _check_options(opts):
-    if opts["method"] not in METHODS:
-        raise ValueError(f"`method` must be one of {sorted(METHODS)}, got {opts['method']!r}")
-    if not isinstance(opts["exact"], (bool, np.bool_)):
-        raise ValueError(f"`exact` must be True or False, got {opts['exact']!r}")
+#: Largest step and event budgets (the kernel counts in int64).
+MAX_BUDGET = V.MAX_COUNT
+
+
+def check_options(opts) -> None:
+    """Check every integrator option of a merged option dict (types, ranges, finiteness),
+    raising :class:`~pwsdyn.errors.ArgumentError` naming the option."""
+    if not isinstance(opts["method"], str) or opts["method"] not in METHODS:
+        raise V.fail("method", f"one of {sorted(METHODS)}", opts["method"])
+    for k in ("exact", "chatter", "variational", "dense", "throw"):
+        if k in opts:
+            V.flag(k, opts[k])
     for k in ("rtol", "atol"):
-        v = opts[k]
-        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-            raise ValueError(f"`{k}` must be a positive number, got {v!r}")
+        V.positive(k, opts[k])
     if opts["rtol"] < 1e-15:
-        raise ValueError("`rtol` below 1e-15 cannot be met in double precision")
+        raise ArgumentError("`rtol` below 1e-15 cannot be met in double precision, got "
+                            f"{opts['rtol']!r}")
+    if not opts["rtol"] < 1.0:
+        raise V.fail("rtol", "a number in [1e-15, 1) (a relative tolerance)", opts["rtol"])
     for k in ("max_steps", "max_events"):
-        if not (isinstance(opts[k], int) and opts[k] > 0):
-            raise ValueError(f"`{k}` must be a positive integer, got {opts[k]!r}")
-    if not opts["max_step"] > 0:
-        raise ValueError(f"`max_step` must be positive, got {opts['max_step']!r}")
-    gain = opts.get("sliding_gain", 0.0)
-    if not (isinstance(gain, (int, float)) and math.isfinite(gain) and gain >= 0):
-        raise ValueError(f"`sliding_gain` must be a non-negative number, got {gain!r}")
+        V.integer(k, opts[k], lo=1, hi=MAX_BUDGET)
+    V.positive("first_step", opts["first_step"], allow_none=True)
+    V.positive("max_step", opts["max_step"], allow_inf=True)
+    V.number("chatter_ratio", opts["chatter_ratio"], lo=0.0, hi=1.0, lo_open=True,
+             must="a number in (0, 1] (1: the chattering map at the first impact)")
+    V.nonnegative("chatter_velocity", opts["chatter_velocity"], allow_none=True)
+    if not isinstance(opts.get("sliding", "convex"), str) \
+            or opts.get("sliding", "convex") not in SLIDING_METHODS:
+        raise V.fail("sliding", f"one of {sorted(SLIDING_METHODS)}", opts.get("sliding"))
+    V.nonnegative("sliding_gain", opts.get("sliding_gain", 0.0))
+    mode = opts.get("mode")
+    if mode is not None and not isinstance(mode, str):
+        raise V.fail("mode", "None or a mode name", mode)
+
+
+def _check_options(opts):
+    check_options(opts)
 
 
 def _max_step(model, p, max_step) -> float:
@@ -229,7 +267,7 @@ def _check_exact(model) -> None:
     aff = affine_structure(model)
     if not aff.any:
         why = "; ".join(f"mode {m.name!r}: {r}" for m, r in zip(model.modes, aff.reasons))
-        raise ValueError(f"`exact=True` needs a mode that is affine in the states with harmonic "
+        raise ArgumentError(f"`exact=True` needs a mode that is affine in the states with harmonic "
                          f"forcing; model {model.name!r} has none ({why})")
     _AFFINE_CHECKED.add(model.hash)
 
@@ -259,7 +297,7 @@ def _build_kernel_tables(cm: CompiledModel, sliding: str):
     eact = np.ascontiguousarray(cm.event_active[:ne].astype(np.int64)).reshape(ne, len(model.modes))
     ns = len(model.switches)
     if sliding not in SLIDING_METHODS:
-        raise ValueError(f"`sliding` must be one of {sorted(SLIDING_METHODS)}, got {sliding!r}")
+        raise ArgumentError(f"`sliding` must be one of {sorted(SLIDING_METHODS)}, got {sliding!r}")
     stab = np.zeros((ns, 6), dtype=np.int64)
     kinds = cm.switch_kind if cm.switch_kind is not None else np.zeros(ns, dtype=np.int64)
     for s in range(ns):

@@ -458,15 +458,17 @@ def iterate(model, x0, n: int, params: Mapping[str, float] | None = None, transi
     >>> xs.shape
     (5, 1)
     """
+    from .. import _validate as V
     from ..integrate.simulate import state_vector
-    from .spec import load_model
 
-    model = load_model(model)
-    if not getattr(model, "is_map", False):
-        raise TypeError(f"model {model.name!r} is a flow, not a map; use pwsdyn.simulate")
-    cm = compile_map(model)
+    n = V.integer("n", n, lo=0)
+    transient = V.integer("transient", transient, lo=0)
+    bound = V.positive("bound", bound, allow_inf=True)
+    model = V.model(model, kind="map", caller="iterate()")
     p = model.parameter_vector(params)
     x = state_vector(model, x0)
+    V.memory(f"iterate() with n={n}", 8.0 * n * (model.n_states + 1))
+    cm = compile_map(model)
     _, xs, pieces, _, _ = orbit_kernel(cm.step, x, p if p.size else np.zeros(1),
                                        int(transient), int(n), float(bound))
     return xs, pieces

@@ -169,26 +169,36 @@ class SymbolicSystem:
     def parameter_vector(self, params: Mapping[str, float] | None = None):
         """Default parameter values overridden by ``params`` (by name), as a float array.
 
-        Raises ``ValueError`` naming an unknown parameter or a non-finite value.
+        Raises :class:`~pwsdyn.errors.ArgumentError` (a ``ValueError``) naming an unknown
+        parameter, a value that is not a real number (a string, ``None``, a bool) or a
+        non-finite value, or ``params`` that is not a mapping.
         """
         import numpy as np
 
+        from .._validate import describe, is_real
+        from ..errors import ArgumentError
+
+        if params is not None and not isinstance(params, Mapping):
+            raise ArgumentError(f"`params` must be a dict of parameter values by name or None, "
+                                f"got {describe(params)}")
         values = dict(self.parameters)
         for k, v in (params or {}).items():
-            if k not in values:
-                raise ValueError(f"unknown parameter {k!r} for model {self.name!r}; parameters "
-                                 f"are {list(self.parameters)}")
+            if not isinstance(k, str) or k not in values:
+                raise ArgumentError(f"unknown parameter {k!r} for model {self.name!r}; "
+                                    f"parameters are {list(self.parameters)}")
+            if not is_real(v):
+                raise ArgumentError(f"parameter {k!r} must be a number, got {describe(v)}")
             try:
                 values[k] = float(v)
-            except (TypeError, ValueError):
-                raise ValueError(f"parameter {k!r} must be a number, got {v!r}") from None
+            except (OverflowError, TypeError, ValueError):
+                raise ArgumentError(f"parameter {k!r} must be a number, got "
+                                    f"{describe(v)}") from None
         p = np.array([values[k] for k in self.parameters], dtype=float)
         bad = [k for k, v in zip(self.parameters, p) if not math.isfinite(v)]
         if bad:
-            raise ValueError(f"parameter(s) {', '.join(bad)} of model {self.name!r} must be "
-                             f"finite, got {[values[k] for k in bad]}")
+            raise ArgumentError(f"parameter(s) {', '.join(bad)} of model {self.name!r} must be "
+                                f"finite, got {[values[k] for k in bad]}")
         return p
-
 
 
 @dataclass(frozen=True, eq=False)

@@ -181,8 +181,21 @@ class PeriodicOrbit:
         -------
         PeriodicOrbit
         """
-        from ._shooting import _guess_from_trajectory, find_periodic_orbit, orbit_at
+        from .. import _validate as V
+        from ._shooting import MAX_PERIODS, _guess_from_trajectory, find_periodic_orbit, orbit_at
 
+        if not isinstance(traj, Trajectory):
+            raise V.fail("traj", "a Trajectory (the result of pwsdyn.simulate)", traj)
+        if getattr(traj.model, "is_map", False) or traj.model is None:
+            raise V.fail("traj", "a Trajectory of a flow", traj)
+        t0 = V.number("t0", t0, allow_none=True)
+        period = V.positive("period", period, allow_none=True)
+        periods = V.integer("periods", periods, lo=1, hi=MAX_PERIODS)
+        refine = V.flag("refine", refine)
+        recurrence_tol = V.positive("recurrence_tol", recurrence_tol)
+        if t0 is not None and not (float(traj.t[0]) <= t0 <= float(traj.t[-1])):
+            raise V.fail("t0", f"a time within the trajectory [{float(traj.t[0])!r}, "
+                         f"{float(traj.t[-1])!r}] or None", t0)
         t0g, x0g, Tg, state = _guess_from_trajectory(traj, t0=t0, period=period, periods=periods,
                                                      recurrence_tol=recurrence_tol)
         if refine:

@@ -33,17 +33,22 @@ import math
 
 import numpy as np
 
-from ..errors import PwsdynError
+from .. import _validate as V
+from ..errors import ArgumentError, PwsdynError
 from ..integrate.simulate import integrator_options, _simulate_compiled, state_vector
-from ..model import load_model
-from ..stability._context import (DiscreteState, ModelContext, event_states,
-                                  trajectory_start_state)
+from ..stability._context import (DiscreteState, ModelContext, check_state_name, event_states,
+                                  forcing_period, initial_state, trajectory_start_state)
 from ..stability._floquet import floquet_multipliers
 from ._orbit import PeriodicOrbit, merge_intervals
 
 #: Integrator options used by the shooting code unless given: tight tolerances, 8th order.
 SHOOTING_DEFAULTS = dict(method="DOP853", rtol=1e-12, atol=1e-12, max_steps=500_000)
 _RESERVED = {"variational", "dense", "throw", "mode"}
+#: Largest number of shooting nodes (the Newton matrix has ``(nodes * n + 1)**2`` entries).
+MAX_NODES = 1000
+#: Largest Newton budget and number of forcing periods of one orbit.
+MAX_ITER = 10_000
+MAX_PERIODS = 1_000_000
 #: An orbit is reported stable when every multiplier has modulus below ``1 - STABILITY_MARGIN``
 #: (a multiplier on the unit circle within the accuracy of the monodromy is not asymptotic
 #: stability).
@@ -166,17 +171,34 @@ class _Shooter:
         return float(np.max(np.abs(r)) / (1.0 + np.max(np.abs(X))))
 
 
-def _options(options: dict) -> dict:
-    return {**integrator_options(options, "find_periodic_orbit()", _RESERVED),
-            **SHOOTING_DEFAULTS, **options}
+def _options(options: dict, caller: str = "find_periodic_orbit()") -> dict:
+    integrator_options(options, caller, _RESERVED)       # names, types and ranges
+    return {**integrator_options({}, caller), **SHOOTING_DEFAULTS, **options}
 
 
 def _initial_state(ctx: ModelContext, mode) -> DiscreteState:
-    if mode is None:
-        return DiscreteState(0, -1, ctx.model.initial_mode)
-    if isinstance(mode, DiscreteState):
-        return mode
-    return ctx.state(str(mode))
+    return initial_state(ctx, mode)
+
+
+def _orbit_period(model, p, period, periods, what="period"):
+    """The period of an orbit: ``periods`` forcing periods, or ``period`` (a multiple of the
+    forcing period of a forced model; a guess for an autonomous one). Validated."""
+    Tf = forcing_period(model, p)
+    if Tf is None:
+        if period is None:
+            raise ArgumentError(f"model {model.name!r} is autonomous (no `forcing_period`): "
+                                f"give a guess of the period as `period`")
+        return float(period), None
+    if period is None:
+        return periods * Tf, Tf
+    T = float(period)
+    k = round(T / Tf)
+    if k < 1 or abs(T - k * Tf) > 1e-9 * T:
+        raise ArgumentError(f"`period` = {T!r} of forced model {model.name!r} must be a "
+                            f"multiple of its forcing period {Tf!r}")
+    if k > MAX_PERIODS:
+        raise V.fail("period", f"at most {MAX_PERIODS} forcing periods {Tf!r}", period)
+    return k * Tf, Tf
 
 
 def _state_at(ctx, traj, st0, t):
@@ -208,11 +230,11 @@ def _place_nodes(ctx, ref, st0, t0, T, nodes, max_nodes):
     """Node times and discrete states from the guess trajectory ``ref`` over one period."""
     if isinstance(nodes, (int, np.integer)) and not isinstance(nodes, bool):
         if nodes < 1:
-            raise ValueError(f"`nodes` must be 'auto' or a positive integer, got {nodes!r}")
+            raise ArgumentError(f"`nodes` must be 'auto' or a positive integer, got {nodes!r}")
         times = t0 + T * np.arange(nodes) / nodes
         return times, [st0] + [_state_at(ctx, ref, st0, t) for t in times[1:]]
     if nodes != "auto":
-        raise ValueError(f"`nodes` must be 'auto' or a positive integer, got {nodes!r}")
+        raise ArgumentError(f"`nodes` must be 'auto' or a positive integer, got {nodes!r}")
     evs = [e for e in ref.events if e.t < t0 + T]
     states = event_states(ctx, evs, st0)
     cands = []
@@ -292,34 +314,28 @@ def find_periodic_orbit(model, x0, *, params=None, period: float | None = None,
     ('impact', True)
     """
     opts = _options(options)
-    ctx = ModelContext(load_model(model), params, opts.get("sliding", "convex"))
-    x0 = state_vector(ctx.model, x0)
-    if not (tol > 0 and math.isfinite(tol)):
-        raise ValueError(f"`tol` must be a positive number, got {tol!r}")
-    if not (isinstance(max_iter, (int, np.integer)) and max_iter >= 1):
-        raise ValueError(f"`max_iter` must be a positive integer, got {max_iter!r}")
-    Tf = ctx.forcing_period
+    model = V.model(model, kind="flow", caller="find_periodic_orbit()")
+    p = model.parameter_vector(params)
+    x0 = state_vector(model, x0)
+    period = V.positive("period", period, allow_none=True)
+    t0 = V.number("t0", t0)
+    periods = V.integer("periods", periods, lo=1, hi=MAX_PERIODS)
+    if not (isinstance(nodes, str) and nodes == "auto"):
+        V.integer("nodes", nodes, lo=1, hi=MAX_NODES)
+    if phase is not None:
+        phase = V.vector("phase", phase, size=model.n_states)
+    tol = V.tolerance("tol", tol)
+    max_iter = V.integer("max_iter", max_iter, lo=1, hi=MAX_ITER)
+    lock_tol = V.positive("lock_tol", lock_tol)
+    max_nodes = V.integer("max_nodes", max_nodes, lo=1, hi=MAX_NODES)
+    check_state_name(model, mode)
+    T, Tf = _orbit_period(model, p, period, periods)
     autonomous = Tf is None
-    t0 = float(t0)
-    if autonomous:
-        if period is None:
-            raise ValueError(f"model {ctx.model.name!r} is autonomous (no `forcing_period`): "
-                             f"give a guess of the period as `period`")
-        T = float(period)
-    else:
-        if period is None:
-            if not (isinstance(periods, (int, np.integer)) and periods >= 1):
-                raise ValueError(f"`periods` must be a positive integer, got {periods!r}")
-            T = periods * Tf
-        else:
-            T = float(period)
-            k = round(T / Tf)
-            if k < 1 or abs(T - k * Tf) > 1e-9 * T:
-                raise ValueError(f"`period` = {T!r} of forced model {ctx.model.name!r} must be a "
-                                 f"multiple of its forcing period {Tf!r}")
-            T = k * Tf
-    if not (math.isfinite(T) and T > 0):
-        raise ValueError(f"`period` must be a positive number, got {period!r}")
+    V.time_window("t0", t0, T, what="one period of the orbit")
+    N = nodes if V.is_int(nodes) else max_nodes
+    V.memory("find_periodic_orbit() with these `nodes`",
+             8.0 * (N * model.n_states + 1) ** 2 * 3)
+    ctx = ModelContext(model, params, opts.get("sliding", "convex"))
     st0 = _initial_state(ctx, mode)
 
     # guess trajectory: signature and node placement
@@ -371,7 +387,7 @@ def _setup(ctx, ref, st0, t0, T, x0, nodes, max_nodes, autonomous, opts, phase):
         f_ref = ctx.field(t0, x0, st0, opts.get("sliding_gain", 0.0))
         phase_normal = f_ref if phase is None else np.asarray(phase, dtype=float).reshape(-1)
         if phase_normal.shape != (ctx.n,) or not np.all(np.isfinite(phase_normal)):
-            raise ValueError(f"`phase` must be a finite vector of {ctx.n} entries")
+            raise ArgumentError(f"`phase` must be a finite vector of {ctx.n} entries")
         nf = np.linalg.norm(phase_normal)
         if nf == 0.0 or np.linalg.norm(f_ref) <= 1e-12 * (1.0 + np.linalg.norm(x0)):
             raise OrbitError("phase", f"singular phase condition: the vector field vanishes at "
@@ -579,9 +595,16 @@ def orbit_at(model, x0, *, params=None, period, t0=0.0, mode=None, tol: float = 
     (``converged`` says whether it closes to ``tol``). Newton-only options are ignored."""
     for key in ("nodes", "max_iter", "lock_tol", "max_nodes", "phase"):
         options.pop(key, None)
-    opts = _options(options)
-    ctx = ModelContext(load_model(model), params, opts.get("sliding", "convex"))
-    x0 = state_vector(ctx.model, x0)
+    opts = _options(options, "PeriodicOrbit.from_trajectory()")
+    model = V.model(model, kind="flow", caller="PeriodicOrbit.from_trajectory()")
+    p = model.parameter_vector(params)
+    x0 = state_vector(model, x0)
+    period = V.positive("period", period)
+    t0 = V.number("t0", t0)
+    tol = V.tolerance("tol", tol)
+    check_state_name(model, mode)
+    V.time_window("t0", t0, period, what="one period of the orbit")
+    ctx = ModelContext(model, params, opts.get("sliding", "convex"))
     st0 = _initial_state(ctx, mode)
     autonomous = ctx.forcing_period is None
     normal = ctx.field(t0, x0, st0, opts.get("sliding_gain", 0.0)) if autonomous else None
@@ -599,7 +622,7 @@ def orbit_at(model, x0, *, params=None, period, t0=0.0, mode=None, tol: float = 
 def _guess_from_trajectory(traj, *, t0=None, period=None, periods=1, recurrence_tol=1e-3):
     """``(t0, x0, T, state)`` of a periodic-orbit guess at the end of a trajectory."""
     if traj._dense is None:
-        raise ValueError("the trajectory has no dense output (simulated with `dense=False`)")
+        raise ArgumentError("the trajectory has no dense output (simulated with `dense=False`)")
     ctx = ModelContext(traj.model, traj.params, traj.options.get("sliding", "convex"))
     Tf = ctx.forcing_period
     if period is None:
@@ -610,7 +633,7 @@ def _guess_from_trajectory(traj, *, t0=None, period=None, periods=1, recurrence_
     T = float(period)
     t_end = float(traj.t[-1])
     if T > t_end - float(traj.t[0]):
-        raise ValueError(f"the trajectory ({t_end - traj.t[0]:.6g} long) is shorter than the "
+        raise ArgumentError(f"the trajectory ({t_end - traj.t[0]:.6g} long) is shorter than the "
                          f"period {T:.6g}")
     if t0 is None:
         t0 = t_end - T
@@ -650,7 +673,7 @@ def _name_at(traj, t) -> str:
 def _recurrence_period(traj, tol) -> float:
     evs = list(traj.events)
     if not evs:
-        raise ValueError("the trajectory has no events to estimate the period of an autonomous "
+        raise ArgumentError("the trajectory has no events to estimate the period of an autonomous "
                          "orbit from; give `period`")
     last = evs[-1]
     scale = 1.0 + np.max(np.abs(traj.x))
@@ -660,6 +683,6 @@ def _recurrence_period(traj, tol) -> float:
             continue
         if np.max(np.abs(e.x_after - last.x_after)) <= tol * scale:
             return float(last.t - e.t)
-    raise ValueError(f"no recurrence of the last event ({last!r}) within {tol:g} (relative) in "
+    raise ArgumentError(f"no recurrence of the last event ({last!r}) within {tol:g} (relative) in "
                      f"the trajectory: it has not settled on a periodic orbit; simulate longer or "
                      f"give `period`")

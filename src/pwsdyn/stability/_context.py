@@ -10,15 +10,18 @@ with ``g_x``, ``g_t``. It also maps the discrete-state names of a trajectory (``
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Mapping
 
 import numpy as np
 import sympy as sp
 
+from .. import _validate as V
+from ..errors import ArgumentError
 from ..integrate._kernel import REGULAR, SLIDE, STICK, state_field
 from ..integrate.simulate import kernel_tables
-from ..model import compile_model, load_model
+from ..model import compile_model
 from ..model.codegen import W_F, W_G, W_GT, W_GX, W_H, W_HT, W_HX
 
 
@@ -52,7 +55,7 @@ class ModelContext:
 
     def __init__(self, model, params: Mapping[str, float] | None = None,
                  sliding: str = "convex"):
-        self.model = load_model(model)
+        self.model = V.model(model, kind="flow")
         self.cm = compile_model(self.model)
         self.p = self.model.parameter_vector(params)
         self._pv = np.ascontiguousarray(self.p if self.p.size else np.zeros(1), dtype=float)
@@ -74,10 +77,7 @@ class ModelContext:
         if fn is None:
             fn = sp.lambdify(self.model.parameter_symbols, fp, modules="math")
             _FORCING_FUNCTIONS[key] = fn
-        val = float(fn(*self.p))
-        if not (np.isfinite(val) and val > 0):
-            return self.model.forcing_period_value(self.params)   # raises with the message
-        return val
+        return forcing_period(self.model, self.p, fn)
 
     @property
     def autonomous(self) -> bool:
@@ -175,6 +175,70 @@ class ModelContext:
         if st.kind == STICK:
             return f"stick:{self.model.events[st.index].name}"
         return f"slide:{self.model.switches[st.index].name}"
+
+
+def forcing_period(model, p, fn=None) -> float | None:
+    """The forcing period of ``model`` at the parameter vector ``p`` (``None`` for an
+    autonomous model); an :class:`ArgumentError` naming the parameters where it is not a
+    positive finite number (``2*pi/omega`` at ``omega = 0``)."""
+    if model.forcing_period is None:
+        return None
+    fn = fn or model.forcing_period_function
+    try:
+        val = float(fn(*(float(q) for q in p)))
+        got = repr(val)
+    except (ArithmeticError, ValueError, TypeError) as exc:
+        val, got = math.nan, f"undefined ({exc})"
+    if not (math.isfinite(val) and val > 0):
+        where = ", ".join(f"{k}={float(v):.17g}" for k, v in zip(model.parameters, p))
+        raise ArgumentError(f"the forcing period {model.forcing_period} of model "
+                            f"{model.name!r} must be a positive finite number, got {got} at "
+                            f"the parameters ({where}): choose parameters where it is")
+    return val
+
+
+def check_state_name(model, mode, name: str = "mode") -> None:
+    """``mode`` names a discrete state of the (symbolic) flow ``model``: None, a
+    :class:`DiscreteState`, a mode name, ``stick:<event>`` or ``slide:<switch>``. Checked
+    before anything is compiled; :func:`initial_state` then makes the kernel's code."""
+    if mode is None or isinstance(mode, DiscreteState):
+        return
+    must = (f"None or a discrete state of model {model.name!r}: a mode "
+            f"{list(model.mode_names)}, 'stick:<event>' with an event "
+            f"{[e.name for e in model.events]} or 'slide:<switch>' with a switch "
+            f"{[s.name for s in model.switches]}")
+    if not isinstance(mode, str):
+        raise V.fail(name, must, mode)
+    kind, sep, ref = mode.partition(":")
+    try:
+        if not sep:
+            model.mode_index(mode)
+            return
+    except ValueError:
+        raise V.fail(name, must, mode) from None
+    if kind == "stick" and ref in [e.name for e in model.events]:
+        return
+    if kind == "slide" and ref in [s.name for s in model.switches]:
+        return
+    raise V.fail(name, must, mode)
+
+
+def initial_state(ctx, mode, name: str = "mode") -> DiscreteState:
+    """The discrete state named by ``mode`` (None: the model's initial mode; a
+    :class:`DiscreteState`; a mode name, ``stick:<event>`` or ``slide:<switch>``), with an
+    :class:`ArgumentError` naming ``name`` otherwise."""
+    if mode is None:
+        return DiscreteState(0, -1, ctx.model.initial_mode)
+    if isinstance(mode, DiscreteState):
+        return mode
+    if not isinstance(mode, str):
+        raise V.fail(name, "None, a mode name, 'stick:<event>' or 'slide:<switch>'", mode)
+    try:
+        return ctx.state(mode)
+    except (ValueError, IndexError, KeyError) as exc:
+        raise ArgumentError(f"`{name}` must name a discrete state of model "
+                            f"{ctx.model.name!r} (a mode {list(ctx.model.mode_names)}, "
+                            f"'stick:<impact event>' or 'slide:<switch>'): {exc}") from None
 
 
 def event_states(ctx: ModelContext, events, start: DiscreteState):

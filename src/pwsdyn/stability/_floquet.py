@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import _validate as V
+from ..errors import ArgumentError
+
 
 def _sorted(values) -> np.ndarray:
     values = np.asarray(values)
@@ -21,7 +24,7 @@ def section_basis(normal) -> np.ndarray:
     nv = np.asarray(normal, dtype=float).reshape(-1)
     nrm = np.linalg.norm(nv)
     if not (np.isfinite(nrm) and nrm > 0):
-        raise ValueError("the section normal must be a nonzero finite vector")
+        raise ArgumentError("the section normal must be a nonzero finite vector")
     q, _ = np.linalg.qr(np.column_stack([nv / nrm, np.eye(len(nv))]))
     return q[:, 1:len(nv)]
 
@@ -48,16 +51,22 @@ def floquet_multipliers(monodromy, *, flow_direction=None, section_normal=None) 
         Poincaré-map Jacobian of thesis eq. 2.25, ``(I - f h_x / (h_x f)) M``, restricted to the
         section's tangent space (where its eigenvalue 0 along ``f`` is absent).
     """
-    M = np.asarray(monodromy, dtype=float)
-    if M.ndim != 2 or M.shape[0] != M.shape[1]:
-        raise ValueError(f"`monodromy` must be a square matrix, got shape {M.shape}")
+    M = V.matrix("monodromy", monodromy)
+    n = M.shape[0]
     if flow_direction is None:
+        if section_normal is not None:
+            raise ArgumentError("`section_normal` needs `flow_direction` (an autonomous orbit's "
+                                "vector field at the base point)")
         return _sorted(np.linalg.eigvals(M))
-    f = np.asarray(flow_direction, dtype=float).reshape(-1)
-    nv = f if section_normal is None else np.asarray(section_normal, dtype=float).reshape(-1)
-    den = nv @ f
+    f = V.vector("flow_direction", flow_direction, size=n)
+    nv = f if section_normal is None else V.vector("section_normal", section_normal, size=n)
+    if not np.any(f) or not np.any(nv):
+        raise ArgumentError("`flow_direction` and `section_normal` must be nonzero vectors")
+    with np.errstate(over="ignore", invalid="ignore"):
+        den = nv @ f
     if not (np.isfinite(den) and abs(den) > 1e-14 * np.linalg.norm(nv) * np.linalg.norm(f)):
-        raise ValueError("the section is tangent to the flow (h_x f = 0): no Poincaré map")
+        raise ArgumentError("the section is tangent to the flow (`section_normal` . "
+                            "`flow_direction` = 0): no Poincaré map")
     P = M - np.outer(f, nv @ M) / den
     Q = section_basis(nv)
     return _sorted(np.linalg.eigvals(Q.T @ P @ Q))

@@ -18,21 +18,24 @@ saltation matrices, no projection: the return time is fixed).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import PwsdynError, SolveError, Status
+from .. import _validate as V
+from ..errors import ArgumentError, PwsdynError, SolveError, Status
 from ..integrate.simulate import integrator_options, _simulate_compiled, state_vector
 from ..integrate.trajectory import EVENT_KINDS
-from ._context import DiscreteState, ModelContext, event_states, trajectory_start_state
+from ._context import (DiscreteState, ModelContext, check_state_name, event_states,
+                       forcing_period, initial_state, trajectory_start_state)
 
 #: Kinds that count as a crossing of an event section / of a switch section.
 _EVENT_SECTION_KINDS = ("impact", "transition")
 _SWITCH_SECTION_KINDS = ("crossing", "slide_start")
 #: Step budget of one Poincaré-map evaluation unless ``max_steps`` is given.
 DEFAULT_MAX_STEPS = 200_000
+#: Largest number of returns of one Poincaré-map evaluation.
+MAX_RETURNS = 1_000_000
 
 
 class SectionNotReachedError(PwsdynError, RuntimeError):
@@ -100,11 +103,7 @@ class PoincareResult:
 
 
 def _initial_state(ctx: ModelContext, mode) -> DiscreteState:
-    if mode is None:
-        return DiscreteState(0, -1, ctx.model.initial_mode)
-    if isinstance(mode, DiscreteState):
-        return mode
-    return ctx.state(str(mode))
+    return initial_state(ctx, mode)
 
 
 def _run(ctx, x0, t0, t_end, st0: DiscreteState, opts, stop=None):
@@ -114,8 +113,8 @@ def _run(ctx, x0, t0, t_end, st0: DiscreteState, opts, stop=None):
 
 
 def _options(options: dict, *, dense: bool, variational: bool = True) -> dict:
-    opts = integrator_options(options, "poincare_map()", ("variational", "throw", "mode"))
-    opts["max_steps"] = options.get("max_steps", DEFAULT_MAX_STEPS)
+    opts = integrator_options({"max_steps": DEFAULT_MAX_STEPS, **options}, "poincare_map()",
+                              ("variational", "throw", "mode"))
     opts.update(variational=variational, throw=False, dense=dense)
     return opts
 
@@ -133,7 +132,7 @@ def section_spec(ctx: ModelContext, section: str):
         ref = sw_names.index(section)
         surface = int(ctx.stab[ref, 0])
     else:
-        raise ValueError(f"unknown section {section!r}: give 'stroboscopic' or the name of an "
+        raise ArgumentError(f"unknown section {section!r}: give 'stroboscopic' or the name of an "
                          f"event {ev_names} or switch {sw_names} of model {ctx.model.name!r}")
     mask = 0
     for k in kinds:
@@ -185,22 +184,37 @@ def poincare_map(model, x0, section: str, *, params=None, t0: float = 0.0, retur
     SolveError
         The simulation itself failed.
     """
-    dense = options.pop("dense", True)
+    dense = V.flag("dense", options.pop("dense", True))
     opts = _options(options, dense=dense)
+    model = V.model(model, kind="flow", caller="poincare_map()")
+    p = model.parameter_vector(params)
+    x0 = state_vector(model, x0)
+    names = ["stroboscopic"] + [e.name for e in model.events] + [s.name for s in model.switches]
+    if not isinstance(section, str) or section not in names:
+        raise ArgumentError(f"unknown section {V.describe(section)}: `section` must be "
+                            f"'stroboscopic' or the name of an event "
+                            f"{[e.name for e in model.events]} or switch "
+                            f"{[s.name for s in model.switches]} of model {model.name!r}")
+    t0 = V.number("t0", t0)
+    returns = V.integer("returns", returns, lo=1, hi=MAX_RETURNS)
+    side = V.choice("side", side, ("after", "before"))
+    check_state_name(model, mode)
+    t_max = V.number("t_max", t_max, allow_none=True)
+    Tf = forcing_period(model, p)
+    if section == "stroboscopic":
+        if Tf is None:
+            raise ArgumentError(f"model {model.name!r} has no `forcing_period`: it has no "
+                                f"stroboscopic section")
+        V.time_window("t0", t0, returns * Tf, what=f"{returns} forcing period(s)")
+    else:
+        if t_max is None:
+            t_max = t0 + 100.0 * returns * Tf if Tf is not None else t0 + 1e12
+        V.time_span("t_max", t0, t_max, what="the time allowed to reach the section")
     ctx = ModelContext(model, params, opts["sliding"] if "sliding" in opts else "convex")
-    x0 = state_vector(ctx.model, x0)
-    if not (isinstance(returns, (int, np.integer)) and returns >= 1):
-        raise ValueError(f"`returns` must be a positive integer, got {returns!r}")
-    if side not in ("after", "before"):
-        raise ValueError(f"`side` must be 'after' or 'before', got {side!r}")
     st0 = _initial_state(ctx, mode)
-    Tf = ctx.forcing_period
     n = ctx.n
     gain = float(opts.get("sliding_gain", 0.0) or 0.0)
     if section == "stroboscopic":
-        if Tf is None:
-            raise ValueError(f"model {ctx.model.name!r} has no `forcing_period`: it has no "
-                             f"stroboscopic section")
         t_end = t0 + returns * Tf
         traj = _run(ctx, x0, t0, t_end, st0, opts)
         if traj.status.failed:
@@ -218,10 +232,6 @@ def poincare_map(model, x0, section: str, *, params=None, t0: float = 0.0, retur
         return PoincareResult(section, float(t0), x0, float(traj.t_final), traj.x_final.copy(), J,
                               np.zeros(n), ext, J, "after", int(returns), traj)
     mask, ref, k, kinds = section_spec(ctx, section)
-    if t_max is None:
-        t_max = t0 + 100.0 * returns * Tf if Tf is not None else t0 + 1e12
-    if not (math.isfinite(t_max) and t_max > t0):
-        raise ValueError(f"`t_max` must be a finite time after t0 = {t0}, got {t_max!r}")
     traj = _run(ctx, x0, t0, t_max, st0, opts, stop=(mask, ref, int(returns)))
     hits = [e for e in traj.events if e.kind in kinds and e.name == section]
     if traj.status != Status.TERMINAL_EVENT or len(hits) < returns:
@@ -246,8 +256,8 @@ def poincare_map(model, x0, section: str, *, params=None, t0: float = 0.0, retur
     hx = ctx.h_x(k, ev.t, ev.x_before)
     den = ctx.h_t(k, ev.t, ev.x_before) + hx @ f_in
     if abs(den) <= 1e-13 * np.linalg.norm(hx) * max(np.linalg.norm(f_in), 1e-300):
-        raise ValueError(f"the flow grazes section {section!r} at t={ev.t:.17g}: eq. 2.25 is "
-                         f"singular there")
+        raise ArgumentError(f"the flow from this `x0` grazes `section` {section!r} at "
+                            f"t={ev.t:.17g}: eq. 2.25 is singular there")
     proj = np.eye(n) - np.outer(f_in, hx) / den                # thesis eq. 2.25
     A = np.column_stack([-phi @ f0, phi])                      # d x(t_ev) / d(t0, x0)
     dt = -(hx @ A) / den

@@ -28,8 +28,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import _validate as V
+from ..errors import ArgumentError
 from ..integrate._kernel import REGULAR, SLIDE
-from ._context import DiscreteState, ModelContext, event_states, trajectory_start_state
+from ._context import (DiscreteState, ModelContext, check_state_name, event_states,
+                       trajectory_start_state)
 
 #: Event kinds that have a projected (eq. 2.36) saltation matrix.
 PROJECTABLE_KINDS = ("impact", "transition", "crossing", "slide_start")
@@ -37,9 +40,19 @@ FORMS = ("full", "projected")
 
 
 def _check_form(form: str) -> str:
-    if form not in FORMS:
-        raise ValueError(f"`form` must be one of {FORMS}, got {form!r}")
-    return form
+    return V.choice("form", form, FORMS)
+
+
+def _check_trajectory(traj, name: str = "traj") -> None:
+    """``traj`` is a Trajectory with transfer matrices (a run with ``variational=True``)."""
+    from ..integrate.trajectory import Trajectory
+
+    if not isinstance(traj, Trajectory):
+        raise V.fail(name, "a Trajectory (the result of pwsdyn.simulate with "
+                     "variational=True)", traj)
+    if traj.transfer_matrices is None:
+        raise ArgumentError(f"`{name}` has no transfer matrices: simulate it with "
+                            "`variational=True`")
 
 
 def _saltation_pair(ctx: ModelContext, kind: str, name: str, t: float, x_before, x_after,
@@ -66,7 +79,7 @@ def _saltation_pair(ctx: ModelContext, kind: str, name: str, t: float, x_before,
     den = ctx.h_t(k, t, x_before) + hx @ f_in
     scale = np.linalg.norm(hx) * max(np.linalg.norm(f_in), 1e-300)
     if not np.isfinite(den) or abs(den) <= 1e-13 * scale:
-        raise ValueError(f"{kind} {name!r} at t={t:.17g} is grazing (h_t + h_x f = {den:.3e}): "
+        raise ArgumentError(f"{kind} {name!r} at t={t:.17g} is grazing (h_t + h_x f = {den:.3e}): "
                          f"its saltation matrix is unbounded")
     full = gx + np.outer(f_out - gx @ f_in - gt, hx) / den
     proj = gx - np.outer(gx @ f_in + gt, hx) / den
@@ -111,10 +124,21 @@ def saltation_matrix(model, event: str, t: float, x, *, params=None, mode=None,
     0.64
     """
     _check_form(form)
+    model = V.model(model, kind="flow", caller="saltation_matrix()")
+    model.parameter_vector(params)
+    names = [e.name for e in model.events] + [s.name for s in model.switches]
+    if not isinstance(event, str) or event not in names:
+        raise ArgumentError(f"unknown switch or event {V.describe(event)}: `event` must be "
+                            f"the name of an event or switch of model {model.name!r} {names}")
+    t = V.number("t", t)
+    x = V.vector("x", x, size=model.n_states)
+    check_state_name(model, mode)
+    if mode is not None and (not isinstance(mode, str) or ":" in mode):
+        raise V.fail("mode", f"None or a mode of model {model.name!r} "
+                     f"{list(model.mode_names)}", mode)
+    sliding = V.choice("sliding", sliding, ("convex", "utkin"))
+    sliding_gain = V.nonnegative("sliding_gain", sliding_gain)
     ctx = ModelContext(model, params, sliding)
-    x = np.asarray(x, dtype=float).reshape(-1)
-    if x.shape != (ctx.n,):
-        raise ValueError(f"`x` must have {ctx.n} entries, got {x.size}")
     names = [e.name for e in ctx.model.events]
     if event in names:
         j = names.index(event)
@@ -132,7 +156,7 @@ def saltation_matrix(model, event: str, t: float, x, *, params=None, mode=None,
         if mode is None:
             arrive = [m for m, ok in ((a, ha < 0), (b, hb > 0)) if ok]
             if len(arrive) != 1:
-                raise ValueError(f"give `mode`: the flow arrives at switch {event!r} from "
+                raise ArgumentError(f"give `mode`: the flow arrives at switch {event!r} from "
                                  f"{'both sides' if arrive else 'neither side'} here")
             m = arrive[0]
         else:
@@ -166,9 +190,7 @@ def event_saltations(traj, form: str = "full") -> list:
     """
     _check_form(form)
     if form == "full":
-        if traj.transfer_matrices is None:
-            raise ValueError("the trajectory has no transfer matrices: simulate it with "
-                             "`variational=True`")
+        _check_trajectory(traj)
         return list(traj.transfer_matrices[1::2])
     ctx = ModelContext(traj.model, traj.params, traj.options.get("sliding", "convex"))
     gain = float(traj.options.get("sliding_gain", 0.0) or 0.0)

@@ -14,7 +14,8 @@ from functools import reduce
 
 import numpy as np
 
-from ._saltation import _check_form, event_saltations
+from ..errors import ArgumentError
+from ._saltation import _check_form, _check_trajectory, event_saltations
 
 
 @dataclass(frozen=True, eq=False)
@@ -68,9 +69,7 @@ def segments(traj) -> list:
         ``len(traj.events) + 1`` pieces; ``traj.jacobian`` is the ordered product of their
         ``transfer`` matrices.
     """
-    if traj.transfer_matrices is None:
-        raise ValueError("the trajectory has no transfer matrices: simulate it with "
-                         "`variational=True`")
+    _check_trajectory(traj)
     tm = traj.transfer_matrices
     evs = list(traj.events)
     proj = event_saltations(traj, "projected") if evs else []
@@ -106,16 +105,14 @@ def monodromy(traj, form: str = "full") -> np.ndarray:
     numpy.ndarray, shape (n, n)
     """
     _check_form(form)
-    if traj.transfer_matrices is None:
-        raise ValueError("the trajectory has no transfer matrices: simulate it with "
-                         "`variational=True`")
+    _check_trajectory(traj)
     tm = traj.transfer_matrices
     if form == "full":
         return reduce(lambda acc, m: m @ acc, tm[1:], tm[0].copy())
     sp = event_saltations(traj, "projected")
     missing = [e for e, s in zip(traj.events, sp) if s is None]
     if missing:
-        raise ValueError(f"the projected form is not defined for {missing[0].kind!r} events "
+        raise ArgumentError(f"the projected form is not defined for {missing[0].kind!r} events "
                          f"({missing[0]!r}); use form='full'")
     acc = tm[0].copy()
     for k, s in enumerate(sp):
