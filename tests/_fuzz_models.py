@@ -22,6 +22,10 @@ from hypothesis import strategies as st
 import pwsdyn
 from pwsdyn.errors import PwsdynError
 
+#: The last message of the rarer refusals (printed with the counts, to tell a refusal that
+#: protects from one that is a bug).
+LAST_REFUSAL: dict = {}
+
 #: Where the payloads write if they ever run.
 SENTINEL = Path(__file__).resolve().parent / ".fuzz-sentinel-must-not-exist"
 
@@ -273,13 +277,42 @@ def assert_inert(source: str) -> None:
                 assert node.id in local or node.id in _CALLS or node.id == "math", node.id
 
 
-def exercise(source, *, compile_it) -> str:
+def run_cli(text: str, n_states: int | None) -> None:
+    """``pwsdyn simulate FILE`` on the model text: a clean exit (0, or 1/2 with one error
+    line), never a traceback or raw control characters."""
+    import tempfile
+
+    from click.testing import CliRunner
+
+    from pwsdyn.cli import main
+
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "model.toml"
+        path.write_text(text, encoding="utf-8", errors="surrogatepass")
+        args = ["simulate", str(path), "--t-end", "0.5"]
+        if n_states:
+            args += ["--x0", ",".join(["0.5"] * n_states)]
+        res = CliRunner().invoke(main, args)
+    if res.exception is not None and not isinstance(res.exception, SystemExit):
+        raise AssertionError(f"the CLI raised {res.exception!r}") from res.exception
+    assert res.exit_code in (0, 1, 2), res.output
+    assert "Traceback" not in res.output and "\x1b" not in res.output, res.output[-500:]
+
+
+def exercise(source, *, compile_it, cli_it=lambda: False) -> str:
     """Load ``source`` (a dict or TOML text) and, if it loads, check its generated module and,
-    if ``compile_it()`` says so, compile and run it. Returns the outcome; raises on anything
-    that is not pwsdyn's own error, and if the sentinel appeared."""
+    if ``compile_it()`` says so, compile and run it; TOML text goes through the command line
+    too when ``cli_it()`` says so. Returns the outcome; raises on anything that is not
+    pwsdyn's own error, and if the sentinel appeared."""
     from pwsdyn.model import codegen, maps
 
     try:
+        if isinstance(source, str) and cli_it():
+            try:
+                n = pwsdyn.load_model(source).n_states
+            except PwsdynError:
+                n = None
+            run_cli(source, n)
         try:
             m = pwsdyn.load_model(source)
         except PwsdynError:
@@ -287,7 +320,8 @@ def exercise(source, *, compile_it) -> str:
         is_map = getattr(m, "is_map", False)
         try:
             src = maps.generate_map_source(m) if is_map else codegen.generate_source(m)
-        except PwsdynError:
+        except PwsdynError as exc:
+            LAST_REFUSAL["refused at code generation"] = str(exc)[:200]
             return "refused at code generation"
         assert_inert(src)
         if not compile_it():
@@ -298,7 +332,8 @@ def exercise(source, *, compile_it) -> str:
             else:
                 pwsdyn.simulate(m, np.full(m.n_states, 0.5), (0.0, 0.5), max_steps=5000,
                                 max_events=200, throw=False)
-        except PwsdynError:
+        except PwsdynError as exc:
+            LAST_REFUSAL["refused at compile or run"] = str(exc)[:200]
             return "refused at compile or run"
         return "accepted and ran"
     finally:
@@ -310,11 +345,20 @@ class Tally:
     loads, and every ``compile_every``-th after it, is compiled and run (numba takes about a
     second a model; the inertness check of the source takes milliseconds)."""
 
-    def __init__(self, compile_every: int = 0):
+    def __init__(self, compile_every: int = 0, cli_every: int = 0):
         self.counts: Counter = Counter()
         self.slowest = 0.0
         self.compile_every = compile_every
+        self.cli_every = cli_every
         self._accepted = 0
+        self._seen = 0
+
+    def _cli_next(self) -> bool:
+        self._seen += 1
+        if self.cli_every and (self._seen - 1) % self.cli_every == 0:
+            self.counts["also run through the CLI"] += 1
+            return True
+        return False
 
     def _compile_next(self) -> bool:
         self._accepted += 1
@@ -322,13 +366,18 @@ class Tally:
 
     def run(self, source) -> str:
         t0 = time.perf_counter()
-        outcome = exercise(source, compile_it=self._compile_next)
+        outcome = exercise(source, compile_it=self._compile_next, cli_it=self._cli_next)
         self.slowest = max(self.slowest, time.perf_counter() - t0)
         self.counts[outcome] += 1
         return outcome
 
+    @property
+    def total(self) -> int:
+        return sum(v for k, v in self.counts.items() if k != "also run through the CLI")
+
     def report(self, what: str) -> str:
-        total = sum(self.counts.values())
+        total = self.total
         parts = ", ".join(f"{k}: {v}" for k, v in sorted(self.counts.items()))
+        examples = "".join(f"\n  last {k}: {v}" for k, v in LAST_REFUSAL.items())
         return (f"{what}: {total} inputs; {parts}; 0 code executions, 0 foreign exceptions; "
-                f"slowest input {self.slowest:.2f} s")
+                f"slowest input {self.slowest:.2f} s{examples}")

@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from .errors import Status
+from .errors import ArgumentError, Status
 
 #: Value of the ``pwsdyn_type`` attribute of a trajectory dataset.
 TRAJECTORY_TYPE = "trajectory"
@@ -114,7 +114,7 @@ def _spec_to_json(spec: dict) -> str:
             return obj.item()
         if isinstance(obj, np.ndarray):
             return obj.tolist()
-        raise TypeError(f"the model definition holds a {type(obj).__name__} ({obj!r}), which "
+        raise ArgumentError(f"the model definition holds a {type(obj).__name__} ({obj!r}), which "
                         f"cannot be stored in a trajectory file")
 
     # TOML allows inf/nan floats; Python's JSON writes and reads them as Infinity/NaN, which is
@@ -206,7 +206,7 @@ def trajectory_to_dataset(traj) -> xr.Dataset:
     """
     for attr in ("t", "x", "state", "events", "model", "status"):
         if not hasattr(traj, attr):
-            raise TypeError(f"`traj` must be a Trajectory, got {type(traj).__name__}")
+            raise ArgumentError(f"`traj` must be a Trajectory, got {type(traj).__name__}")
     model = traj.model
     names = list(model.states)
     n = len(names)
@@ -299,7 +299,7 @@ def _attr(ds: xr.Dataset, key: str):
     try:
         return ds.attrs[key]
     except KeyError:
-        raise ValueError(f"the dataset has no attribute {key!r}; it was not written by "
+        raise ArgumentError(f"the dataset has no attribute {key!r}; it was not written by "
                          f"pwsdyn.io.trajectory_to_dataset") from None
 
 
@@ -336,16 +336,16 @@ def trajectory_from_dataset(ds: xr.Dataset, model=None):
     from .model import load_model
 
     if not isinstance(ds, xr.Dataset):
-        raise TypeError(f"`ds` must be an xarray.Dataset, got {type(ds).__name__}")
+        raise ArgumentError(f"`ds` must be an xarray.Dataset, got {type(ds).__name__}")
     kind = ds.attrs.get("pwsdyn_type")
     if kind != TRAJECTORY_TYPE:
-        raise ValueError(f"the dataset is not a pwsdyn trajectory (attribute pwsdyn_type="
+        raise ArgumentError(f"the dataset is not a pwsdyn trajectory (attribute pwsdyn_type="
                          f"{kind!r}, expected {TRAJECTORY_TYPE!r})")
     stored_hash = str(_attr(ds, "model_hash"))
     if model is None:
         spec = json.loads(_attr(ds, "model_spec"))
         if not spec:
-            raise ValueError("the dataset holds no model definition (`model_spec` is empty); "
+            raise ArgumentError("the dataset holds no model definition (`model_spec` is empty); "
                              "pass the model with `model=`")
         model = load_model(spec)
         if model.hash != stored_hash:
@@ -358,7 +358,7 @@ def trajectory_from_dataset(ds: xr.Dataset, model=None):
     names = list(model.states)
     stored_names = _strings(ds["state"].values)
     if stored_names != names:
-        raise ValueError(f"the dataset has states {stored_names}, the model has {names}")
+        raise ArgumentError(f"the dataset has states {stored_names}, the model has {names}")
     n = len(names)
 
     t = np.ascontiguousarray(ds["t"].values, dtype=float)
@@ -385,7 +385,7 @@ def trajectory_from_dataset(ds: xr.Dataset, model=None):
     try:
         status = Status[status_name]
     except KeyError:
-        raise ValueError(f"unknown status {status_name!r} in the dataset; statuses are "
+        raise ArgumentError(f"unknown status {status_name!r} in the dataset; statuses are "
                          f"{[s.name for s in Status]}") from None
     provenance = _json_restore(json.loads(ds.attrs.get("provenance", "{}")))
     return Trajectory(
@@ -452,7 +452,7 @@ def save_dataset(ds, path, *, overwrite: bool = False) -> Path:
         if hasattr(ds, "events") and hasattr(ds, "model"):
             ds = trajectory_to_dataset(ds)
         else:
-            raise TypeError(f"`ds` must be an xarray.Dataset or a Trajectory, got "
+            raise ArgumentError(f"`ds` must be an xarray.Dataset or a Trajectory, got "
                             f"{type(ds).__name__}")
 
     def write(tmp):

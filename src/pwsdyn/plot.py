@@ -21,6 +21,8 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
+from .errors import ArgumentError
+
 #: Colour of the trajectory itself.
 TRAJECTORY_COLOR = "#0072B2"
 #: Marker style of each event kind (Okabe-Ito colours, readable by colour-blind readers,
@@ -135,13 +137,13 @@ def _state_index(model, s, argname: str) -> int:
     names = list(model.states)
     if isinstance(s, (int, np.integer)) and not isinstance(s, bool):
         if not -len(names) <= s < len(names):
-            raise ValueError(f"`{argname}`: state index {s} out of range for states {names}")
+            raise ArgumentError(f"`{argname}`: state index {s} out of range for states {names}")
         return int(s) % len(names)
     if isinstance(s, str):
         if s not in names:
-            raise ValueError(f"`{argname}`: unknown state {s!r}; states are {names}")
+            raise ArgumentError(f"`{argname}`: unknown state {s!r}; states are {names}")
         return names.index(s)
-    raise TypeError(f"`{argname}` must hold state names or indices, got {s!r}")
+    raise ArgumentError(f"`{argname}` must hold state names or indices, got {s!r}")
 
 
 def _left_right(T, X):
@@ -279,7 +281,7 @@ def plot_trajectory(traj, path=None, states=None, phase=None, *, num: int = 4000
     """
     for attr in ("t", "x", "events", "model", "sample"):
         if not hasattr(traj, attr):
-            raise TypeError(f"`traj` must be a Trajectory, got {type(traj).__name__}")
+            raise ArgumentError(f"`traj` must be a Trajectory, got {type(traj).__name__}")
     if path is not None:
         _check_figure_path(path, overwrite)
     model = traj.model
@@ -292,19 +294,19 @@ def plot_trajectory(traj, path=None, states=None, phase=None, *, num: int = 4000
             states = [states]
         shown = [_state_index(model, s, "states") for s in states]
         if not shown:
-            raise ValueError("`states` must name at least one state")
+            raise ArgumentError("`states` must name at least one state")
     if phase is None:
         phase_ij = (0, 1) if n >= 2 else None
     else:
         if n < 2:
-            raise ValueError(f"`phase`: model {model.name!r} has one state, no phase plane")
+            raise ArgumentError(f"`phase`: model {model.name!r} has one state, no phase plane")
         if len(phase) != 2:
-            raise ValueError(f"`phase` must be a pair of states, got {phase!r}")
+            raise ArgumentError(f"`phase` must be a pair of states, got {phase!r}")
         phase_ij = (_state_index(model, phase[0], "phase"), _state_index(model, phase[1], "phase"))
         if phase_ij[0] == phase_ij[1]:
-            raise ValueError(f"`phase` must name two different states, got {phase!r}")
+            raise ArgumentError(f"`phase` must name two different states, got {phase!r}")
     if not (isinstance(num, (int, np.integer)) and num >= 2):
-        raise ValueError(f"`num` must be an integer >= 2, got {num!r}")
+        raise ArgumentError(f"`num` must be an integer >= 2, got {num!r}")
 
     # at least a few samples per stored step, so long runs with many oscillations stay smooth;
     # capped because every sample is evaluated from the dense output one by one
@@ -425,9 +427,9 @@ def plot_orbit(orbit, path=None, states=None, phase=None, *, num: int = 4000,
     """
     for attr in ("trajectory", "multipliers", "period", "events"):
         if not hasattr(orbit, attr):
-            raise TypeError(f"`orbit` must be a PeriodicOrbit, got {type(orbit).__name__}")
+            raise ArgumentError(f"`orbit` must be a PeriodicOrbit, got {type(orbit).__name__}")
     if orbit.trajectory is None:
-        raise ValueError("the orbit has no trajectory to plot")
+        raise ArgumentError("the orbit has no trajectory to plot")
     if path is not None:
         _check_figure_path(path, overwrite)
     mult = np.atleast_1d(np.asarray(orbit.multipliers if orbit.multipliers is not None else [],
@@ -537,8 +539,6 @@ def figure_formats() -> list:
 
 def _figure_format(path) -> str:
     """The format of a figure file from its suffix (no suffix: PNG); refuses an unknown one."""
-    from .errors import ArgumentError
-
     suffix = Path(path).suffix
     fmt = suffix[1:].lower() or "png"
     if fmt not in figure_formats():
@@ -582,7 +582,7 @@ def _tex(name: str) -> str:
 
 def _sweep_param(ds):
     if ds.attrs.get("kind") != "sweep":
-        raise ValueError("expected the dataset of pwsdyn.sweep (attribute kind = 'sweep')")
+        raise ArgumentError("expected the dataset of pwsdyn.sweep (attribute kind = 'sweep')")
     return ds.attrs["parameter"]
 
 
@@ -618,10 +618,10 @@ def plot_bifurcation(ds, state=None, path=None, *, markersize: float = 1.0,
         state = states[0] if ds.attrs.get("section") == "stroboscopic" else states[-1]
     if isinstance(state, (int, np.integer)):
         if not 0 <= state < len(states):
-            raise ValueError(f"`state` index {state} out of range for states {states}")
+            raise ArgumentError(f"`state` index {state} out of range for states {states}")
         state = states[state]
     if state not in states:
-        raise ValueError(f"unknown state {state!r}; states are {states}")
+        raise ArgumentError(f"unknown state {state!r}; states are {states}")
     fig = Figure(figsize=(8.0, 6.0), layout="constrained")
     ax, ax2 = fig.subplots(2, 1, sharex=True, height_ratios=(3, 1))
     pv = ds[pname].values
@@ -660,7 +660,7 @@ def plot_lyapunov(ds, path=None, *, overwrite: bool = False) -> Figure:
     ``path`` and ``overwrite`` as for :func:`plot_bifurcation`."""
     pname = _sweep_param(ds)
     if "lyapunov" not in ds:
-        raise ValueError("the sweep has no Lyapunov exponents: run it with lyapunov=True")
+        raise ArgumentError("the sweep has no Lyapunov exponents: run it with lyapunov=True")
     if path is not None:
         _check_figure_path(path, overwrite)
     fig = Figure(figsize=(8.0, 4.0), layout="constrained")
@@ -693,7 +693,7 @@ def plot_basins(ds, path=None, *, overwrite: bool = False) -> Figure:
     from matplotlib.patches import Patch
 
     if ds.attrs.get("kind") != "basins":
-        raise ValueError("expected the dataset of pwsdyn.basins (attribute kind = 'basins')")
+        raise ArgumentError("expected the dataset of pwsdyn.basins (attribute kind = 'basins')")
     if path is not None:
         _check_figure_path(path, overwrite)
     lab = ds.label

@@ -31,7 +31,7 @@ import xarray as xr
 
 from .. import __version__
 from .. import _validate as V
-from ..errors import ArgumentError, Status
+from ..errors import ArgumentError, OutputExistsError, Status
 from ..integrate.simulate import DEFAULTS, check_mode, integrator_options, state_vector
 from ._common import check_common, check_section, check_time_unit, DIVERGED, ModelContext, model_payload, period_estimate
 from ._executor import run_chunks
@@ -248,7 +248,7 @@ def basins(model, grid: Mapping[str, object], x0=None, *, params=None, transient
         chunk_size = max(1, math.ceil(rows / 16))
     out_path = Path(out) if out is not None else None
     if out_path is not None and out_path.exists():
-        raise FileExistsError(f"output file {str(out_path)!r} exists; nothing was overwritten "
+        raise OutputExistsError(f"output file {str(out_path)!r} exists; nothing was overwritten "
                               "(choose another name or delete it)")
 
     idx = [model.states.index(nm_) for nm_, _ in axes]

@@ -16,12 +16,14 @@ import logging
 import os
 from typing import Callable, Sequence
 
+from ..errors import ArgumentError
+
 
 def _check_workers(workers):
     if workers is None:
         return None
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise ValueError(f"`workers` must be a positive integer or None, got {workers!r}")
+        raise ArgumentError(f"`workers` must be a positive integer or None, got {workers!r}")
     return workers
 
 
@@ -55,7 +57,7 @@ def run_chunks(fn: Callable, tasks: Sequence, todo: Sequence[int],
 
     workers = _check_workers(workers)
     if client is not None and scheduler is not None:
-        raise ValueError("give either `client` or `scheduler`, not both")
+        raise ArgumentError("give either `client` or `scheduler`, not both")
     total = n_done + len(todo)
     bar = tqdm(total=total, initial=n_done, desc=desc, unit="chunk", disable=not progress,
                dynamic_ncols=True)

@@ -40,7 +40,7 @@ import xarray as xr
 
 from .. import __version__
 from .. import _validate as V
-from ..errors import ArgumentError
+from ..errors import ArgumentError, OutputExistsError
 from ..integrate.simulate import (DEFAULTS, check_mode, integrator_options, _simulate_compiled,
                                   state_vector)
 from ..integrate.trajectory import EventLog
@@ -456,7 +456,7 @@ def sweep(model, param: str, values: Sequence[float], x0=None, *, transient: int
         chunk_size = max(1, math.ceil(len(vals) / 16))
     out_path = Path(out) if out is not None else None
     if out_path is not None and out_path.exists():
-        raise FileExistsError(f"output file {str(out_path)!r} exists; nothing was overwritten "
+        raise OutputExistsError(f"output file {str(out_path)!r} exists; nothing was overwritten "
                               "(choose another name or delete it)")
 
     settings = dict(param=param, values=[float(v) for v in vals], x0=[float(v) for v in x0v],

@@ -237,20 +237,29 @@ def load_module(kind: str, version: str, model_digest: str, generate, *, model_n
         module = importlib.util.module_from_spec(spec)
         sys.modules[modname] = module
         try:
+            # numba compiles (or loads from its cache) here: the signature is explicit
             spec.loader.exec_module(module)
+        except Exception as exc:
+            _discard(path, modname)
+            raise _compile_error(model_name, exc) from None
         except BaseException:
             _discard(path, modname)
             raise
     fn = getattr(module, attribute)
     try:
         warm_up(fn)
-    except RecursionError:
-        _discard(path, modname)
-        raise ModelError(f"model {model_name!r} is too deeply nested to compile; simplify its "
-                         "expressions (or split them into definitions)") from None
     except Exception as exc:
         _discard(path, modname)
-        msg = str(exc).strip().splitlines()
-        raise ModelError(f"model {model_name!r} could not be compiled "
-                         f"({type(exc).__name__}: {msg[0][:300] if msg else ''})") from None
+        raise _compile_error(model_name, exc) from None
     return fn, path
+
+
+def _compile_error(model_name: str, exc: Exception) -> ModelError:
+    if isinstance(exc, RecursionError):
+        return ModelError(f"model {model_name!r} is too deeply nested to compile; simplify its "
+                          "expressions (or split them into definitions)")
+    # numba's messages carry terminal colour codes and the generated file's path
+    msg = re.sub(r"\x1b\[[0-9;]*m", "", str(exc)).strip().splitlines()
+    return ModelError(f"model {model_name!r} could not be compiled ({type(exc).__name__}: "
+                      f"{msg[0][:300] if msg else ''}). This is a bug in pwsdyn's code "
+                      "generation: please report it with the model")

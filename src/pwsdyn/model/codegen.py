@@ -52,6 +52,15 @@ W_FU, W_HDU, W_HDUD = 14, 15, 16
 # followed by the augmented matrix M (nz x nz, row-major)
 W_AFFINE = 17
 
+# what each selector computes, for messages
+_QUANTITIES = {W_F: "vector field", W_FX: "Jacobian f_x", W_FT: "time derivative f_t",
+               W_H: "surface", W_HX: "surface gradient h_x", W_HT: "surface rate h_t",
+               W_HD: "normal velocity", W_HDX: "normal velocity gradient",
+               W_HDT: "normal velocity rate", W_G: "reset map", W_GX: "reset Jacobian",
+               W_GT: "reset time derivative", W_GUARD: "guard", W_HHD: "surface",
+               W_FU: "sliding family", W_HDU: "sliding normal velocity",
+               W_HDUD: "sliding normal velocity derivative", W_AFFINE: "affine matrix"}
+
 #: Signature of the generated function: evaluate(which, idx, t, x, p, out) -> None
 EVALUATE_SIGNATURE = types.void(types.int64, types.int64, types.float64, types.float64[::1],
                                 types.float64[::1], types.float64[::1])
@@ -161,8 +170,10 @@ def derivatives(model: Model) -> Derivatives:
     for (which, idx), exprs in cases.items():
         for e in exprs:
             if isinstance(e, sp.Basic) and e.has(sp.I, sp.nan, sp.zoo, sp.oo, -sp.oo):
-                raise ModelError(f"a derivative of model {model.name!r} (quantity {which}, "
-                                 f"index {idx}) has the non-finite or complex value {e}",
+                raise ModelError(f"the {_QUANTITIES.get(which, 'derivative')} (case {idx}) "
+                                 f"of model {model.name!r} has the non-finite or complex value "
+                                 f"{str(e)[:200]}; a field that is complex (a negative number to "
+                                 "a non-integer power, ...) cannot be integrated",
                                  source=model.origin)
     aff = affine_structure(model)
     cases[(W_AFFINE, -1)] = [sp.Integer(aff.dimension if aff.any else 0)]

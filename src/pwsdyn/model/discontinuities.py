@@ -155,7 +155,8 @@ def _apply(expr, registry: _Registry, sides: dict, u_surface: int | None = None)
 
     With ``u_surface``, terms on that surface are replaced by the switching variable
     ``U_SYMBOL`` instead (Utkin's family). Returns ``(expr, pending)``: ``pending`` is the
-    index of a surface met that has no side in ``sides`` (``None`` when ``expr`` is smooth).
+    index of a surface met that has no side in ``sides`` (``None`` when ``expr`` is smooth;
+    -1 when a term's surface would depend on ``U_SYMBOL``).
     """
     for _ in range(10_000):
         atoms = _innermost([expr])
@@ -164,6 +165,11 @@ def _apply(expr, registry: _Registry, sides: dict, u_surface: int | None = None)
         rep = {}
         for atom in atoms:
             s = _surface_of(atom)
+            if s.has(U_SYMBOL):
+                # a term whose surface depends on the switching variable (Max(Heaviside(b),
+                # b + 4) in Utkin's family of b): the family is not of the affine form the
+                # kernel solves; no surface of the model may hold U_SYMBOL
+                return expr, -1
             k, orient = registry.find(s)
             if k == u_surface:
                 sg = orient * U_SYMBOL
@@ -242,6 +248,11 @@ def _partial(expr, registry, sides):
         rep = {}
         for atom in atoms:
             s = _surface_of(atom)
+            if s.has(U_SYMBOL):
+                # a term whose surface depends on the switching variable (Max(Heaviside(b),
+                # b + 4) in Utkin's family of b): the family is not of the affine form the
+                # kernel solves; no surface of the model may hold U_SYMBOL
+                return expr, -1
             k, orient = registry.find(s)
             if k in sides:
                 rep[atom] = _value(atom, s, orient * sides[k])

@@ -26,7 +26,7 @@ from typing import Any, Mapping
 
 import sympy as sp
 
-from ..errors import ModelError
+from ..errors import ArgumentError, ModelError
 from .expressions import check_expression, parse_expression
 
 #: Name of the independent variable in expressions.
@@ -238,13 +238,13 @@ class Model(SymbolicSystem):
             for i, m in enumerate(self.mode_names):
                 if m.startswith(name + "["):
                     return i
-            raise ValueError(f"unknown mode {name!r}; modes are {list(self.mode_names)}") from None
+            raise ArgumentError(f"unknown mode {name!r}; modes are {list(self.mode_names)}") from None
 
     def event_index(self, name: str) -> int:
         for i, ev in enumerate(self.events):
             if ev.name == name:
                 return i
-        raise ValueError(f"unknown event {name!r}; events are {[e.name for e in self.events]}")
+        raise ArgumentError(f"unknown event {name!r}; events are {[e.name for e in self.events]}")
 
     # --- parameters ----------------------------------------------------------------------
     def forcing_period_value(self, params: Mapping[str, float] | None = None) -> float | None:
@@ -254,7 +254,7 @@ class Model(SymbolicSystem):
         p = self.parameter_vector(params)
         val = float(self.forcing_period.subs(dict(zip(self.parameter_symbols, p))))
         if not (math.isfinite(val) and val > 0):
-            raise ValueError(f"the forcing period of model {self.name!r} must be a positive "
+            raise ArgumentError(f"the forcing period of model {self.name!r} must be a positive "
                              f"number, got {val!r} for these parameters")
         return val
 
@@ -333,7 +333,7 @@ def load_model(source, **kwargs) -> Model:
     ('y', 'v')
     """
     if kwargs:
-        raise TypeError(f"load_model() got unexpected keyword argument(s) {sorted(kwargs)}")
+        raise ArgumentError(f"load_model() got unexpected keyword argument(s) {sorted(kwargs)}")
     if isinstance(source, Model) or getattr(source, "is_map", False):
         return source
     if isinstance(source, Mapping):
@@ -353,7 +353,7 @@ def load_model(source, **kwargs) -> Model:
         except OSError as exc:
             raise ModelError(f"cannot read model file: {exc}", source=str(path)) from None
         return _model_from_toml_text(text, str(path))
-    raise TypeError(f"`source` must be a path, a model name, a dict or a Model, "
+    raise ArgumentError(f"`source` must be a path, a model name, a dict or a Model, "
                     f"got {type(source).__name__}")
 
 
@@ -444,6 +444,9 @@ def model_from_dict(data: dict, origin: str = "<dict>", text: str | None = None)
 
     A dict with ``kind = "map"`` describes a piecewise-smooth map instead
     (:mod:`pwsdyn.model.maps`)."""
+    keys = [k for k in data if not isinstance(k, str)]
+    if keys:
+        raise ModelError(f"top-level keys must be strings, got {keys[0]!r}", source=origin)
     if data.get("kind") == "map":
         from .maps import map_model_from_dict
 
@@ -590,7 +593,10 @@ def model_from_dict(data: dict, origin: str = "<dict>", text: str | None = None)
                             terminal))
 
     switches = []
-    for i, sw in enumerate(data.get("switches", []) or []):
+    switches_raw = data.get("switches", []) or []
+    if not isinstance(switches_raw, list):
+        raise W.error("`switches` must be an array of tables ([[switches]])", "switches")
+    for i, sw in enumerate(switches_raw):
         pre = f"switches[{i}]."
         if not isinstance(sw, dict):
             raise W.error("each switch must be a table", f"switches[{i}]")
