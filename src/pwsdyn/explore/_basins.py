@@ -33,7 +33,8 @@ from .. import __version__
 from .. import _validate as V
 from ..errors import ArgumentError, OutputExistsError, Status
 from ..integrate.simulate import DEFAULTS, check_mode, integrator_options, state_vector
-from ._common import check_common, check_section, check_time_unit, DIVERGED, ModelContext, model_payload, period_estimate
+from ._common import (check_common, check_section, check_time_unit, DIVERGED, ModelContext,
+                      model_payload, period_estimate)
 from ._executor import run_chunks
 from ._store import ChunkStore
 from ._sweep import _period_function, _settings_json, run_window
@@ -192,13 +193,10 @@ def basins(model, grid: Mapping[str, object], x0=None, *, params=None, transient
     >>> float(ds.fraction.sum())
     1.0
     """
-    c = check_common(transient=transient, samples=samples, samples_min=2, phase=phase,
-                     period=period, max_period=max_period, period_tol=period_tol, bound=bound,
-                     chunk_size=chunk_size, workers=workers, progress=progress, store=store,
-                     out=out, scheduler=scheduler)
-    transient, samples, phase, period = c["transient"], c["samples"], c["phase"], c["period"]
-    max_period, period_tol, bound, chunk_size = (c["max_period"], c["period_tol"], c["bound"],
-                                                 c["chunk_size"])
+    (transient, samples, phase, period, max_period, period_tol, bound, chunk_size) = check_common(
+        transient=transient, samples=samples, samples_min=2, phase=phase, period=period,
+        max_period=max_period, period_tol=period_tol, bound=bound, chunk_size=chunk_size,
+        workers=workers, progress=progress, store=store, out=out, scheduler=scheduler)
     match_tol = V.tolerance("match_tol", match_tol)
     model = V.model(model, caller="basins()")
     is_map = bool(getattr(model, "is_map", False))

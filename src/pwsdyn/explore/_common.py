@@ -185,22 +185,23 @@ MAX_WORKERS = 4096
 
 def check_common(*, transient, samples, samples_min, phase, period, max_period, period_tol,
                  bound, chunk_size, workers, progress, store=None, out=None, scheduler=None
-                 ) -> dict:
-    """The arguments that :func:`pwsdyn.sweep` and :func:`pwsdyn.basins` share, checked and
+                 ) -> tuple:
+    """Check the arguments that :func:`pwsdyn.sweep` and :func:`pwsdyn.basins` share; return
+    ``(transient, samples, phase, period, max_period, period_tol, bound, chunk_size)``
     normalised (``max_period``, ``chunk_size`` may be None: defaults chosen later)."""
-    return dict(
-        transient=V.integer("transient", transient, lo=0),
-        samples=V.integer("samples", samples, lo=samples_min),
-        phase=V.number("phase", phase, lo=-1e6, hi=1e6),
-        period=V.positive("period", period, allow_none=True),
-        max_period=V.integer("max_period", max_period, lo=1, allow_none=True),
-        period_tol=V.tolerance("period_tol", period_tol),
-        bound=V.positive("bound", bound, allow_inf=True),
-        chunk_size=V.integer("chunk_size", chunk_size, lo=1, allow_none=True),
-        workers=V.integer("workers", workers, lo=1, hi=MAX_WORKERS, allow_none=True),
-        progress=V.flag("progress", progress),
-        store=V.path("store", store), out=V.path("out", out),
-        scheduler=V.text("scheduler", scheduler, allow_none=True))
+    V.integer("workers", workers, lo=1, hi=MAX_WORKERS, allow_none=True)
+    V.flag("progress", progress)
+    V.path("store", store)
+    V.path("out", out)
+    V.text("scheduler", scheduler, allow_none=True)
+    return (V.integer("transient", transient, lo=0),
+            V.integer("samples", samples, lo=samples_min),
+            V.number("phase", phase, lo=-1e6, hi=1e6),
+            V.positive("period", period, allow_none=True),
+            V.integer("max_period", max_period, lo=1, allow_none=True),
+            V.tolerance("period_tol", period_tol),
+            V.positive("bound", bound, allow_inf=True),
+            V.integer("chunk_size", chunk_size, lo=1, allow_none=True))
 
 
 def check_time_unit(model, p, period, phase: float, n_periods: int, *, pidx=None,

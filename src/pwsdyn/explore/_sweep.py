@@ -44,9 +44,9 @@ from ..errors import ArgumentError, OutputExistsError
 from ..integrate.simulate import (DEFAULTS, check_mode, integrator_options, _simulate_compiled,
                                   state_vector)
 from ..integrate.trajectory import EventLog
-from ._common import (check_common, check_section, check_time_unit, COUNTED_KINDS, DIVERGED, SECTION_MISSED, ModelContext,
-                      check_bound, failed_status, model_payload, period_estimate, readmit,
-                      state_times)
+from ._common import (check_common, check_section, check_time_unit, COUNTED_KINDS, DIVERGED,
+                      SECTION_MISSED, ModelContext, check_bound, failed_status, model_payload,
+                      period_estimate, readmit, state_times)
 from ._executor import run_chunks
 from ._lyapunov import flow_segments
 from ._store import ChunkStore
@@ -389,13 +389,10 @@ def sweep(model, param: str, values: Sequence[float], x0=None, *, transient: int
     >>> ds.sizes["mu"], int(ds.period.sel(direction="up").min())
     (5, 0)
     """
-    c = check_common(transient=transient, samples=samples, samples_min=1, phase=phase,
-                     period=period, max_period=max_period, period_tol=period_tol, bound=bound,
-                     chunk_size=chunk_size, workers=workers, progress=progress, store=store,
-                     out=out, scheduler=scheduler)
-    transient, samples, phase, period = c["transient"], c["samples"], c["phase"], c["period"]
-    max_period, period_tol, bound, chunk_size = (c["max_period"], c["period_tol"], c["bound"],
-                                                 c["chunk_size"])
+    (transient, samples, phase, period, max_period, period_tol, bound, chunk_size) = check_common(
+        transient=transient, samples=samples, samples_min=1, phase=phase, period=period,
+        max_period=max_period, period_tol=period_tol, bound=bound, chunk_size=chunk_size,
+        workers=workers, progress=progress, store=store, out=out, scheduler=scheduler)
     direction = V.choice("direction", direction, DIRECTIONS)
     warmup = V.integer("warmup", warmup, lo=0)
     lyapunov = V.flag("lyapunov", lyapunov)

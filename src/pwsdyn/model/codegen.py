@@ -11,13 +11,13 @@ They are emitted as one Python module with a single numba function
     evaluate(which, idx, t, x, p, out)
 
 where ``which`` selects the quantity (the ``W_*`` constants below) and ``idx`` the mode,
-surface, event or (surface, mode) pair. The module is written to a private cache directory under the
-model's full SHA-256 and compiled by numba with ``cache=True``, so a second process loads
-machine code from disk (:mod:`pwsdyn.model.cache` says how the cache is protected). Only
-validated identifiers (states and parameters, prefixed) and numbers reach the source; the
-model's name and other text never do. All models share this one signature, so the integrator kernel is compiled once for
-all models (it receives ``evaluate`` as a first-class function) and a new model costs only the
-compilation of its own small function.
+surface, event or (surface, mode) pair. The module is written to a private cache directory
+under the model's full SHA-256 and compiled by numba with ``cache=True``, so a second process
+loads machine code from disk (:mod:`pwsdyn.model.cache` says how the cache is protected).
+Only validated identifiers (states and parameters, prefixed) and numbers reach the source;
+the model's name and other text never do. All models share this one signature, so the
+integrator kernel is compiled once for all models (it receives ``evaluate`` as a first-class
+function) and a new model costs only the compilation of its own small function.
 """
 
 from __future__ import annotations

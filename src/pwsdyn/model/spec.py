@@ -238,7 +238,8 @@ class Model(SymbolicSystem):
             for i, m in enumerate(self.mode_names):
                 if m.startswith(name + "["):
                     return i
-            raise ArgumentError(f"unknown mode {name!r}; modes are {list(self.mode_names)}") from None
+            raise ArgumentError(f"unknown mode {name!r}; modes are "
+                                f"{list(self.mode_names)}") from None
 
     def event_index(self, name: str) -> int:
         for i, ev in enumerate(self.events):
