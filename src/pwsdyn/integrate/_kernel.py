@@ -66,6 +66,25 @@ is its evaluation, the terms then rescaled to the shortened interval. Their erro
 is zero; sticking, sliding, non-affine modes and the variational equations stay on the
 Runge-Kutta pair.
 
+Termination
+-----------
+No input makes the kernel spin. Non-finite input (``t0``, ``t_end``, ``x0``, first step,
+a NaN largest step, tolerances, sampling time or period) ends the run before any work with
+``ST_NONFINITE``, as does a non-finite time, state or field at the start and after every
+event (a NaN reset) or a step size that turns NaN. A Runge-Kutta stage or a watch function
+that turns non-finite inside a step has the step retaken shorter, down to 4 ulp of ``t``:
+the run ends with ``ST_NONFINITE`` at the last finite state. Accepted steps are counted
+against ``max_steps`` and events against ``max_events``; a rejection shrinks the step by at
+least 10% (an accepted step grows it at most 10x) and a step below 4 ulp of ``t`` ends the
+run, so rejections are bounded too; samples are bounded by ``max_steps`` (more requested
+ends the run at once with ``ST_MAX_STEPS``); inner loops (event location, Newton
+polishing, projections, the equivalent control) have fixed iteration caps.
+
+Time never passes ``t_end``: the last step ends at ``t_end`` exactly, and a complete-
+chattering jump is taken only where its accumulation point lies within ``t_end``; before a
+later one the impacts are integrated one by one, and where they fall below the velocity
+floor (unresolvable) the run ends at ``t_end`` on the chord of the chattering gap.
+
 Variational equations
 ---------------------
 With ``variational`` the state is augmented by the n x n matrix ``Phi`` (row-major), integrated
@@ -573,11 +592,15 @@ def _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_f
 
 
 @njit(cache=True)
-def _take_samples(t, h, y, Q, nY, n, deg, s0, sdt, k, t_end, samp, n_samp, xs):
+def _take_samples(t, h, y, Q, nY, n, deg, s0, sdt, k, t_end, samp, n_samp, xs, max_samp):
     """Record the states at the sample times ``s0 + k sdt`` in ``(t, t + h]`` (and not past
-    ``t_end``) from the step's dense output. Returns ``(samp, n_samp, k)``."""
+    ``t_end``) from the step's dense output, at most ``max_samp`` in all. Returns
+    ``(samp, n_samp, k)``."""
     ts = s0 + k * sdt
-    while ts <= t + h and ts <= t_end:
+    # bounded: the kernel admits only finite s0, t, h, t_end and 0 < sdt < inf, so ts grows
+    # with k; the cap bounds a tiny sdt (the kernel's set-up already refuses more samples
+    # than it, so it is only a backstop and never drops a sample of a run it accepted)
+    while ts <= t + h and ts <= t_end and n_samp < max_samp:
         _dense_eval(y, Q, (ts - t) / h if h > 0.0 else 1.0, nY, deg, xs)
         samp = _grow2(samp, n_samp + 1)
         samp[n_samp, 0] = ts
@@ -1126,10 +1149,29 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     if iopt.shape[0] > IO_DIDX0:
         dkind = iopt[IO_DKIND0]
         didx = iopt[IO_DIDX0]
-    if dkind == REGULAR and n_sw > 0:
+    status = ST_SUCCESS
+    # Non-finite input ends the run at once, before any work: a NaN compares false with
+    # everything, so a NaN time or step size would never reach t_end nor fall below the
+    # smallest step, and the stepping loop would spin (rejected steps do not count against
+    # max_steps). Infinite ones are refused too: t_end = inf never ends, and x0 or
+    # first_step = inf make the first step NaN. max_step = inf is fine (no limit).
+    h0 = fopt[FO_H0]
+    if not (np.isfinite(t0) and np.isfinite(t_end) and np.isfinite(h0) and not np.isnan(hmax)
+            and np.isfinite(rtol) and np.isfinite(atol)):
+        status = ST_NONFINITE
+    for i in range(n):
+        if not np.isfinite(x0[i]):
+            status = ST_NONFINITE
+    if fopt.shape[0] > FO_SAMPLE_DT:
+        # sampling: off for dt <= 0; a NaN or infinite dt (a NaN forcing period or phase of a
+        # sweep) or a non-finite first sample time is non-finite input
+        sdt_in = fopt[FO_SAMPLE_DT]
+        if np.isnan(sdt_in) or (sdt_in > 0.0 and not (np.isfinite(sdt_in)
+                                                       and np.isfinite(fopt[FO_SAMPLE_T0]))):
+            status = ST_NONFINITE
+    if status == ST_SUCCESS and dkind == REGULAR and n_sw > 0:
         # the mode on the right side of every switching surface; sliding from a start on one
         dkind, didx, mode = _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx)
-    status = ST_SUCCESS
 
     # watch list
     wtype = np.zeros(_MAXW, dtype=np.int64)
@@ -1174,11 +1216,22 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     s0 = 0.0
     sdt = 0.0
     sk = 0
-    if fopt.shape[0] > FO_SAMPLE_DT and fopt[FO_SAMPLE_DT] > 0.0:
+    # the samples are bounded by the step budget (each costs about what a stored step does):
+    # a run that would record more than max_steps of them ends at once with ST_MAX_STEPS
+    # instead of looping ~(t_end - t0) / dt times (dt = 1e-300); max_samp caps the sampling
+    # loops as a backstop (one more for the rounding of the count)
+    max_samp = max_steps + 2
+    if status == ST_SUCCESS and fopt.shape[0] > FO_SAMPLE_DT and fopt[FO_SAMPLE_DT] > 0.0:
         s0 = fopt[FO_SAMPLE_T0]
         sdt = fopt[FO_SAMPLE_DT]
-        sk = max(0, int(np.ceil((t - s0) / sdt)))
-        if s0 + sk * sdt == t:
+        kf = max(0.0, np.ceil((t - s0) / sdt))
+        # index of the first sample; beyond 2^53 (an s0 that far before t0) neither it nor
+        # s0 + k sdt is exact, and int() of it would overflow
+        if kf > 2.0 ** 53 or (t_end - s0) / sdt - kf + 1.0 > max_steps:
+            status = ST_MAX_STEPS
+            sdt = 0.0
+        sk = int(kf) if status == ST_SUCCESS else 0
+        if sdt > 0.0 and s0 + sk * sdt == t:
             samp[0, 0] = t
             for i in range(n):
                 samp[0, 1 + i] = y[i]
@@ -1186,9 +1239,19 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             sk += 1
 
     restart = True
-    h = fopt[FO_H0]
+    h = h0
+    # Every iteration of this loop either accepts a step (counted in stats[0], bounded by
+    # max_steps; event handling, also without an event, follows an accepted step) or rejects
+    # one (error, non-finite stage, unresolved moving surface). A rejection shrinks h by a
+    # factor <= 0.9, a step grows it by <= 10, and h below 4 ulp(t) ends the run, so the
+    # rejections are bounded too -- provided t and h stay finite, which the checks at each
+    # restart (t, y, field) and before each step (h) guarantee.
     while True:
         if restart:
+            if status != ST_SUCCESS:
+                # refused input (above); tested here, not in the loop condition, which
+                # measured ~40% slower on every step
+                break
             # (re)build the watch list for the current discrete state
             nw = 0
             for j in range(n_events):
@@ -1271,6 +1334,16 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             _rhs(ev, p, dkind, didx, mode, nm, t, y, n, nvar, K[0], etab, stab, slide_c,
                  w1, w2, gx, hdx, jac, xt, ft)
             stats[2] += 1
+            # at the start and after every event (a reset, a chattering jump in time, a new
+            # mode): time, state and field must be finite. A NaN field here would make the
+            # first step size NaN (a step then neither accepted nor rejected for good).
+            ok = np.isfinite(t)
+            for i in range(nY):
+                if not (np.isfinite(y[i]) and np.isfinite(K[0, i])):
+                    ok = False
+            if not ok:
+                status = ST_NONFINITE
+                break
             if h <= 0.0:
                 # initial step (Hairer, Norsett & Wanner I, II.4): from the scales of y and f
                 d0 = 0.0
@@ -1289,6 +1362,11 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             break
         if stats[0] >= max_steps:
             status = ST_MAX_STEPS
+            break
+        if not np.isfinite(h):
+            # NaN from the error control (an error norm 0/0) or the initial-step estimate;
+            # compared with anything it is false, so it must not reach the clipping below
+            status = ST_NONFINITE
             break
         exact_now = nz > 0 and dkind == REGULAR and nvar == 0 and aff_ok[mode] == 1
         if exact_now:
@@ -1351,7 +1429,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 err = max(err, _error_norm(K, E, method, s_fsal, y, ynew, h, n, nY, rtol, atol))
         if not (err <= 1.0):
             stats[1] += 1
-            if not finite:
+            if not finite or err != err:
                 h *= 0.25
                 if h < 4.0 * _ulp(t):
                     status = ST_NONFINITE
@@ -1371,12 +1449,17 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                                         hdx, jac, xt, ft)
             q_ready = True
         t_new = t + h
+        if t_new > t_end or h >= t_end - t:
+            # the last step, clipped to t_end - t: t + (t_end - t) can round one ulp past (or
+            # short of) t_end; the run ends exactly at t_end
+            t_new = t_end
 
         # ---- event detection on [t, t_new]
         best = -1
         best_th = 2.0
         best_sign = 0.0
         unresolved = False
+        bad_watch = False  # a watch function (surface, hdot, hddot) NaN or inf at a step end
         tratio = 0.0   # largest midpoint mismatch / tolerance of time-dependent surfaces
         for w in range(nw):
             # Samples in increasing theta. Surfaces: the ends and the interior extrema of the
@@ -1399,6 +1482,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                                       buf, fbuf, hdx)
                     r1 = _surface_rate(ev, p, dkind, widx[w], mode, nm, t_new, ynew, K[s_fsal],
                                        n, buf, hdx)
+                if not (np.isfinite(v0) and np.isfinite(v1)):
+                    bad_watch = True
+                    break
                 wv[w] = v1
                 wd[w] = r1
                 d0 = r0 * h
@@ -1492,6 +1578,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                                           xs, n, buf, fbuf, hdx)
                 vals[w, 2] = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t_new, ynew,
                                           n, buf, fbuf, hdx)
+                if not (np.isfinite(vals[w, 0]) and np.isfinite(vals[w, 2])):
+                    bad_watch = True
+                    break
                 wv[w] = vals[w, 2]
             forced = wforce[w] != 0.0 and t == last_t
             if forced:
@@ -1568,6 +1657,19 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 prev_th = th
                 prev_v = vq
 
+        if bad_watch:
+            # a crossing of a NaN surface can never be seen: events would be missed silently.
+            # Treated like a non-finite stage: retake the step shorter, down to the point
+            # where the function turns non-finite (or at once, if it is at the start)
+            stats[1] += 1
+            for ww in range(nw):
+                wvalid[ww] = 0
+            h *= 0.25
+            if h < 4.0 * _ulp(t):
+                status = ST_NONFINITE
+                break
+            continue
+
         if unresolved:
             # retake the step shorter (the surface was not resolved); cached watch values
             # belong to the rejected step
@@ -1613,7 +1715,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                                                 w1, w2, gx, hdx, jac, xt, ft)
                     q_ready = True
                 samp, n_samp, sk = _take_samples(t, h, y, Q, nY, n, deg, s0, sdt, sk, t_end,
-                                                 samp, n_samp, xs)
+                                                 samp, n_samp, xs, max_samp)
             t = t_new
             for i in range(nY):
                 y[i] = ynew[i]
@@ -1663,7 +1765,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             if hd == 0.0 or hv == 0.0:
                 break
             dt = -hv / hd
-            if abs(dt) <= 2.0 * _ulp(t + h_ev) or h_ev + dt <= 0.0 or h_ev + dt > h:
+            # (a NaN correction, from a NaN watch function, keeps the bracketed time)
+            if (not np.isfinite(dt) or abs(dt) <= 2.0 * _ulp(t + h_ev) or h_ev + dt <= 0.0
+                    or h_ev + dt > h):
                 break
             h_ev += dt
         # landing-step dense output (extra stages for DOP853; Taylor terms rescaled)
@@ -1678,11 +1782,11 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, nvar, Kland,
                                     A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2, gx,
                                     hdx, jac, xt, ft)
-        t_ev = t + h_ev
+        t_ev = min(t + h_ev, t_end)
         if sdt > 0.0:
             # samples up to the event (one at the event time takes the state before it)
             samp, n_samp, sk = _take_samples(t, h_ev, y, Q, nY, n, deg, s0, sdt, sk, t_end,
-                                             samp, n_samp, xs)
+                                             samp, n_samp, xs, max_samp)
         # store the node just before the event (always, also when not saving all steps)
         nodes_t = _grow1(nodes_t, n_nodes + 3)
         nodes_y = _grow2(nodes_y, n_nodes + 3)
@@ -1711,6 +1815,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
         t_after = t
         act = wact[w]
         new_sign = best_sign
+        chatter_tail = False
         for i in range(nY):
             xs[i] = y[i]
         if act == ACT_EVENT:
@@ -1782,11 +1887,34 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 do_chatter = (chatter_on == 1 and acc < 0.0 and r >= 0.0 and r < 1.0
                               and (abs(vin) <= chat_rel * chain_vmax or abs(vin) <= vfloor
                                    or r == 0.0))
-                if do_chatter:
-                    # complete-chattering map (Nordmark & Piiroinen 2009; slides):
-                    # x_out = x_in + (2 r f_in / a + W) hdot_in / (1 - r),
-                    # t_out = t_in + 2 r hdot_in / ((1 - r) a)
-                    dtc = 2.0 * r * vin / ((1.0 - r) * acc)
+                # complete-chattering map (Nordmark & Piiroinen 2009; slides):
+                # x_out = x_in + (2 r f_in / a + W) hdot_in / (1 - r),
+                # t_out = t_in + 2 r hdot_in / ((1 - r) a)
+                dtc = 2.0 * r * vin / ((1.0 - r) * acc) if do_chatter else 0.0
+                if do_chatter and not (t + dtc <= t_end):
+                    # the accumulation point lies beyond t_end: up to t_end the motion is a
+                    # finite number of ordinary impacts, so take this one (and the next ones)
+                    # as an impact and integrate on; jumping would end the run past t_end
+                    # with the state of a time not asked for
+                    do_chatter = False
+                    # ... unless the bounces are below the velocity floor: they rise less than
+                    # the position tolerance, so the event search cannot resolve them (their
+                    # crossings drown in the round-off band of the re-trigger guard and the
+                    # state would fall through the surface). Up to t_end the motion then is
+                    # the start of the chattering sequence, within the resolution of the run:
+                    # end at t_end on the chord from x_in to the accumulation state (Q(x_in)
+                    # projected onto the sticking manifold, as below) that a chattering gap
+                    # is drawn with (error O(floor) in hdot, O(tolerance) in h)
+                    chatter_tail = abs(vin) <= vfloor and dtc > 0.0
+                if chatter_tail:
+                    for i in range(n):
+                        ytmp[i] = xs[i] + (2.0 * r * fbuf[i] / acc + w1[i]) * vin / (1.0 - r)
+                    _project_stick(ev, p, k, mode, nm, t + dtc, ytmp, n, hdx, w2, buf)
+                    th = (t_end - t) / dtc
+                    for i in range(n):
+                        y[i] = (1.0 - th) * xs[i] + th * ytmp[i]
+                    log_kind = -1
+                elif do_chatter:
                     for i in range(n):
                         y[i] = xs[i] + (2.0 * r * fbuf[i] / acc + w1[i]) * vin / (1.0 - r)
                     if nvar:
@@ -1816,14 +1944,14 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 if etab[j, 3] >= 0:
                     mode = etab[j, 3]
                 chain_event = -1
-            if (log_kind != K_CHATTER and n_sw > 0
+            if (log_kind != K_CHATTER and not chatter_tail and n_sw > 0
                     and (dkind == REGULAR or etab[j, 5] == 1 or etab[j, 3] >= 0)):
                 # a reset or a new mode may put the state on the other side of a switching
                 # surface, or on one (an impact that stops the relative motion): take the
                 # variant on the right side, or slide. An event without reset or target
                 # while sliding (a section, a terminal event) leaves the sliding motion alone.
                 dkind, didx, mode = _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx)
-            if nvar and log_kind != K_CHATTER:
+            if nvar and log_kind != K_CHATTER and not chatter_tail:
                 _event_saltation(ev, p, j, k, old_mode, mode, nm, t, xs, y, n, S, gx, hdx, buf,
                                  fbuf, w1, w2, etab, stab, slide_c, old_kind, old_idx, ytmp,
                                  dkind, didx)
@@ -1987,7 +2115,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                                                                 ev_xa, n_ev, t_after, t_after,
                                                                 rec, y, y)
                 n_ev += 1
-                while sdt > 0.0 and s0 + sk * sdt < t_after and s0 + sk * sdt <= t_end:
+                while (sdt > 0.0 and s0 + sk * sdt < t_after and s0 + sk * sdt <= t_end
+                       and n_samp < max_samp):
                     ts = s0 + sk * sdt
                     th = (ts - t) / (t_after - t)
                     samp = _grow2(samp, n_samp + 1)
@@ -1997,6 +2126,20 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     n_samp += 1
                     sk += 1
             t = t_after
+        if chatter_tail:
+            # the run ends at t_end inside the unresolvable tail of a chattering sequence
+            # (see the impact above); samples on the same chord
+            while (sdt > 0.0 and s0 + sk * sdt <= t_end and n_samp < max_samp):
+                ts = s0 + sk * sdt
+                th = (ts - t) / (t_end - t) if t_end > t else 1.0
+                samp = _grow2(samp, n_samp + 1)
+                samp[n_samp, 0] = ts
+                for i in range(n):
+                    samp[n_samp, 1 + i] = (1.0 - th) * xs[i] + th * y[i]
+                n_samp += 1
+                sk += 1
+            t = t_end
+            break
         if stop_mask != 0:
             # stop at the stop_count-th logged event of the requested kinds and index
             for r in range(n_ev0, n_ev):
