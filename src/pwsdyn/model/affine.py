@@ -155,7 +155,20 @@ def affine_structure(model) -> AffineStructure:
             if bad:
                 reasons[i] = f"f[{model.states[r]}] = {e} is not affine in the states"
                 break
-            const = sp.simplify(fe.xreplace({z: 0 for z in Z}))
+            # what is left after the linear part must not depend on the states: a term whose
+            # derivative vanishes almost everywhere (atan2(0, f(x)), piecewise constant) is
+            # not affine even though its gradient is constant
+            rest = sp.expand(fe - sum(g * z for g, z in zip(grad, Z)))
+            if rest.free_symbols & set(Z):
+                reasons[i] = f"f[{model.states[r]}] = {e} is not affine in the states"
+                break
+            try:
+                const = sp.simplify(rest)
+            except (TypeError, ValueError, ArithmeticError):
+                const = sp.nan
+            if const.has(sp.nan, sp.zoo, sp.oo, -sp.oo, sp.I):
+                reasons[i] = f"f[{model.states[r]}] = {e} has no finite constant term"
+                break
             for c, g in enumerate(grad[:n]):
                 M[r, c] = g
             M[r, n] = const

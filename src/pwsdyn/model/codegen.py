@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 import sympy as sp
 from numba import types
+from sympy.printing.codeprinter import PrintMethodNotImplementedError
 from sympy.printing.pycode import PythonCodePrinter
 
 from ..errors import ModelError
@@ -89,6 +90,18 @@ class _Printer(PythonCodePrinter):
         if abs(int(expr.p)) > 2**53 or int(expr.q) > 2**53:
             return repr(float(expr))
         return super()._print_Rational(expr)
+
+    # SymPy differentiates Abs(f) of an f it cannot prove real into re() and im() terms; the
+    # generated code computes in real doubles (a complex value is NaN there), so re(f) = f,
+    # im(f) = 0 and conjugate(f) = f
+    def _print_re(self, expr):
+        return f"({self._print(expr.args[0])})"
+
+    def _print_im(self, expr):
+        return "0.0"
+
+    def _print_conjugate(self, expr):
+        return f"({self._print(expr.args[0])})"
 
     def _print_Heaviside(self, expr):
         a = self._print(expr.args[0])
@@ -298,6 +311,9 @@ def compile_model(model: Model) -> CompiledModel:
         except RecursionError:
             raise ModelError(f"model {model.name!r} is too deeply nested to differentiate; "
                              "simplify its expressions", source=model.origin) from None
+        except PrintMethodNotImplementedError as exc:
+            raise ModelError(f"model {model.name!r} uses a function that cannot be compiled "
+                             f"({exc}); simplify the expression", source=model.origin) from None
         if len(body) > MAX_SOURCE_CHARS:
             raise ModelError(f"model {model.name!r} needs {len(body)} characters of generated "
                              f"code ({len(model.modes)} modes, {len(model.surfaces)} surfaces, "
