@@ -67,9 +67,11 @@ def test_impacts_land_on_the_surface_and_approach():
 
 
 def test_ball_at_rest_on_the_floor_sticks_at_once():
+    # a start at rest on the constraint starts sticking (no zero-speed impact and chattering
+    # sequence first: see tests/test_restart.py)
     traj = pwsdyn.simulate("bouncing-ball", {"y": 0.0, "v": 0.0}, (0, 1))
-    assert [e.kind for e in traj.events] == ["chatter", "stick"]
-    assert traj.events[-1].t < 1e-6
+    assert traj.events == [] or len(traj.events) == 0
+    assert set(traj.state) == {"stick:impact"}
     np.testing.assert_allclose(traj.x[-1], 0.0, atol=1e-12)
 
 

@@ -23,6 +23,8 @@ import numpy as np
 
 from .. import _validate as V
 from ..errors import ArgumentError
+from ..integrate._start import ADMIT_BEHIND, start_state
+from ..integrate.simulate import kernel_tables
 from ..model import compile_model, load_model
 
 #: Event kinds counted in "events per period" (state changes -- stick, release, slide start
@@ -87,37 +89,26 @@ class ModelContext:
 
 
 def readmit(ctx: ModelContext, t: float, x, p) -> np.ndarray:
-    """``x`` moved onto the admissible side of every impact surface it lies a round-off
-    distance behind, for a restart at time ``t``.
+    """``x`` moved onto the admissible side of every impact surface it lies a small distance
+    behind, for a restart at time ``t`` (:func:`pwsdyn.integrate._start.start_state`, the rule
+    every run of :func:`pwsdyn.simulate` and the internal runner starts with).
 
     A state carried from one kernel run to the next (to the next parameter value, the next
-    Lyapunov segment) may be sticking on an impact surface, ``h = 0`` up to round-off. The
-    kernel always starts in a regular mode, where a start with ``h`` a few ulps below zero
-    would not register the contact and the motion would pass through the wall; from
-    ``h >= 0`` it registers the contact at once (an impact of vanishing speed, the
-    chattering map, sticking). So ``x += (delta - h) h_x / |h_x|^2`` when
-    ``-1e-8 (1 + |x|) < h < 0`` (``delta`` a few ulps).
+    Lyapunov segment) may be sticking on an impact surface, ``h = 0`` up to round-off and the
+    tolerance the sticking motion holds it to. Within ``1e-8 (1 + |x|) max(1, |h_x|)`` behind
+    a surface (:data:`pwsdyn.integrate._start.ADMIT_BEHIND`: the kernel's sticking motion
+    drifts behind the wall by more than the tolerances) the state is put on it; the run then
+    starts sticking, with an impact or in free motion as the runner's start rule decides. A
+    state further behind is left alone.
     """
-    from ..model.codegen import W_H, W_HX
-
     x = np.array(x, dtype=float)
     model = ctx.model
     if ctx.is_map or not model.events:
         return x
-    n = model.n_states
-    buf = np.zeros(max(n, 2))
-    pv = p if len(p) else np.zeros(1)
-    scale = 1.0 + float(np.max(np.abs(x)))
-    for k in sorted({e.surface for e in model.events if e.kind == "impact"}):
-        ctx.cm.evaluate(W_H, k, float(t), x, pv, buf)
-        h = buf[0]
-        if -1e-8 * scale < h < 0.0:
-            ctx.cm.evaluate(W_HX, k, float(t), x, pv, buf)
-            g = buf[:n].copy()
-            nrm2 = float(g @ g)
-            if nrm2 > 0:
-                x = x + (4 * np.finfo(float).eps * scale - h) * g / nrm2
-    return x
+    etab, eact, stab = kernel_tables(ctx.cm)
+    scale = 1.0 + float(np.max(np.abs(x))) if x.size else 1.0
+    return start_state(ctx.cm, etab, eact, stab, float(t), x, np.asarray(p, dtype=float),
+                       int(model.initial_mode), behind_tol=ADMIT_BEHIND * scale).x
 
 
 def period_estimate(points: np.ndarray, max_period: int, tol: float) -> int:

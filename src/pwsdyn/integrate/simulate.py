@@ -15,6 +15,7 @@ from ..model.codegen import CompiledModel
 from ..model.affine import affine_structure
 from ._kernel import (IO_DIDX0, IO_DKIND0, IO_EXACT, IO_N, IO_STOP_COUNT, IO_STOP_MASK,
                       IO_STOP_REF, VAR_NONE, VAR_SEGMENTS, run_kernel)
+from ._start import ADMIT_BEHIND, STICK, start_state
 from ._variational import assemble_segments
 from .tableaus import METHODS
 from .trajectory import EventLog, Trajectory
@@ -87,12 +88,19 @@ def simulate(model, x0, t_span, params: Mapping[str, float] | None = None, **opt
     ----------
     model : Model, str, path or dict
         A model or anything :func:`pwsdyn.load_model` accepts.
-    x0 : sequence or dict
-        Initial state, in state order or by state name.
+    x0 : sequence, dict or Trajectory
+        Initial state, in state order or by state name. A state on an impact constraint (see
+        "Starts on a constraint" below) starts sticking, with an impact at ``t0``, or in free
+        motion, as the constraint requires. A :class:`Trajectory` of the same model is
+        *continued*: the run starts from its ``x_final`` in its final discrete state
+        (``final_discrete_state``: sticking, sliding or a mode) with its parameters (``params``
+        overrides some), exactly where it stopped; ``mode`` must then be None.
     t_span : (float, float) or float
-        ``(t0, t_end)``, or ``t_end`` with ``t0 = 0``: finite, ``t_end > t0``, and at least
-        1024 units of the time resolution ``eps * max(1, |t|)`` long (``(1e16, 1e16 + 2)`` is
-        refused: doubles are 2 apart there; see :mod:`pwsdyn._validate`).
+        ``(t0, t_end)``, or ``t_end`` with ``t0 = 0`` (``t0 = traj.t_final`` when ``x0`` is a
+        trajectory ``traj``): finite, ``t_end > t0``, and at least 1024 units of the time
+        resolution ``eps * max(1, |t|)`` long (``(1e16, 1e16 + 2)`` is refused: doubles are 2
+        apart there; see :mod:`pwsdyn._validate`). A trajectory continued from another time
+        than its ``t_final`` starts from ``x_final`` by the rule for plain states.
     params : dict, optional
         Parameter values overriding the model defaults, by name.
     method : {'RK45', 'DOP853'}
@@ -164,11 +172,35 @@ def simulate(model, x0, t_span, params: Mapping[str, float] | None = None, **opt
     -------
     Trajectory
 
+    Starts on a constraint
+    ----------------------
+    A state carried over from a run (``traj.x_final``) lies on a constraint only up to
+    round-off and the tolerance the sticking motion holds it to, and may be a little behind
+    it. Before integrating, every impact constraint ``h >= 0`` active in the initial mode is
+    examined (:mod:`pwsdyn.integrate._start`): where ``|h|`` is within
+    ``max(64 eps max(1, |x|), atol + rtol |x|) max(1, |h_x|)`` (the kernel's round-off band,
+    the one that decides the side of a switching surface, or the position tolerance if
+    larger) the state is on the constraint and starts
+
+    * sticking on it (projected onto ``h = 0, hdot = 0``) when the normal velocity ``hdot``
+      is within its band (the same rule on ``hdot_x``) and the free normal acceleration
+      points into the constraint;
+    * with the impact at ``t0`` when ``hdot < 0`` beyond that band;
+    * in free motion otherwise (leaving the constraint).
+
+    A state a little behind a constraint is put on it first: within
+    ``1e-8 (1 + |x|) max(1, |h_x|)`` (a long sticking run drifts behind the wall by more than
+    the tolerances; :data:`pwsdyn.integrate._start.ADMIT_BEHIND`). A state further behind is
+    inside the wall: an :class:`ArgumentError` names the event and the value of ``h``. A
+    start within round-off of a Filippov switching surface into which both fields point
+    starts sliding.
+
     Raises
     ------
     ArgumentError
         (a ``ValueError`` and ``TypeError``) Before any work: a bad model, state, time span,
-        parameter or option, naming it and what it must be.
+        parameter or option, naming it and what it must be; a state inside an impact
+        constraint.
     SolveError
         The run failed (with ``throw=True``).
 
@@ -181,22 +213,52 @@ def simulate(model, x0, t_span, params: Mapping[str, float] | None = None, **opt
     """
     opts = integrator_options(options, "simulate()")
     model = V.model(model, kind="flow", caller="simulate()")
+    cont = x0 if isinstance(x0, Trajectory) else None
+    if cont is not None:
+        params = _continued_params(model, cont, opts, params)
+        x0 = cont.x_final
     p = model.parameter_vector(params)
     x = state_vector(model, x0)
-    t0, t_end = _time_span(t_span)
+    t0, t_end = _time_span(t_span, t0=None if cont is None else cont.t_final)
     check_mode(model, opts)
     if opts["exact"]:
         _check_exact(model)
     cm = compile_model(model)
-    return _simulate_compiled(cm, x, t0, t_end, p, opts)
+    state = None if cont is None else cont.final_discrete_state
+    if state is not None and t0 == cont.t_final and len(state) == 3:
+        kind, idx, mode0 = (int(v) for v in state)
+        return _simulate_compiled(cm, x, t0, t_end, p, opts, mode0=mode0, dkind0=kind,
+                                  didx0=idx, refuse=True)
+    return _simulate_compiled(cm, x, t0, t_end, p, opts, refuse=True)
 
 
-def _time_span(t_span, name: str = "t_span"):
+def _continued_params(model, traj, opts, params):
+    """The parameters of a run continuing ``traj``: its own, with ``params`` over them;
+    ``traj`` must be a trajectory of ``model`` and ``mode`` unset."""
+    if getattr(traj.model, "hash", None) != model.hash:
+        raise ArgumentError(f"`x0` is a trajectory of model "
+                            f"{getattr(traj.model, 'name', '?')!r}, not of {model.name!r}: a "
+                            "trajectory is continued with its own model")
+    if opts.get("mode") is not None:
+        raise ArgumentError("`mode` must be None when `x0` is a trajectory to continue (the "
+                            "run starts in its final discrete state)")
+    if not len(traj.t):
+        raise ArgumentError("`x0` is an empty trajectory: there is no state to continue from")
+    merged = {k: v for k, v in (traj.params or {}).items() if k in model.parameters}
+    if params is not None:
+        if not isinstance(params, Mapping):
+            raise V.fail("params", "a dict of parameter values by name", params)
+        merged.update(params)
+    return merged
+
+
+def _time_span(t_span, name: str = "t_span", t0=None):
     """``(t0, t_end)`` from ``t_span``: finite, ``t_end > t0`` and resolvable in double
-    precision (:func:`pwsdyn._validate.time_span`: at least 1024 units ``eps max(1, |t|)``)."""
+    precision (:func:`pwsdyn._validate.time_span`: at least 1024 units ``eps max(1, |t|)``).
+    A single number is ``t_end`` from ``t0`` (default 0)."""
     must = "(t0, t_end) or t_end, with finite numbers"
     if V.is_real(t_span):
-        t0, t_end = 0.0, V.number(name, t_span, must=must)
+        t0, t_end = (0.0 if t0 is None else float(t0)), V.number(name, t_span, must=must)
     else:
         if isinstance(t_span, (str, bytes, Mapping)) or not hasattr(t_span, "__len__"):
             raise V.fail(name, must, t_span)
@@ -307,11 +369,18 @@ def _build_kernel_tables(cm: CompiledModel, sliding: str):
 
 
 def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dkind0=None,
-                       didx0=None, stop=None, sample=None):
+                       didx0=None, stop=None, sample=None, admit=True, refuse=False):
     """The kernel run behind :func:`simulate`, without re-validating model, state, params.
 
     ``dkind0``, ``didx0``: initial discrete state (0 mode, 1 sticking on event ``didx0``, 2
-    sliding on switch ``didx0``; default a regular mode). ``stop = (kind_mask, ref, count)``
+    sliding on switch ``didx0``; default a regular mode). A start in a regular mode goes
+    through :func:`pwsdyn.integrate._start.start_state` (``admit``, default True): a state on
+    an impact constraint (within round-off or the position tolerance ``atol + rtol |x|``)
+    starts sticking, with the impact at ``t0`` or in free motion, and one a little behind it
+    (``ADMIT_BEHIND``) is put on it first; one further behind raises :class:`ArgumentError`
+    with ``refuse`` (the public entry points) and is left alone otherwise. Newton
+    iterations (shooting) pass ``admit=False``: they integrate exactly the state they are
+    given. ``stop = (kind_mask, ref, count)``
     ends the run (status TERMINAL_EVENT) at the ``count``-th logged event whose kind code
     (``EVENT_KINDS`` index) has its bit set in ``kind_mask`` and whose event or switch index is
     ``ref`` (-1: any), so Poincaré maps on event sections run in one kernel call.
@@ -325,6 +394,15 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
     etab, eact, stab = kernel_tables(cm, opts.get("sliding", "convex"))
     if mode0 is None:
         mode0 = model.initial_mode if opts["mode"] is None else model.mode_index(opts["mode"])
+    if admit and not dkind0 and len(etab):
+        x = np.asarray(x, dtype=float)
+        xmax = float(np.max(np.abs(x))) if x.size else 0.0
+        st = start_state(cm, etab, eact, stab, t0, x, p, int(mode0),
+                         pos_tol=opts["atol"] + opts["rtol"] * xmax,
+                         behind_tol=ADMIT_BEHIND * (1.0 + xmax), refuse=refuse)
+        x = st.x
+        if st.kind == STICK:
+            mode0, dkind0, didx0 = st.mode, st.kind, st.index
     iopt = np.zeros(IO_N, dtype=np.int64)
     iopt[:8] = [mode0, len(model.modes), opts["max_steps"], opts["max_events"], tab.code,
                 VAR_SEGMENTS if opts["variational"] else VAR_NONE, 1 if opts["chatter"] else 0,

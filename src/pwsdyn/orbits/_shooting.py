@@ -127,9 +127,11 @@ class _Shooter:
         for i in range(self.N):
             st = self.states[i]
             try:
+                # the Newton iterate exactly as it is (no start rule: the node's discrete
+                # state is part of the locked signature)
                 tr = _simulate_compiled(self.ctx.cm, np.asarray(X[i], dtype=float), ts[i],
                                         ts[i + 1], self.ctx.p, opts, mode0=st.mode,
-                                        dkind0=st.kind, didx0=st.index)
+                                        dkind0=st.kind, didx0=st.index, admit=False)
             except (ValueError, FloatingPointError) as exc:
                 raise _SimulationFailed(i, exc=exc) from None
             if tr.status.failed or not np.all(np.isfinite(tr.jacobian)):
@@ -340,13 +342,17 @@ def find_periodic_orbit(model, x0, *, params=None, period: float | None = None,
 
     # guess trajectory: signature and node placement
     ref_opts = dict(opts, variational=False, dense=True, throw=False)
+    # a guess on an impact constraint (the end of a run that sticks) starts sticking, with an
+    # impact or in free motion, as simulate() starts it; one inside the wall is refused
     ref = _simulate_compiled(ctx.cm, x0, t0, t0 + T, ctx.p, ref_opts, mode0=st0.mode,
-                             dkind0=st0.kind, didx0=st0.index)
+                             dkind0=st0.kind, didx0=st0.index, refuse=True)
     if ref.status.failed:
         raise OrbitError("simulation", f"the guess could not be simulated over one period: "
                          f"{ref.message} (stopped at t={ref.t_final:.17g} in {ref.state[-1]})")
-    # the kernel starts on the side of each switching surface the state lies on
+    # the kernel starts on the side of each switching surface the state lies on, and the
+    # start rule may have put the state on a constraint: the guess is the run's first node
     st0 = trajectory_start_state(ctx, ref)
+    x0 = np.array(ref.x[0], dtype=float)
     history: list = []
     for rebase in range(3):
         if _events_near_nodes([ref], np.array([t0, t0 + T]), T, margin=0.02):
@@ -368,7 +374,7 @@ def find_periodic_orbit(model, x0, *, params=None, period: float | None = None,
             T = rb.T
             x0 = np.asarray(rb.X[0], dtype=float)
             ref = _simulate_compiled(ctx.cm, x0, t0, t0 + T, ctx.p, ref_opts, mode0=st0.mode,
-                                     dkind0=st0.kind, didx0=st0.index)
+                                     dkind0=st0.kind, didx0=st0.index, admit=False)
             if ref.status.failed:
                 raise OrbitError("simulation", f"the iterate could not be simulated over one "
                                  f"period: {ref.message}", history=history) from None
