@@ -14,6 +14,13 @@ and ``det(S Phi) = det S det Phi`` equals the mean divergence ``tr f_x`` along t
 the mean of ``log|det S|`` over the events per unit time -- the sum rule that
 tests/test_explore.py checks against closed forms of ``tr f_x`` and ``det S``.
 
+Sticking (contact) is a reset, not a collapse: the state of a flow sticking on an impact
+surface lies on the sticking manifold, so its tangent dynamics collapse a direction in finite
+time and any average over a run with one sticking episode would be ``-inf``. Contact
+episodes (complete chattering to release) are therefore left out of the tangent dynamics
+and of the averaging time, and their time is reported apart (:class:`LyapunovSpectrum`,
+Notes); the sum rule then holds for the free motion.
+
 Maps: the same QR iteration with the Jacobian of the applied piece at every iterate
 (:func:`pwsdyn.model.maps.lyapunov_kernel`), per iteration.
 """
@@ -21,7 +28,7 @@ Maps: the same QR iteration with the Jacobian of the applied piece at every iter
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import Mapping, NamedTuple
 
 import numpy as np
 
@@ -29,6 +36,7 @@ from .. import __version__
 from .. import _validate as V
 from ..errors import ArgumentError
 from ..integrate.simulate import check_mode, integrator_options, _simulate_compiled, state_vector
+from ..integrate.trajectory import EVENT_KINDS
 from ..stability._context import forcing_period
 from ._common import ModelContext, check_bound, failed_status, readmit
 
@@ -40,19 +48,60 @@ class LyapunovSpectrum:
     Attributes
     ----------
     exponents : numpy.ndarray, shape (n,)
-        Lyapunov exponents in decreasing order, per unit time (flows) or per iteration (maps).
-        ``-inf`` where the tangent dynamics collapse a direction exactly (Filippov sliding:
-        the saltation matrix of sliding entry has rank n - 1).
+        Lyapunov exponents in decreasing order, per unit time (flows) or per iteration (maps);
+        flows with sticking: of the free motion, per unit free time (Notes). ``-inf`` where
+        the tangent dynamics collapse a direction exactly (Filippov sliding: the saltation
+        matrix of sliding entry has rank n - 1), or for a run that ends stuck for good.
     time : float
-        Averaging time (flows: time units; maps: iterations).
+        Averaging time (flows: time units; maps: iterations): ``span`` less the contact
+        episodes.
     convergence : numpy.ndarray, shape (n_segments, n)
-        Running estimates after each segment (Gram-Schmidt order), to judge convergence.
+        Running estimates after each segment (Gram-Schmidt order), to judge convergence
+        (NaN while no free time has been averaged).
     events : dict
         Number of events of each kind in the averaging window (flows).
     status : int
         0, or the :class:`pwsdyn.Status` of a failed simulation (-1: diverged).
     x_final : numpy.ndarray
     provenance : dict
+    span : float
+        Length of the averaging window (flows: segments done times ``segment``; maps:
+        iterations).
+    contact_time : float
+        Time spent sticking in the window (each ``stick`` record to its ``release``, or to
+        the window's end): the ``stick_time`` of :func:`pwsdyn.sweep` times the periods.
+        ``span - time - contact_time`` is the chattering gaps (complete-chattering map) of
+        the episodes.
+    contact_episodes : int
+        Sticking episodes begun in the window (``stick`` records).
+    ends_stuck : bool
+        The run ends sticking for good (see Notes; exponents ``-inf``).
+
+    Notes
+    -----
+    With contact (sticking): while a flow sticks on an impact surface (after complete
+    chattering, until release) its state lies on the sticking manifold ``h = 0 = hdot``:
+    perturbations off it vanish in finite time (the chattering saltation is rank-deficient),
+    so the tangent dynamics of a sticking episode would make exponents ``-inf`` however
+    short the episode. As in the nonsmooth-dynamics literature (Müller 1995; exponents of
+    the free motion of systems with sticking), a *contact episode* -- from the
+    complete-chattering map that ends the approach (its ``chatter`` record; a ``stick``
+    record reached without one) to the ``release`` -- is a reset of the tangent dynamics,
+    not part of the average: the tangent frame is re-orthonormalised where the episode
+    begins and resumes unchanged at release (the episode's saltations and flow, chattering
+    to release, are left out), and its duration is left out of ``time``. So ``exponents``
+    are the exponents of the free motion (flight, impacts, other events) per unit *free*
+    time, finite for intermittent sticking, and ``sum * time`` is the sum of ``log|det|`` of
+    the free motion's transfer matrices. A run that ends sticking for good (an open episode
+    at the end that does not release within one more window length ``span``: permanent
+    sticking, the state has collapsed) has ``ends_stuck`` and exponents ``-inf``; a window
+    spent sticking entirely that releases later has nothing to average: ``NaN``. Without
+    sticking nothing changes: ``time == span`` and the exponents are the plain Benettin QR
+    averages. The exponents of the free motion measure how perturbations grow between
+    contacts: a motion synchronised by its contacts (a periodic orbit with one sticking
+    episode per period, whose perturbations sticking removes) can have a positive one, so
+    read them with ``contact_episodes`` and ``contact_fraction``. Filippov sliding is not a
+    contact episode here: sliding entry still gives ``-inf`` (see ``exponents``).
     """
 
     exponents: np.ndarray
@@ -62,38 +111,83 @@ class LyapunovSpectrum:
     status: int = 0
     x_final: np.ndarray | None = None
     provenance: dict = field(default_factory=dict)
+    span: float | None = None
+    contact_time: float = 0.0
+    contact_episodes: int = 0
+    ends_stuck: bool = False
+
+    def __post_init__(self):
+        if self.span is None:
+            self.span = self.time
 
     @property
     def sum(self) -> float:
         return float(np.sum(self.exponents))
 
+    @property
+    def contact_fraction(self) -> float:
+        """``contact_time / span``: the fraction of the window spent sticking (0 if empty)."""
+        return self.contact_time / self.span if self.span else 0.0
 
-def _sticking_projector(ctx: ModelContext, t: float, x, p, kind: int, event: int, mode: int):
-    """Projector onto the tangent space of the sticking manifold {h = 0, hdot = 0} of impact
-    event ``event``, along span(h_x, hdot_x) -- the derivative of the projection the kernel
-    applies at the end of a chattering sequence."""
-    from ..model.codegen import W_HDX, W_HX
 
-    n = ctx.model.n_states
-    k = ctx.model.events[event].surface
-    nm = len(ctx.model.modes)
-    pv = p if len(p) else np.zeros(1)
-    buf = np.zeros(max(n, 2))
-    ctx.cm.evaluate(W_HX, k, float(t), np.asarray(x, float), pv, buf)
-    a = buf[:n].copy()
-    ctx.cm.evaluate(W_HDX, k * nm + mode, float(t), np.asarray(x, float), pv, buf)
-    b = buf[:n].copy()
-    A = np.vstack([a, b])
-    return np.eye(n) - A.T @ np.linalg.solve(A @ A.T, A)
+#: Kernel event kind codes (``EventLog.kind_code``) that delimit contact episodes.
+_CHATTER, _STICK, _RELEASE = (EVENT_KINDS.index(k) for k in ("chatter", "stick", "release"))
+
+
+class FlowSegments(NamedTuple):
+    """What :func:`flow_segments` returns (see :class:`LyapunovSpectrum` for the meaning of
+    ``time``, ``contact_time``, ``contact_episodes``, ``ends_stuck``)."""
+
+    exponents: np.ndarray     # (n,), Gram-Schmidt order (unsorted); NaN when nothing averaged
+    sums: np.ndarray          # (n,) sums of log|R_ii|
+    done: int                 # segments completed
+    x: np.ndarray             # end state
+    status: int
+    starts: np.ndarray        # (n_seg, n) state at the start of each segment
+    events: list              # with ``keep_events``
+    running: np.ndarray       # (n_seg, n) running estimates
+    span: float               # done * seg
+    time: float               # averaging time: span less the contact episodes
+    contact_time: float
+    contact_episodes: int
+    ends_stuck: bool
+
+
+def _contact_marks(log, final_kind: int, in_contact: bool) -> list:
+    """The records of one segment's event log at which a contact episode begins or ends:
+    ``(record, +1)`` where an episode begins (the complete-chattering record whose
+    accumulation point the ball sticks at, or a stick record reached without one), ``(record,
+    0)`` at its stick record, ``(record, -1)`` where it ends (the release). A chattering record
+    not followed by sticking is an episode of its own (its saltation is rank-deficient too):
+    ``(record, +1)`` then ``(record, -1)``. ``in_contact``: the segment starts in one."""
+    kinds = np.asarray(log.kind_code)
+    m = len(kinds)
+    marks = []
+    for r in range(m):
+        k = int(kinds[r])
+        if not in_contact and k == _CHATTER:
+            sticks = (kinds[r + 1] == _STICK) if r + 1 < m else (final_kind == 1)
+            marks.append((r, 1))
+            if not sticks:
+                marks.append((r, -1))
+            else:
+                in_contact = True
+        elif k == _STICK:
+            if not in_contact:
+                marks.append((r, 1))
+                in_contact = True
+            marks.append((r, 0))
+        elif k == _RELEASE and in_contact:
+            marks.append((r, -1))
+            in_contact = False
+    return marks
 
 
 def flow_segments(ctx: ModelContext, x, t0: float, seg: float, n_seg: int, p, opts,
-                  bound: float, keep_events: bool = False):
-    """Integrate ``n_seg`` segments of length ``seg`` with the variational equations and QR.
-
-    Returns (sums of log|R_ii| (n,), segments done, x_end, status, starts (n_seg, n) -- the
-    state at the start of each segment, events (list, if ``keep_events``), running estimates).
-    """
+                  bound: float, keep_events: bool = False) -> FlowSegments:
+    """Integrate ``n_seg`` segments of length ``seg`` with the variational equations and QR,
+    excluding contact episodes (sticking on an impact surface, see :class:`LyapunovSpectrum`)
+    from the tangent dynamics and from the averaging time."""
     n = ctx.model.n_states
     Q = np.eye(n)
     sums = np.zeros(n)
@@ -105,15 +199,29 @@ def flow_segments(ctx: ModelContext, x, t0: float, seg: float, n_seg: int, p, op
     done = 0
     x = np.array(x, dtype=float)
     discrete = None   # the discrete state the previous segment ended in
+    excluded = 0.0    # time in contact episodes (chattering gap + sticking)
+    contact = 0.0     # time sticking
+    episodes = 0
+    ep_start = st_start = None   # start of the open episode, of its sticking
+
+    def advance(J):
+        nonlocal Q, sums
+        Qn, R = np.linalg.qr(J @ Q)
+        d = np.abs(np.diag(R))
+        if not np.all(np.isfinite(d)):
+            return False
+        # R_ii = 0: the segment maps a direction to zero (sliding collapses the normal
+        # direction onto the switching surface): that exponent is -inf
+        with np.errstate(divide="ignore"):
+            sums += np.log(d)
+        Q = Qn
+        return True
+
     for k in range(n_seg):
         ta = t0 + k * seg
-        P0 = None
         if discrete is not None and discrete[0] == 1:
             # still sticking: continue in the sticking state (a restart in free flight would
-            # register the contact again with a chattering saltation each segment), and
-            # start Phi on the tangent space of the sticking manifold {h = 0, hdot = 0}:
-            # perturbations off it return to it in finite time (superstable directions)
-            P0 = _sticking_projector(ctx, ta, x, p, *discrete)
+            # register the contact again with a chattering saltation each segment)
             traj = _simulate_compiled(ctx.cm, x, ta, ta + seg, p, vopts, mode0=discrete[2],
                                       dkind0=1, didx0=discrete[1])
         else:
@@ -126,24 +234,85 @@ def flow_segments(ctx: ModelContext, x, t0: float, seg: float, n_seg: int, p, op
         if keep_events:
             events.extend(traj.events)
         x = traj.x_final.copy()
+        was_stuck = ep_start is not None
         discrete = traj.final_discrete_state
         if not check_bound(x, bound):
             status = -1
             break
-        J = traj.jacobian if P0 is None else traj.jacobian @ P0
-        Qn, R = np.linalg.qr(J @ Q)
-        d = np.abs(np.diag(R))
-        if not np.all(np.isfinite(d)):
+        log = traj.events
+        saved = (Q, sums.copy(), excluded, contact, episodes, ep_start, st_start)
+        marks = _contact_marks(log, discrete[0] if discrete else 0, was_stuck)
+        if not marks and not was_stuck:
+            ok = advance(traj.jacobian)       # the whole segment is free motion
+        else:
+            # transfer = [Phi_0, S_1, Phi_1, ..., S_m, Phi_m]; the factors of a contact
+            # episode (its chattering saltation .. its release saltation) are left out: the
+            # tangent frame, re-orthonormalised where the episode begins, resumes at release.
+            # The frame is re-orthonormalised at every event here: the approach to sticking (a
+            # chattering sequence of ever slower impacts) multiplies shears of size ~ 1/v, and
+            # their product over a segment is too ill-conditioned (cond ~ 1e11 .. 1e15) for
+            # its QR factor R to keep log|det| (the sum of the exponents) to round-off
+            F = traj.transfer_matrices
+            mk: dict = {}
+            for r, what in marks:
+                mk.setdefault(r, []).append(what)
+            ok = True if was_stuck else advance(F[0])
+            for r in range(len(log)):
+                for what in mk.get(r, ()):
+                    if what == 1:
+                        ep_start = float(log.t[r])
+                    elif what == 0:
+                        st_start = float(log.t[r])
+                        episodes += 1
+                    else:
+                        t_end = float(log.t[r]) if int(log.kind_code[r]) == _RELEASE \
+                            else float(log.t_after[r])
+                        excluded += t_end - ep_start
+                        if st_start is not None:
+                            contact += t_end - st_start
+                        ep_start = st_start = None
+                        ok = ok and advance(F[2 * r + 2])     # Phi after the release
+                if ep_start is None and r not in mk:
+                    ok = ok and advance(F[2 * r + 2] @ F[2 * r + 1])
+            if ep_start is not None:
+                te = ta + seg
+                excluded += te - ep_start
+                ep_start = te
+                if st_start is not None:
+                    contact += te - st_start
+                    st_start = te
+        if not ok:
+            Q, sums, excluded, contact, episodes, ep_start, st_start = saved
             status = -1
             break
-        # R_ii = 0: the segment maps a direction to zero (sliding collapses the normal
-        # direction onto the switching surface): that exponent is -inf
-        with np.errstate(divide="ignore"):
-            sums += np.log(d)
-        Q = Qn
         done = k + 1
-        running[k] = sums / (done * seg)
-    return sums, done, x, status, starts, events, running
+        time = done * seg - excluded
+        running[k] = sums / time if time > 0 else np.nan
+    span = done * seg
+    time = span - excluded
+    with np.errstate(invalid="ignore"):
+        ex = sums / time if (done and time > 0) else np.full(n, np.nan)
+    ends_stuck = False
+    if ep_start is not None and st_start is not None and status == 0 and done:
+        # the run ends sticking: an episode that lasts beyond one more window length is taken
+        # as permanent sticking -- the state has collapsed onto the sticking manifold for good
+        # (in chunks of 100 segments, each well within max_steps)
+        te, t_look = t0 + span, t0 + 2 * span
+        released = failed = False
+        xs, ds = x, discrete
+        while te < t_look and not (released or failed):
+            t1 = min(te + 100 * seg, t_look)
+            look = _simulate_compiled(ctx.cm, xs, te, t1, p, {**opts, "dense": False,
+                                      "throw": False}, mode0=ds[2], dkind0=ds[0],
+                                      didx0=ds[1], stop=(1 << _RELEASE, -1, 1))
+            released = any(int(c) == _RELEASE for c in look.events.kind_code)
+            failed = bool(failed_status(look))
+            xs, ds, te = look.x_final, look.final_discrete_state, t1
+        if not (released or failed):
+            ends_stuck = True
+            ex = np.full(n, -np.inf)
+    return FlowSegments(ex, sums, done, x, status, starts, events, running, span, time,
+                        contact, episodes, ends_stuck)
 
 
 def lyapunov_spectrum(model, x0, params: Mapping[str, float] | None = None, *,
@@ -176,6 +345,9 @@ def lyapunov_spectrum(model, x0, params: Mapping[str, float] | None = None, *,
     Returns
     -------
     LyapunovSpectrum
+        With sticking (flows): the exponents of the free motion, sticking episodes being
+        resets of the tangent dynamics, and the time in contact apart (``contact_time``,
+        ``contact_episodes``, ``ends_stuck``; :class:`LyapunovSpectrum`, Notes).
 
     Raises
     ------
@@ -244,13 +416,13 @@ def lyapunov_spectrum(model, x0, params: Mapping[str, float] | None = None, *,
     if status:
         n = model.n_states
         return LyapunovSpectrum(np.full(n, np.nan), 0.0, np.zeros((0, n)), {}, status, x, prov)
-    sums, done, xe, status, _, events, running = flow_segments(
-        ctx, x, t, segment, int(duration), p, opts, bound, keep_events=True)
+    fs = flow_segments(ctx, x, t, segment, int(duration), p, opts, bound, keep_events=True)
     counts: dict = {}
-    for e in events:
+    for e in fs.events:
         counts[e.kind] = counts.get(e.kind, 0) + 1
-    ex = sums / (done * segment) if done else np.full(model.n_states, np.nan)
     prov.update(segment=segment, transient=int(transient), duration=int(duration),
                 options={k: v for k, v in opts.items() if k not in ("throw",)})
-    return LyapunovSpectrum(np.sort(ex)[::-1], done * segment, running[:done], counts, status,
-                            xe, prov)
+    return LyapunovSpectrum(np.sort(fs.exponents)[::-1], fs.time, fs.running[:fs.done],
+                            counts, fs.status, fs.x, prov, span=fs.span,
+                            contact_time=fs.contact_time, contact_episodes=fs.contact_episodes,
+                            ends_stuck=fs.ends_stuck)

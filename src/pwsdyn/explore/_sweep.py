@@ -121,11 +121,12 @@ def run_window(ctx: ModelContext, x, p, T: float, phase: float, n_tr: int, n_s: 
             xx = tr.x_final.copy()
         events = []
         if not status:
-            sums, done, xe, status, starts, events, _ = flow_segments(
-                ctx, xx, t_w, T, n_s, p, opts, bound, keep_events=True)
+            # exponents of the free motion: sticking episodes are resets (LyapunovSpectrum)
+            fs = flow_segments(ctx, xx, t_w, T, n_s, p, opts, bound, keep_events=True)
+            status, done, starts, events = fs.status, fs.done, fs.starts, fs.events
             if done:
-                lyap = np.sort(sums / (done * T))[::-1]
-            xx = xe
+                lyap = np.sort(fs.exponents)[::-1]
+            xx = fs.x
             if strobe:
                 m = min(max_points, done)
                 pts[:m] = starts[:m]
@@ -363,7 +364,8 @@ def sweep(model, param: str, values: Sequence[float], x0=None, *, transient: int
         - ``status``: 0, a :class:`pwsdyn.Status` code of a failed run, -1 (diverged) or -3
           (the section at the end of the window was not logged; not expected to occur);
         - ``x_final``: the state handed on to the next value; ``steps``: integrator steps;
-        - ``lyapunov`` (direction, param, exponent), with ``lyapunov=True``;
+        - ``lyapunov`` (direction, param, exponent), with ``lyapunov=True`` (flows with
+          sticking: exponents of the free motion, see :class:`pwsdyn.LyapunovSpectrum`);
         - ``chunk_start`` (direction, param): True at the first value of each chunk.
 
         Attributes hold the provenance (model name and hash, pwsdyn version, settings).
