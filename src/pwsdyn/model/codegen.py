@@ -182,6 +182,11 @@ def derivatives(model: Model) -> Derivatives:
     # is not (it would be NaN at every point, or not compile)
     for (which, idx), exprs in cases.items():
         for e in exprs:
+            if isinstance(e, sp.Basic) and e.has(sp.Derivative, sp.Subs):
+                raise ModelError(f"the {_QUANTITIES.get(which, 'derivative')} (case {idx}) "
+                                 f"of model {model.name!r} has a term SymPy cannot differentiate "
+                                 f"in closed form ({str(e)[:200]}); simplify the expression",
+                                 source=model.origin)
             if isinstance(e, sp.Basic) and e.has(sp.I, sp.nan, sp.zoo, sp.oo, -sp.oo):
                 raise ModelError(f"the {_QUANTITIES.get(which, 'derivative')} (case {idx}) "
                                  f"of model {model.name!r} has the non-finite or complex value "
@@ -204,7 +209,20 @@ def generate_source(model: Model) -> str:
 
 
 def _generate_body(model: Model) -> str:
-    """The module's text after its header line."""
+    """The module's text after its header line; what SymPy cannot differentiate or print is a
+    :class:`ModelError` naming the model."""
+    try:
+        return _emit_body(model)
+    except RecursionError:
+        raise ModelError(f"model {model.name!r} is too deeply nested to differentiate; "
+                         "simplify its expressions", source=model.origin) from None
+    except PrintMethodNotImplementedError as exc:
+        what = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ModelError(f"model {model.name!r} needs a function that cannot be compiled "
+                         f"({what}); simplify the expression", source=model.origin) from None
+
+
+def _emit_body(model: Model) -> str:
     # a Model built by hand (not through the loader) is checked here too: only identifiers
     # reach the source
     check_identifiers(model.states, model.parameters, origin=model.origin)
@@ -306,14 +324,7 @@ def compile_model(model: Model) -> CompiledModel:
                  np.zeros(n * n))
 
     def generate():
-        try:
-            body = _generate_body(model)
-        except RecursionError:
-            raise ModelError(f"model {model.name!r} is too deeply nested to differentiate; "
-                             "simplify its expressions", source=model.origin) from None
-        except PrintMethodNotImplementedError as exc:
-            raise ModelError(f"model {model.name!r} uses a function that cannot be compiled "
-                             f"({exc}); simplify the expression", source=model.origin) from None
+        body = _generate_body(model)
         if len(body) > MAX_SOURCE_CHARS:
             raise ModelError(f"model {model.name!r} needs {len(body)} characters of generated "
                              f"code ({len(model.modes)} modes, {len(model.surfaces)} surfaces, "
