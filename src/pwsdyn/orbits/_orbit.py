@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -9,6 +10,72 @@ import numpy as np
 from .. import __version__
 from ..errors import Status
 from ..integrate.trajectory import Trajectory
+
+
+#: Default of ``max_periods`` of :meth:`PeriodicOrbit.from_trajectory`: the most forcing
+#: periods searched for a recurrence of the trajectory.
+RECURRENCE_MAX_PERIODS = 16
+
+
+class RecurrenceWarning(UserWarning):
+    """:meth:`PeriodicOrbit.from_trajectory` found that the trajectory does not recur after the
+    period it would otherwise use: the period was changed to the one it recurs at, or (an
+    explicit request, or no recurrence at all) the orbit refined need not be the motion of the
+    run. The orbit's ``recurrence`` has the details."""
+
+
+@dataclass(frozen=True)
+class Recurrence:
+    """How :meth:`PeriodicOrbit.from_trajectory` chose the period: the recurrence of the end of
+    the trajectory.
+
+    Attributes
+    ----------
+    period : float or None
+        The smallest time after which the end of the trajectory recurs to ``tol``: ``periods``
+        forcing periods (forced models) or the time between recurring events (autonomous);
+        ``None`` when it does not recur within ``max_periods`` forcing periods (or the run).
+    periods : int or None
+        Forced models: ``period`` in forcing periods.
+    requested : int or None
+        Forced models: the forcing periods asked for explicitly (``periods=`` or ``period=``);
+        ``None`` when the period was left to the recurrence.
+    used : int or None
+        Forced models: the forcing periods of the guess that was refined (``orbit.periods``).
+    time : float
+        Forced models: the time ``tc`` of the last forcing period whose state is compared with
+        those at ``tc - k * forcing_period`` (the middle of the longest event-free stretch);
+        autonomous models: the time of the last event.
+    distances : tuple of float
+        Forced models: ``max|x(tc - k T_f) - x(tc)| / (1 + max|x|)`` for ``k = 1, 2, ...``
+        (``max|x|`` over the last forcing period); autonomous models: the same distance of the
+        post-event states of the recurring event.
+    same_state : tuple of bool
+        Whether the discrete state (mode, or the sticking or sliding constraint) at
+        ``tc - k T_f`` is the one at ``tc``; a recurrence needs both.
+    tol : float
+        ``recurrence_tol``.
+    max_periods : int or None
+        Forced models: the most forcing periods searched.
+    message : str
+        The :class:`RecurrenceWarning` issued, ``''`` if none.
+    """
+
+    period: float | None
+    periods: int | None
+    requested: int | None
+    used: int | None
+    time: float
+    distances: tuple
+    same_state: tuple
+    tol: float
+    max_periods: int | None
+    message: str = ""
+
+    @property
+    def settled(self) -> bool:
+        """The trajectory recurs within the periods searched."""
+        return self.period is not None
 
 
 @dataclass(eq=False)
@@ -71,6 +138,11 @@ class PeriodicOrbit:
         shooting intervals, at the Newton tolerance.
     options : dict
         Integrator and solver options used.
+    recurrence : Recurrence or None
+        Orbits from :meth:`from_trajectory`: how the period was chosen from the recurrence of
+        the trajectory (``None`` for :func:`pwsdyn.find_periodic_orbit`, for an autonomous
+        model given ``period``, and for a ``period`` that is not a multiple of the forcing
+        period).
     """
 
     model: object
@@ -94,6 +166,7 @@ class PeriodicOrbit:
     residual: float = np.nan
     closure: float = np.nan
     options: dict = field(default_factory=dict)
+    recurrence: Recurrence | None = None
 
     # ------------------------------------------------------------------------------------
     @property
@@ -105,6 +178,17 @@ class PeriodicOrbit:
     def transfer_matrices(self) -> list | None:
         """``[Phi_0, S_1, Phi_1, ..., S_m, Phi_m]`` over one period (full saltation form)."""
         return None if self.trajectory is None else self.trajectory.transfer_matrices
+
+    @property
+    def periods(self) -> int | None:
+        """Forced orbits: the period in forcing periods (2 for a period-doubled orbit);
+        ``None`` for an autonomous one."""
+        if self.autonomous:
+            return None
+        from ..stability._context import forcing_period
+
+        Tf = forcing_period(self.model, self.model.parameter_vector(self.params))
+        return None if Tf is None else int(round(self.period / Tf))
 
     @property
     def iterations(self) -> int:
@@ -126,7 +210,7 @@ class PeriodicOrbit:
                                    or "(none)"),
                  f"period      {self.period:.15g}"
                  + ("  (autonomous: found by Newton)" if self.autonomous else
-                    "  (forced: multiple of the forcing period)"),
+                    f"  (forced: {self.periods} forcing period(s))"),
                  f"t0          {self.t0:.15g}  in {self.state0}",
                  "x0          " + ", ".join(f"{s}={v:.15g}"
                                             for s, v in zip(self.model.states, self.x0))]
@@ -152,37 +236,76 @@ class PeriodicOrbit:
     # ------------------------------------------------------------------------------------
     @classmethod
     def from_trajectory(cls, traj, *, t0: float | None = None, period: float | None = None,
-                        periods: int = 1, refine: bool = True, recurrence_tol: float = 1e-3,
+                        periods: int | None = None, refine: bool = True,
+                        recurrence_tol: float = 1e-3,
+                        max_periods: int = RECURRENCE_MAX_PERIODS,
                         **kwargs) -> "PeriodicOrbit":
         """A periodic orbit from a simulated trajectory that has settled on it.
 
-        The guess is the end of the run: for a forced model ``period = periods *
-        forcing_period`` and ``t0 = t_end - period`` (or the given ``t0``); for an autonomous
-        model the period is the time between the last event and the most recent earlier event
-        of the same kind, name and modes whose post-event state agrees with it to
-        ``recurrence_tol`` (relative), unless ``period`` is given. With ``refine`` (default) the
-        guess is refined by :func:`pwsdyn.find_periodic_orbit` (``kwargs`` go there);
-        otherwise one period is re-simulated from the guess and its monodromy reported as is
-        (``converged`` then says whether it closed to ``tol``).
+        The period is that of the motion at the end of the run, found by its recurrence (the
+        guess is then the state one period before the end, at ``t0 = t_end - period`` unless
+        ``t0`` is given):
+
+        * forced model, neither ``periods`` nor ``period`` given: the smallest ``k`` (up to
+          ``max_periods``) such that the state and the discrete state (mode, sticking or
+          sliding constraint) ``k`` forcing periods before the end of the run agree with those
+          at the end, to ``recurrence_tol`` relative to ``1 + max|x|``. They are compared at the
+          middle of the longest event-free stretch of the last forcing period, through the dense
+          output. ``k = 1`` for a period-1 motion (unchanged from before). A larger ``k`` -- a
+          period-doubled motion, say -- is used, and a :class:`RecurrenceWarning` says so: the
+          orbit's ``period`` is then ``k * forcing_period`` (``orbit.periods == k``), where one
+          might have expected one forcing period. If the run does not recur at all (a
+          transient, a quasi-periodic or chaotic motion) the guess of one forcing period is
+          refined as before, with a :class:`RecurrenceWarning`: Newton may converge (from a
+          rough guess near a stable orbit it does) but nothing says the orbit is the one the
+          run approaches.
+        * forced model, ``periods`` or ``period`` given: that period is used, as asked; when
+          the run does not recur after it a :class:`RecurrenceWarning` says so and names the
+          period it does recur at. An explicit request is never replaced: ``periods=1`` on a
+          period-doubled run is how one finds the (unstable) period-1 orbit near it, as a
+          continuation code (AUTO, COCO) would start from the period it is given.
+        * autonomous model: the period is the time between the last event and the most recent
+          earlier event of the same kind, name and modes whose post-event state agrees with it
+          to ``recurrence_tol`` (relative), unless ``period`` (a guess) is given. No recurrence
+          is an :class:`~pwsdyn.errors.ArgumentError`.
+
+        ``orbit.recurrence`` (a :class:`Recurrence`) records what was found. With ``refine``
+        (default) the guess is refined by :func:`pwsdyn.find_periodic_orbit` (``kwargs`` go
+        there); otherwise one period is re-simulated from the guess and its monodromy reported
+        as is (``converged`` then says whether it closed to ``tol``).
 
         Parameters
         ----------
         traj : Trajectory
             A run with dense output (the default of :func:`pwsdyn.simulate`).
         t0, period : float, optional
-        periods : int
-            Forced models: the period in forcing periods.
+        periods : int, optional
+            Forced models: the period in forcing periods (default: from the recurrence).
         refine : bool
         recurrence_tol : float
+        max_periods : int
+            Forced models: the most forcing periods searched for a recurrence.
         **kwargs
             Options of :func:`pwsdyn.find_periodic_orbit`.
 
         Returns
         -------
         PeriodicOrbit
+
+        Warns
+        -----
+        RecurrenceWarning
+            The run does not recur after one forcing period but after ``k`` (the orbit has
+            period ``k``), or not after the period asked for, or not at all.
+
+        Raises
+        ------
+        OrbitError
+            As :func:`pwsdyn.find_periodic_orbit`; its ``result`` carries ``recurrence``.
         """
         from .. import _validate as V
-        from ._shooting import MAX_PERIODS, _guess_from_trajectory, find_periodic_orbit, orbit_at
+        from ._shooting import (MAX_PERIODS, OrbitError, _guess_from_trajectory,
+                                find_periodic_orbit, orbit_at)
 
         if not isinstance(traj, Trajectory):
             raise V.fail("traj", "a Trajectory (the result of pwsdyn.simulate)", traj)
@@ -190,19 +313,32 @@ class PeriodicOrbit:
             raise V.fail("traj", "a Trajectory of a flow", traj)
         t0 = V.number("t0", t0, allow_none=True)
         period = V.positive("period", period, allow_none=True)
-        periods = V.integer("periods", periods, lo=1, hi=MAX_PERIODS)
+        if periods is not None:
+            periods = V.integer("periods", periods, lo=1, hi=MAX_PERIODS)
         refine = V.flag("refine", refine)
         recurrence_tol = V.positive("recurrence_tol", recurrence_tol)
+        max_periods = V.integer("max_periods", max_periods, lo=1, hi=MAX_PERIODS)
         if t0 is not None and not (float(traj.t[0]) <= t0 <= float(traj.t[-1])):
             raise V.fail("t0", f"a time within the trajectory [{float(traj.t[0])!r}, "
                          f"{float(traj.t[-1])!r}] or None", t0)
-        t0g, x0g, Tg, state = _guess_from_trajectory(traj, t0=t0, period=period, periods=periods,
-                                                     recurrence_tol=recurrence_tol)
-        if refine:
-            return find_periodic_orbit(traj.model, x0g, params=traj.params, period=Tg, t0=t0g,
-                                       mode=state, **kwargs)
-        return orbit_at(traj.model, x0g, params=traj.params, period=Tg, t0=t0g, mode=state,
-                        **kwargs)
+        t0g, x0g, Tg, state, recurrence = _guess_from_trajectory(
+            traj, t0=t0, period=period, periods=periods, recurrence_tol=recurrence_tol,
+            max_periods=max_periods)
+        if recurrence is not None and recurrence.message:
+            warnings.warn(recurrence.message, RecurrenceWarning, stacklevel=2)
+        try:
+            if refine:
+                orbit = find_periodic_orbit(traj.model, x0g, params=traj.params, period=Tg,
+                                            t0=t0g, mode=state, **kwargs)
+            else:
+                orbit = orbit_at(traj.model, x0g, params=traj.params, period=Tg, t0=t0g,
+                                 mode=state, **kwargs)
+        except OrbitError as exc:
+            if exc.result is not None:
+                exc.result.recurrence = recurrence
+            raise
+        orbit.recurrence = recurrence
+        return orbit
 
     # ------------------------------------------------------------------------------------
     def to_dataset(self):

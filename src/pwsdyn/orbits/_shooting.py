@@ -39,7 +39,7 @@ from ..integrate.simulate import integrator_options, _simulate_compiled, state_v
 from ..stability._context import (DiscreteState, ModelContext, check_state_name, event_states,
                                   forcing_period, initial_state, trajectory_start_state)
 from ..stability._floquet import floquet_multipliers
-from ._orbit import PeriodicOrbit, merge_intervals
+from ._orbit import RECURRENCE_MAX_PERIODS, PeriodicOrbit, Recurrence, merge_intervals
 
 #: Integrator options used by the shooting code unless given: tight tolerances, 8th order.
 SHOOTING_DEFAULTS = dict(method="DOP853", rtol=1e-12, atol=1e-12, max_steps=500_000)
@@ -625,17 +625,31 @@ def orbit_at(model, x0, *, params=None, period, t0=0.0, mode=None, tol: float = 
     return _build_orbit(sh, [x0], float(period), [res], converged=res <= tol)
 
 
-def _guess_from_trajectory(traj, *, t0=None, period=None, periods=1, recurrence_tol=1e-3):
-    """``(t0, x0, T, state)`` of a periodic-orbit guess at the end of a trajectory."""
+def _guess_from_trajectory(traj, *, t0=None, period=None, periods=None, recurrence_tol=1e-3,
+                           max_periods=RECURRENCE_MAX_PERIODS):
+    """``(t0, x0, T, state, recurrence)`` of a periodic-orbit guess at the end of a trajectory.
+
+    ``recurrence`` (a :class:`Recurrence`, ``None`` for an autonomous model given ``period``)
+    says how the period was chosen; its ``message`` is the warning to issue ('' if none).
+    """
     if traj._dense is None:
         raise ArgumentError("the trajectory has no dense output (simulated with `dense=False`)")
     ctx = ModelContext(traj.model, traj.params, traj.options.get("sliding", "convex"))
     Tf = ctx.forcing_period
-    if period is None:
-        if Tf is not None:
-            period = periods * Tf
-        else:
-            period = _recurrence_period(traj, recurrence_tol)
+    recurrence = None
+    if Tf is not None:
+        requested = periods
+        if period is not None:
+            k = float(period) / Tf
+            requested = int(round(k)) if abs(k - round(k)) <= 1e-9 * k and k >= 0.5 else None
+        if period is None or requested is not None:
+            # (a period that is not a multiple of the forcing period is refused downstream)
+            recurrence = _forced_recurrence(traj, ctx, Tf, recurrence_tol, max_periods,
+                                            requested, explicit=requested is not None)
+        if period is None:
+            period = recurrence.used * Tf
+    elif period is None:
+        period, recurrence = _recurrence_period(traj, recurrence_tol)
     T = float(period)
     t_end = float(traj.t[-1])
     if T > t_end - float(traj.t[0]):
@@ -654,20 +668,104 @@ def _guess_from_trajectory(traj, *, t0=None, period=None, periods=1, recurrence_
                 t0 = 0.5 * (a + b)
     t0 = float(t0)
     x0 = traj(t0, side="right")
-    name = _name_at(traj, t0)
+    return t0, x0, T, _discrete_state_at(traj, ctx, t0), recurrence
+
+
+def _discrete_state_at(traj, ctx, t) -> DiscreteState:
+    """The discrete state of a trajectory at ``t``: its ``state`` entry there, a sticking
+    state completed with the regular mode it constrains from the event log."""
+    name = _name_at(traj, t)
+    if not name.startswith("stick:"):
+        return ctx.state(name)
     hint = None
     for e in traj.events:
-        if e.t_after > t0:
+        if e.t_after > t:
             break
         if ":" not in e.mode_after:
             hint = e.mode_after
         elif ":" not in e.mode_before:
             hint = e.mode_before
-    if name.startswith("stick:") and hint is not None:
-        name_state = ctx.state(name, mode_hint=hint)
-    else:
-        name_state = ctx.state(name)
-    return t0, x0, T, name_state
+    return ctx.state(name, mode_hint=hint)
+
+
+def _forced_recurrence(traj, ctx, Tf, tol, max_periods, requested, *, explicit):
+    """Recurrence of the end of a forced trajectory after ``k`` forcing periods.
+
+    The state and the discrete state at a time ``tc`` of the last forcing period are compared
+    with those at ``tc - k Tf``, ``k = 1, 2, ...`` up to ``max_periods`` (or ``requested``, if
+    larger) and the length of the run. ``tc`` is the middle of the longest event-free stretch
+    of the last forcing period, so that a recurring orbit is compared away from its jumps (an
+    impact a rounding error before or after ``tc`` would otherwise count as a mismatch).
+    """
+    t_start, t_end = float(traj.t[0]), float(traj.t[-1])
+    a0 = max(t_end - Tf, t_start)
+    spans, cur = [], a0
+    for e in traj.events:
+        if e.t_after <= a0:
+            continue
+        if e.t > t_end:
+            break
+        spans.append((cur, max(cur, e.t)))
+        cur = max(cur, e.t_after)
+    spans.append((cur, max(cur, t_end)))
+    a, b = max(spans, key=lambda s: s[1] - s[0])
+    tc = 0.5 * (a + b) if b > a else t_end
+    xc = traj(tc, side="right")
+    sc = _discrete_state_at(traj, ctx, tc)
+    last = np.asarray(traj.x)[np.asarray(traj.t) >= a0]
+    scale = 1.0 + max(float(np.max(np.abs(xc))), float(np.max(np.abs(last))) if len(last) else 0.0)
+    available = int(math.floor((tc - t_start) / Tf * (1.0 + 1e-12)))
+    n_check = min(available, max(max_periods, requested or 0))
+    dist, same = [], []
+    for k in range(1, n_check + 1):
+        tk = max(tc - k * Tf, t_start)
+        dist.append(float(np.max(np.abs(traj(tk, side="right") - xc))) / scale)
+        same.append(_discrete_state_at(traj, ctx, tk) == sc)
+    recurs = [d <= tol and s for d, s in zip(dist, same)]
+    found = next((k for k in range(1, n_check + 1) if recurs[k - 1]), None)
+    base = requested or 1
+    ok = base <= n_check and recurs[base - 1]
+    used = base
+    message = ""
+    name = ctx.model.name
+    covered = (f"{n_check} forcing period(s)" + (" (all the run covers)"
+                                                 if n_check < max_periods else ""))
+    if found is not None and found > 1 and requested is None:
+        used = found
+        message = (f"the trajectory of {name!r} does not recur after one forcing period "
+                   f"(relative distance {dist[0]:.2e}"
+                   + ("" if same[0] else ", another discrete state")
+                   + f" > recurrence_tol = {tol:.1e}) but does "
+                   f"after {found} ({dist[found - 1]:.2e}): its settled motion has period "
+                   f"{found} (e.g. after a period doubling), and the orbit returned has period "
+                   f"{found} * forcing_period = {found * Tf:.10g}. Pass periods={found} to ask "
+                   f"for it without this warning, or periods=1 for the period-1 orbit (not the "
+                   f"attractor of this run, likely unstable)")
+    elif not ok and base > n_check:
+        message = (f"the trajectory of {name!r} is too short to check its recurrence after "
+                   f"the {base} forcing periods asked for; refining the guess of that period "
+                   f"anyway")
+    elif not ok and found is not None:
+        message = (f"the trajectory of {name!r} does not recur after the {base} forcing "
+                   f"period(s) asked for (relative distance {dist[base - 1]:.2e}"
+                   + ("" if same[base - 1] else ", another discrete state")
+                   + f" > recurrence_tol = {tol:.1e}) but does after {found} "
+                   f"({dist[found - 1]:.2e}): the orbit of period {base} refined as asked is not "
+                   f"the motion of the run (likely an unstable orbit near it); pass "
+                   f"periods={found} for that")
+    elif not ok:
+        j = int(np.argmin(dist)) if dist else -1
+        closest = (f"; closest after {j + 1} forcing period(s): {dist[j]:.2e}" if j >= 0 else "")
+        message = (f"the trajectory of {name!r} does not recur within {covered} to "
+                   f"recurrence_tol = {tol:.1e}{closest}: it has not settled on a periodic orbit "
+                   f"(a transient, or quasi-periodic or chaotic motion). Refining the guess of "
+                   f"{base} forcing period(s) {'as asked' if explicit else 'anyway'}: the orbit "
+                   f"found need not be the one the run approaches; simulate longer, or give "
+                   f"periods= (or a larger max_periods or recurrence_tol)")
+    return Recurrence(period=None if found is None else found * Tf, periods=found,
+                      requested=requested, used=used, time=float(tc), distances=tuple(dist),
+                      same_state=tuple(same), tol=float(tol), max_periods=int(max_periods),
+                      message=message)
 
 
 def _name_at(traj, t) -> str:
@@ -676,7 +774,12 @@ def _name_at(traj, t) -> str:
     return str(traj.state[i])
 
 
-def _recurrence_period(traj, tol) -> float:
+def _recurrence_period(traj, tol):
+    """``(period, recurrence)`` of an autonomous trajectory: the time between its last event
+    and the most recent earlier event of the same kind, name and modes whose post-event state
+    agrees with it to ``tol`` (relative to ``1 + max|x|``): the smallest recurrence, so a
+    period-2 cycle (two passes through the section per period) is not taken for one of half
+    its period."""
     evs = list(traj.events)
     if not evs:
         raise ArgumentError("the trajectory has no events to estimate the period of an autonomous "
@@ -687,8 +790,12 @@ def _recurrence_period(traj, tol) -> float:
     for e in reversed(evs[:-1]):
         if (e.kind, e.name, e.mode_before, e.mode_after) != key:
             continue
-        if np.max(np.abs(e.x_after - last.x_after)) <= tol * scale:
-            return float(last.t - e.t)
+        d = float(np.max(np.abs(e.x_after - last.x_after)) / scale)
+        if d <= tol:
+            T = float(last.t - e.t)
+            return T, Recurrence(period=T, periods=None, requested=None, used=None,
+                                 time=float(last.t), distances=(d,), same_state=(True,),
+                                 tol=float(tol), max_periods=None, message="")
     raise ArgumentError(f"no recurrence of the last event ({last!r}) within {tol:g} (relative) in "
                      f"the trajectory: it has not settled on a periodic orbit; simulate longer or "
                      f"give `period`")
