@@ -210,7 +210,7 @@ def test_model_argument():
     ("rtol", "1e-6"), ("atol", 0.0), ("atol", INF), ("atol", None),
     ("first_step", 0.0), ("first_step", -1.0), ("first_step", NAN),
     ("max_step", 0.0), ("max_step", NAN), ("max_step", -INF),
-    ("chatter_ratio", 0.0), ("chatter_ratio", 1.5), ("chatter_ratio", NAN),
+    ("chatter_ratio", 0.0), ("chatter_ratio", INF), ("chatter_ratio", NAN),
     ("chatter_velocity", -1.0), ("chatter_velocity", INF),
     ("sliding", "filippov"), ("sliding", 0), ("sliding_gain", -1.0), ("sliding_gain", NAN),
     ("method", None), ("method", "euler"), ("exact", 1), ("chatter", "yes"),
@@ -235,7 +235,7 @@ def test_options_checked_before_any_work_in_every_entry_point():
         lambda: pwsdyn.poincare_map(IO, X0, "impact", atol=NAN),
         lambda: pwsdyn.sweep(IO, "omega", [2.5], X0, workers=1, progress=False,
                              max_steps=10**20),
-        lambda: pwsdyn.basins(IO, {"x": [0.0]}, workers=1, progress=False, chatter_ratio=2),
+        lambda: pwsdyn.basins(IO, {"x": [0.0]}, workers=1, progress=False, chatter_ratio=-2),
         lambda: pwsdyn.lyapunov_spectrum(IO, X0, sliding_gain=-1),
     ]
     for call in calls:

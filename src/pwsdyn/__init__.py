@@ -15,6 +15,7 @@ from .integrate import EventRecord as EventRecord, Trajectory as Trajectory, sim
 from .model import Model as Model, compile_model as compile_model, load_model as load_model
 from .model import zoo_names as zoo_names
 from .orbits import (OrbitError as OrbitError, PeriodicOrbit as PeriodicOrbit,
+                     RecurrenceWarning as RecurrenceWarning,
                      find_periodic_orbit as find_periodic_orbit)
 from .stability import (SectionNotReachedError as SectionNotReachedError,
                         floquet_multipliers as floquet_multipliers, monodromy as monodromy,

@@ -774,8 +774,9 @@ def basins_cmd(model, xname, x_from, x_to, x_num, yname, y_from, y_to, y_num, se
               help="Forced models: the period, a multiple of the forcing period (default "
                    "--periods forcing periods). Autonomous models: a guess (default: from the "
                    "recurrence of the events of a transient run).")
-@click.option("--periods", type=int, default=1, show_default=True,
-              help="Forced models: the period in forcing periods.")
+@click.option("--periods", type=int, default=None,
+              help="Forced models: the period in forcing periods (default: after a transient "
+                   "run, the number of forcing periods after which it repeats; else 1).")
 @click.option("--transient", type=float, default=None,
               help="Simulate this long from x0 first and take the guess from the end of the "
                    "run (default: the model's defaults.t_end when no --x0 is given or the "
@@ -825,7 +826,7 @@ def orbit_cmd(model, params, x0, t0, period, periods, transient, mode, nodes, to
     _check_params(mdl, cli_params)
     if cli_x0 is not None:
         _check_x0(mdl, cli_x0)
-    if periods < 1:
+    if periods is not None and periods < 1:
         raise click.BadParameter("must be a positive integer", param_hint="--periods")
     if nodes != "auto":
         try:
@@ -856,7 +857,7 @@ def orbit_cmd(model, params, x0, t0, period, periods, transient, mode, nodes, to
                                                   **options)
         else:
             orbit = find_periodic_orbit(mdl, x0_val, params=all_params, period=period, t0=t0,
-                                        periods=periods, mode=mode, **options)
+                                        periods=periods or 1, mode=mode, **options)
     except OrbitError as exc:
         if exc.history:
             _echo("newton residuals: " + " ".join(f"{r:.2e}" for r in exc.history),

@@ -294,8 +294,8 @@ def check_options(opts) -> None:
         V.integer(k, opts[k], lo=1, hi=MAX_BUDGET)
     V.positive("first_step", opts["first_step"], allow_none=True)
     V.positive("max_step", opts["max_step"], allow_inf=True)
-    V.number("chatter_ratio", opts["chatter_ratio"], lo=0.0, hi=1.0, lo_open=True,
-             must="a number in (0, 1] (1: the chattering map at the first impact)")
+    # >= 1: the chattering map applies at the first impact (ratio to the largest impact speed)
+    V.positive("chatter_ratio", opts["chatter_ratio"])
     V.nonnegative("chatter_velocity", opts["chatter_velocity"], allow_none=True)
     if not isinstance(opts.get("sliding", "convex"), str) \
             or opts.get("sliding", "convex") not in SLIDING_METHODS:
