@@ -23,7 +23,7 @@ import numpy as np
 
 from .. import _validate as V
 from ..errors import ArgumentError
-from ..integrate._start import ADMIT_BEHIND, start_state
+from ..integrate._start import ADMIT_BEHIND, REGULAR, Start, start_state
 from ..integrate.simulate import kernel_tables
 from ..model import compile_model, load_model
 
@@ -101,14 +101,20 @@ def readmit(ctx: ModelContext, t: float, x, p) -> np.ndarray:
     starts sticking, with an impact or in free motion as the runner's start rule decides. A
     state further behind is left alone.
     """
+    return start_of(ctx, t, x, p).x
+
+
+def start_of(ctx: ModelContext, t: float, x, p) -> Start:
+    """The start :func:`readmit` takes: the state and the discrete state (sticking on an
+    impact surface, or regular) that a run from ``x`` at ``t`` begins in."""
     x = np.array(x, dtype=float)
     model = ctx.model
     if ctx.is_map or not model.events:
-        return x
+        return Start(x, REGULAR, -1, int(getattr(model, "initial_mode", 0)))
     etab, eact, stab = kernel_tables(ctx.cm)
     scale = 1.0 + float(np.max(np.abs(x))) if x.size else 1.0
     return start_state(ctx.cm, etab, eact, stab, float(t), x, np.asarray(p, dtype=float),
-                       int(model.initial_mode), behind_tol=ADMIT_BEHIND * scale).x
+                       int(model.initial_mode), behind_tol=ADMIT_BEHIND * scale)
 
 
 def period_estimate(points: np.ndarray, max_period: int, tol: float) -> int:

@@ -35,10 +35,12 @@ import numpy as np
 from .. import __version__
 from .. import _validate as V
 from ..errors import ArgumentError
-from ..integrate.simulate import check_mode, integrator_options, _simulate_compiled, state_vector
+from ..integrate.simulate import (_simulate_compiled, check_mode, integrator_options,
+                                  state_vector)
 from ..integrate.trajectory import EVENT_KINDS
 from ..stability._context import forcing_period
-from ._common import ModelContext, check_bound, failed_status, readmit
+from ..integrate._start import STICK
+from ._common import ModelContext, check_bound, failed_status, readmit, start_of
 
 
 @dataclass
@@ -184,10 +186,11 @@ def _contact_marks(log, final_kind: int, in_contact: bool) -> list:
 
 
 def flow_segments(ctx: ModelContext, x, t0: float, seg: float, n_seg: int, p, opts,
-                  bound: float, keep_events: bool = False) -> FlowSegments:
+                  bound: float, keep_events: bool = False, discrete=None) -> FlowSegments:
     """Integrate ``n_seg`` segments of length ``seg`` with the variational equations and QR,
     excluding contact episodes (sticking on an impact surface, see :class:`LyapunovSpectrum`)
-    from the tangent dynamics and from the averaging time."""
+    from the tangent dynamics and from the averaging time. ``discrete``: the discrete state
+    ``x`` is in (a run's ``final_discrete_state``; None: found from ``x``)."""
     n = ctx.model.n_states
     Q = np.eye(n)
     sums = np.zeros(n)
@@ -198,7 +201,7 @@ def flow_segments(ctx: ModelContext, x, t0: float, seg: float, n_seg: int, p, op
     status = 0
     done = 0
     x = np.array(x, dtype=float)
-    discrete = None   # the discrete state the previous segment ended in
+    # ``discrete``: the discrete state the previous segment ended in
     excluded = 0.0    # time in contact episodes (chattering gap + sticking)
     contact = 0.0     # time sticking
     episodes = 0
@@ -222,11 +225,24 @@ def flow_segments(ctx: ModelContext, x, t0: float, seg: float, n_seg: int, p, op
         if discrete is not None and discrete[0] == 1:
             # still sticking: continue in the sticking state (a restart in free flight would
             # register the contact again with a chattering saltation each segment)
+            if ep_start is None:        # stuck from the start (the transient ended stuck)
+                ep_start = st_start = ta
+                episodes += 1
             traj = _simulate_compiled(ctx.cm, x, ta, ta + seg, p, vopts, mode0=discrete[2],
                                       dkind0=1, didx0=discrete[1])
         else:
-            x = readmit(ctx, ta, x, p)
-            traj = _simulate_compiled(ctx.cm, x, ta, ta + seg, p, vopts)
+            start = start_of(ctx, ta, x, p)
+            x = start.x
+            if start.kind == STICK:
+                # a segment that starts sticking (the transient ended stuck) starts a contact
+                # episode: its kernel log has no chatter or stick record to mark it
+                if ep_start is None:
+                    ep_start = st_start = ta
+                    episodes += 1
+                traj = _simulate_compiled(ctx.cm, x, ta, ta + seg, p, vopts, mode0=start.mode,
+                                          dkind0=STICK, didx0=start.idx)
+            else:
+                traj = _simulate_compiled(ctx.cm, x, ta, ta + seg, p, vopts)
         starts[k] = x
         status = failed_status(traj)
         if status:
@@ -407,16 +423,18 @@ def lyapunov_spectrum(model, x0, params: Mapping[str, float] | None = None, *,
     ctx = ModelContext.get(model)
     t = float(t0)
     status = 0
+    discrete = None
     if transient:
         x = readmit(ctx, t, x, p)
         tr = _simulate_compiled(ctx.cm, x, t, t + transient * segment, p, opts)
         status = failed_status(tr)
-        x = tr.x_final.copy()
+        x, discrete = tr.x_final.copy(), tr.final_discrete_state
         t += transient * segment
     if status:
         n = model.n_states
         return LyapunovSpectrum(np.full(n, np.nan), 0.0, np.zeros((0, n)), {}, status, x, prov)
-    fs = flow_segments(ctx, x, t, segment, int(duration), p, opts, bound, keep_events=True)
+    fs = flow_segments(ctx, x, t, segment, int(duration), p, opts, bound, keep_events=True,
+                       discrete=discrete)
     counts: dict = {}
     for e in fs.events:
         counts[e.kind] = counts.get(e.kind, 0) + 1
