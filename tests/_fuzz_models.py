@@ -348,6 +348,7 @@ class Tally:
     def __init__(self, compile_every: int = 0, cli_every: int = 0):
         self.counts: Counter = Counter()
         self.slowest = 0.0
+        self.slowest_by: dict = {}   # outcome -> slowest input (s) with that outcome
         self.compile_every = compile_every
         self.cli_every = cli_every
         self._accepted = 0
@@ -367,7 +368,9 @@ class Tally:
     def run(self, source) -> str:
         t0 = time.perf_counter()
         outcome = exercise(source, compile_it=self._compile_next, cli_it=self._cli_next)
-        self.slowest = max(self.slowest, time.perf_counter() - t0)
+        dt = time.perf_counter() - t0
+        self.slowest = max(self.slowest, dt)
+        self.slowest_by[outcome] = max(self.slowest_by.get(outcome, 0.0), dt)
         self.counts[outcome] += 1
         return outcome
 
@@ -379,5 +382,6 @@ class Tally:
         total = self.total
         parts = ", ".join(f"{k}: {v}" for k, v in sorted(self.counts.items()))
         examples = "".join(f"\n  last {k}: {v}" for k, v in LAST_REFUSAL.items())
+        slow = ", ".join(f"{k} {v:.2f} s" for k, v in sorted(self.slowest_by.items()))
         return (f"{what}: {total} inputs; {parts}; 0 code executions, 0 foreign exceptions; "
-                f"slowest input {self.slowest:.2f} s{examples}")
+                f"slowest input {self.slowest:.2f} s (by outcome: {slow}){examples}")
