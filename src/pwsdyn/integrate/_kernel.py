@@ -873,6 +873,32 @@ def _chatter_event_map(ev, p, j, k, mode, nm, t, x, n, out, W, gx, hdx, f, buf, 
 
 
 @njit(cache=True)
+def _chatter_coef(ev, p, j, k, mode, nm, t, x, n, c, W, gx, hdx, f, buf):
+    """The coefficients of the complete-chattering map, smooth functions of ``(t, x)``:
+    ``Q = x + c hdot``, ``q = b hdot`` with ``b = 2 r / ((1 - r) a)`` and
+    ``c = (2 r f / a + W) / (1 - r)`` (:func:`_chatter_map`). Writes c; returns b."""
+    ev(W_F, mode, t, x, p, f)
+    ev(W_HDX, k * nm + mode, t, x, p, hdx)
+    ev(W_HDT, k * nm + mode, t, x, p, buf)
+    acc = buf[0] + _dot(hdx, f, n)
+    hw = _impact_direction(ev, p, j, k, mode, nm, t, x, n, W, gx, hdx)
+    r = -(1.0 + hw)
+    for i in range(n):
+        c[i] = (2.0 * r * f[i] / acc + W[i]) / (1.0 - r)
+    return 2.0 * r / ((1.0 - r) * acc)
+
+
+@njit(cache=True)
+def _stick_gradients(ev, p, k, mode, nm, t, x, n, mu0, mu1, out, hdx):
+    """``G = mu0 h_x + mu1 hdot_x`` at ``(t, x)`` into out (the normal displacement of the
+    projection onto the sticking manifold, as a function of the point)."""
+    ev(W_HX, k, t, x, p, out)
+    ev(W_HDX, k * nm + mode, t, x, p, hdx)
+    for i in range(n):
+        out[i] = mu0 * out[i] + mu1 * hdx[i]
+
+
+@njit(cache=True)
 def _chatter_saltation(ev, p, j, k, mode, nm, t, x_in, n, S, etab, stab, slide_c):
     """Saltation matrix of a complete chattering sequence (the full form, ``Phi+ = S Phi-``).
 
@@ -881,14 +907,39 @@ def _chatter_saltation(ev, p, j, k, mode, nm, t, x_in, n, S, etab, stab, slide_c
     (h_t + h_x f_in)`` later, at ``x_in + dx + f_in dt``; comparing the two solutions at a common
     time after the event gives
 
-        S = C - (X_t + C f_in - f_out tau_t) h_x / (h_t + h_x f_in),   C = X_x - f_out tau_x.
+        S = C - (X_t + C f_in - F tau_t) h_x / (h_t + h_x f_in),   C = X_x - F tau_x,
 
-    For a time-independent map ``tau = t + q``, ``X = Q`` this is the slides' chattering
-    saltation ``G = C + (f_out - C f_in) h_x / (h_x f_in)``, ``C = Q_x - f_out q_x`` (Nordmark &
-    Piiroinen 2009); for ``tau = t``, ``X = g`` it is the impact saltation of
-    :func:`_event_saltation`. Here ``(tau, X)`` is :func:`_chatter_event_map` (with the projection
-    onto the sticking manifold, so S is the derivative of the map the kernel applies), ``f_out``
-    the sticking field at ``(tau, X)``; ``X_x, X_t, tau_x, tau_t`` are central differences.
+    with ``F`` the sticking field at ``(tau, X)``. For a time-independent map ``tau = t + q``,
+    ``X = Q`` this is the slides' chattering saltation ``G = C + (f_out - C f_in) h_x / (h_x
+    f_in)``, ``C = Q_x - f_out q_x`` (Nordmark & Piiroinen 2009); for ``tau = t``, ``X = g`` it
+    is the impact saltation of :func:`_event_saltation`. ``(tau, X)`` is the map the kernel
+    applies, :func:`_chatter_event_map`: ``tau = t + b v``, ``Z = x + c v`` (``v = hdot``,
+    ``b``, ``c`` of :func:`_chatter_coef`), ``X`` = Z projected onto ``{h = 0, hdot = 0}`` at
+    ``tau`` along ``N = (h_x, hdot_x)``: ``X = Z + N mu``.
+
+    The derivatives are analytic in ``v`` (the entry speed):
+
+        tau_x = b v_x + v b_x,  Z_x = I + c v_x^T + v c_x,  D = d/dt + f_in . d/dx,
+        D v = a,  D tau = 1 + a b + v D b,  D Z = f + a c + v D c = (1 + a b) F0 + v D c,
+
+    ``F0`` the sticking field at ``(t, x_in)`` (``f + a c = (1 + a b)(f + a W / (1 + r))``
+    identically). The projection's derivative is ``dX = L(dZ, dtau)``: ``(I - G_y) dX - N dmu
+    = dZ + G_t dtau``, ``B dX = -Phi_t dtau`` (``B = N^T``, ``Phi = (h, hdot)`` at (tau, X),
+    ``G = N mu`` with mu held, ``(I - G_y)^-1 ~ I + G_y``: ``G`` is O(v^2)). Since ``F`` is
+    tangent to the manifold, ``L((I - G_y) F - G_t, 1) = F``, so with ``Fs = (I - G_y) F - G_t``
+
+        C = L(Z_x - Fs tau_x^T, 0),
+        (X_t + C f_in - F tau_t) / v = L(R / v, 0),
+        R / v = -(1 + a b) (F - F0) / v + D c - D b F + D tau (G_y F + G_t) / v,
+
+    so the 1/v of the formula multiplies no difference of O(1) numbers: ``(F - F0) / v`` is the
+    divided difference of the sticking field over the jump, taken at the jump's ends or, when
+    they are closer than a difference step, as a central difference along the jump about its
+    midpoint (step relative to max(1, |t|)^(1/3) in time and max(1, |x_i|) in state); ``b_x, c_x,
+    b_t, c_t`` and ``G_y, G_t`` are central differences of first derivatives of the model,
+    multiplied by v or by ``mu = O(v^2)``. The result does not lose accuracy as the entry speed
+    goes to 0 or as |t| grows (issue "events", item 5: the earlier central difference of the
+    whole map divided its error, growing with |t|, by v).
     """
     W = np.zeros(n)
     gx = np.zeros(n * n)
@@ -896,51 +947,215 @@ def _chatter_saltation(ev, p, j, k, mode, nm, t, x_in, n, S, etab, stab, slide_c
     f = np.zeros(n)
     buf = np.zeros(max(n, 2))
     hx = np.zeros(n)
-    xo = np.zeros(n)
-    xp = np.zeros(n)
-    xm = np.zeros(n)
-    xt = np.zeros(n)
+    hx1 = np.zeros(n)
+    hd1 = np.zeros(n)
+    vx = np.zeros(n)
     fi = np.zeros(n)
-    fo = np.zeros(n)
+    xo = np.zeros(n)
+    z = np.zeros(n)
+    xt = np.zeros(n)
+    cc = np.zeros(n)
+    cp = np.zeros(n)
+    cm = np.zeros(n)
     w1 = np.zeros(n)
     w2 = np.zeros(n)
-    Cm = np.zeros((n, n))
-    taux = np.zeros(n)
-    Xt = np.zeros(n)
+    F0 = np.zeros(n)
+    F1 = np.zeros(n)
+    Fp = np.zeros(n)
+    Fm = np.zeros(n)
+    bx = np.zeros(n)
+    cx = np.zeros((n, n))
+    ct = np.zeros(n)
+    Gy = np.zeros((n, n))
+    Gt = np.zeros(n)
+    Rv = np.zeros(n)
+    RC = np.zeros((n, n))
+    Nt = np.zeros((n, 2))
+    tmp = np.zeros(n)
+    # input point: v = hdot, its derivatives, the field and the surface gradient
+    ev(W_HD, k * nm + mode, t, x_in, p, buf)
+    v = buf[0]
+    ev(W_HDT, k * nm + mode, t, x_in, p, buf)
+    vt = buf[0]
+    ev(W_HDX, k * nm + mode, t, x_in, p, vx)
+    ev(W_F, mode, t, x_in, p, fi)
+    ev(W_HX, k, t, x_in, p, hx)
+    a = vt + _dot(vx, fi, n)
     for i in range(n):
         xt[i] = x_in[i]
-    t_out = _chatter_event_map(ev, p, j, k, mode, nm, t, xt, n, xo, W, gx, hdx, f, buf, hx)
-    for c in range(n):
-        dx = _FD_STEP * max(1.0, abs(x_in[c]))
-        xt[c] = x_in[c] + dx
-        tp = _chatter_event_map(ev, p, j, k, mode, nm, t, xt, n, xp, W, gx, hdx, f, buf, hx)
-        xt[c] = x_in[c] - dx
-        tm = _chatter_event_map(ev, p, j, k, mode, nm, t, xt, n, xm, W, gx, hdx, f, buf, hx)
-        xt[c] = x_in[c]
+    b = _chatter_coef(ev, p, j, k, mode, nm, t, xt, n, cc, W, gx, hdx, f, buf)
+    # the map as applied: Z = Q(x_in) and X, tau = the projected one
+    _chatter_map(ev, p, j, k, mode, nm, t, xt, n, z, W, gx, hdx, f, buf)
+    t_out = _chatter_event_map(ev, p, j, k, mode, nm, t, xt, n, xo, W, gx, hdx, f, buf, hx1)
+    # derivatives of the coefficients b, c (O(1), multiplied by v below); actual steps
+    for col in range(n):
+        dx = _FD_STEP * max(1.0, abs(x_in[col]))
+        xt[col] = x_in[col] + dx
+        hp = xt[col]
+        bp = _chatter_coef(ev, p, j, k, mode, nm, t, xt, n, cp, W, gx, hdx, f, buf)
+        xt[col] = x_in[col] - dx
+        hm = xt[col]
+        bm = _chatter_coef(ev, p, j, k, mode, nm, t, xt, n, cm, W, gx, hdx, f, buf)
+        xt[col] = x_in[col]
+        bx[col] = (bp - bm) / (hp - hm)
         for i in range(n):
-            Cm[i, c] = (xp[i] - xm[i]) / (2.0 * dx)
-        taux[c] = (tp - tm) / (2.0 * dx)
-    # rounding of t itself is eps |t|: the step grows like |t|^(1/3) to keep eps |t| / dt small
+            cx[i, col] = (cp[i] - cm[i]) / (hp - hm)
     dt = _FD_STEP * max(1.0, abs(t)) ** (1.0 / 3.0)
-    tp = _chatter_event_map(ev, p, j, k, mode, nm, t + dt, xt, n, xp, W, gx, hdx, f, buf, hx)
-    tm = _chatter_event_map(ev, p, j, k, mode, nm, t - dt, xt, n, xm, W, gx, hdx, f, buf, hx)
-    taut = (tp - tm) / (2.0 * dt)
+    tp = t + dt
+    tm = t - dt
+    bp = _chatter_coef(ev, p, j, k, mode, nm, tp, xt, n, cp, W, gx, hdx, f, buf)
+    bm = _chatter_coef(ev, p, j, k, mode, nm, tm, xt, n, cm, W, gx, hdx, f, buf)
+    bt = (bp - bm) / (tp - tm)
     for i in range(n):
-        Xt[i] = (xp[i] - xm[i]) / (2.0 * dt)
-    _field(ev, p, STICK, j, mode, nm, t_out, xo, n, fo, etab, stab, slide_c, w1, w2, gx, hdx)
-    ev(W_F, mode, t, xt, p, fi)
-    ev(W_HX, k, t, xt, p, hx)
-    ev(W_HT, k, t, xt, p, buf)
-    den = buf[0] + _dot(hx, fi, n)
+        ct[i] = (cp[i] - cm[i]) / (tp - tm)
+    Db = bt + _dot(bx, fi, n)
+    Dtau = 1.0 + a * b + v * Db
+    # sticking fields at both ends of the jump
+    _field(ev, p, STICK, j, mode, nm, t_out, xo, n, F1, etab, stab, slide_c, w1, w2, gx, hdx)
+    _field(ev, p, STICK, j, mode, nm, t, x_in, n, F0, etab, stab, slide_c, w1, w2, gx, hdx)
+    # projection geometry at (tau, X): N = (h_x, hdot_x), X - Z = N mu
+    ev(W_HX, k, t_out, xo, p, hx1)
+    ev(W_HDX, k * nm + mode, t_out, xo, p, hd1)
+    aa = _dot(hx1, hx1, n)
+    ab = _dot(hx1, hd1, n)
+    bb = _dot(hd1, hd1, n)
+    det = aa * bb - ab * ab
+    proj = det != 0.0 and np.isfinite(det)
+    if proj:
+        for i in range(n):
+            tmp[i] = xo[i] - z[i]
+        r1 = _dot(hx1, tmp, n)
+        r2 = _dot(hd1, tmp, n)
+        mu0 = (bb * r1 - ab * r2) / det
+        mu1 = (aa * r2 - ab * r1) / det
+        if mu0 != 0.0 or mu1 != 0.0:
+            for col in range(n):
+                for i in range(n):
+                    xt[i] = xo[i]
+                dx = _FD_STEP * max(1.0, abs(xo[col]))
+                xt[col] = xo[col] + dx
+                hp = xt[col]
+                _stick_gradients(ev, p, k, mode, nm, t_out, xt, n, mu0, mu1, cp, hdx)
+                xt[col] = xo[col] - dx
+                hm = xt[col]
+                _stick_gradients(ev, p, k, mode, nm, t_out, xt, n, mu0, mu1, cm, hdx)
+                for i in range(n):
+                    Gy[i, col] = (cp[i] - cm[i]) / (hp - hm)
+            for i in range(n):
+                xt[i] = xo[i]
+            dt = _FD_STEP * max(1.0, abs(t_out)) ** (1.0 / 3.0)
+            tp = t_out + dt
+            tm = t_out - dt
+            _stick_gradients(ev, p, k, mode, nm, tp, xt, n, mu0, mu1, cp, hdx)
+            _stick_gradients(ev, p, k, mode, nm, tm, xt, n, mu0, mu1, cm, hdx)
+            for i in range(n):
+                Gt[i] = (cp[i] - cm[i]) / (tp - tm)
+    # (F - F0) / v over the jump from (t, x_in) to (t_out, xo), direction e = (b, (X - x) / v)
+    if v != 0.0:
+        et = (t_out - t) / v
+        scl = abs(et) / max(1.0, abs(t)) ** (1.0 / 3.0)
+        for i in range(n):
+            tmp[i] = (xo[i] - x_in[i]) / v
+            scl = max(scl, abs(tmp[i]) / max(1.0, abs(x_in[i])))
+        smin = _FD_STEP / scl if scl > 0.0 else 0.0
+        if scl == 0.0:
+            for i in range(n):
+                Rv[i] = 0.0
+        elif 0.5 * abs(v) >= smin:
+            for i in range(n):
+                Rv[i] = (F1[i] - F0[i]) / v
+        else:
+            # central difference along the jump about its midpoint, the time steps as taken
+            tmid = t + 0.5 * (t_out - t)
+            tp = tmid + smin * et
+            tm = tmid - smin * et
+            s2 = (tp - tm) / et if et != 0.0 else 2.0 * smin
+            for i in range(n):
+                xt[i] = 0.5 * (x_in[i] + xo[i]) + 0.5 * s2 * tmp[i]
+            _field(ev, p, STICK, j, mode, nm, tp, xt, n, Fp, etab, stab, slide_c, w1, w2, gx,
+                   hdx)
+            for i in range(n):
+                xt[i] = 0.5 * (x_in[i] + xo[i]) - 0.5 * s2 * tmp[i]
+            _field(ev, p, STICK, j, mode, nm, tm, xt, n, Fm, etab, stab, slide_c, w1, w2, gx,
+                   hdx)
+            for i in range(n):
+                Rv[i] = (Fp[i] - Fm[i]) / s2
+        # R / v = -(1 + a b) (F - F0) / v + D c - D b F + D tau (G_y F + G_t) / v
+        for i in range(n):
+            gf = Gt[i]
+            dc = ct[i]
+            for c in range(n):
+                gf += Gy[i, c] * F1[c]
+                dc += cx[i, c] * fi[c]
+            Rv[i] = -(1.0 + a * b) * Rv[i] + dc - Db * F1[i] + Dtau * gf / v
+    # C = L(Z_x - Fs tau_x^T, 0), Fs = (I - G_y) F - G_t
     for i in range(n):
+        fs = F1[i] - Gt[i]
         for c in range(n):
-            Cm[i, c] -= fo[i] * taux[c]
-    for i in range(n):
-        v = Xt[i] - fo[i] * taut
+            fs -= Gy[i, c] * F1[c]
         for c in range(n):
-            v += Cm[i, c] * fi[c]
-        for c in range(n):
-            S[i, c] = Cm[i, c] - (v * hx[c] / den if den != 0.0 else 0.0)
+            RC[i, c] = ((1.0 if i == c else 0.0) + cc[i] * vx[c] + v * cx[i, c]
+                        - fs * (b * vx[c] + v * bx[c]))
+    # L(R, 0): dX = (I + G_y)(R + N dmu) with B dX = 0, B = N^T at (tau, X)
+    if proj:
+        for i in range(n):
+            Nt[i, 0] = hx1[i]
+            Nt[i, 1] = hd1[i]
+            for c in range(n):
+                Nt[i, 0] += Gy[i, c] * hx1[c]
+                Nt[i, 1] += Gy[i, c] * hd1[c]
+        m00 = _dot(hx1, Nt[:, 0], n)
+        m01 = _dot(hx1, Nt[:, 1], n)
+        m10 = _dot(hd1, Nt[:, 0], n)
+        m11 = _dot(hd1, Nt[:, 1], n)
+        dm = m00 * m11 - m01 * m10
+        proj = dm != 0.0 and np.isfinite(dm)
+    else:
+        m00 = m01 = m10 = m11 = dm = 1.0
+    for col in range(n + 1):
+        # columns of C, then R / v
+        for i in range(n):
+            w1[i] = RC[i, col] if col < n else Rv[i]
+        for i in range(n):
+            s = w1[i]
+            for c in range(n):
+                s += Gy[i, c] * w1[c]
+            w2[i] = s
+        if proj:
+            q0 = _dot(hx1, w2, n)
+            q1 = _dot(hd1, w2, n)
+            d0 = -(m11 * q0 - m01 * q1) / dm
+            d1 = -(m00 * q1 - m10 * q0) / dm
+            for i in range(n):
+                w2[i] += Nt[i, 0] * d0 + Nt[i, 1] * d1
+        if col < n:
+            for i in range(n):
+                S[i, col] = w2[i]
+        else:
+            for i in range(n):
+                tmp[i] = w2[i]
+    if v != 0.0:
+        for i in range(n):
+            for c in range(n):
+                S[i, c] -= tmp[i] * hx[c]
+
+
+def _chatter_saltation_signature():
+    from numba import types as nt
+
+    from ..model.codegen import EVALUATE_TYPE
+    f1 = nt.float64[::1]
+    i2 = nt.int64[:, ::1]
+    return nt.void(EVALUATE_TYPE, f1, nt.int64, nt.int64, nt.int64, nt.float64, f1, i2, i2,
+                   nt.float64, nt.float64[:, ::1])
+
+
+@njit(_chatter_saltation_signature(), cache=True)
+def chatter_saltation(ev, p, j, mode, nm, t, x, etab, stab, slide_c, S):
+    """The saltation matrix :func:`_chatter_saltation` of the complete-chattering map of
+    impact event ``j`` entered from mode ``mode`` at ``(t, x)`` into ``S`` (n x n): the matrix
+    the kernel applies, for Python callers (:func:`pwsdyn.stability.saltation_matrix`)."""
+    _chatter_saltation(ev, p, j, etab[j, 0], mode, nm, t, x, x.shape[0], S, etab, stab, slide_c)
 
 
 def _state_field_signature():

@@ -21,7 +21,8 @@ Two forms are in use and they must not be mixed up:
 Both are defined at events applied at the crossing time: ``impact`` and ``transition`` events
 and the Filippov ``crossing`` and ``slide_start`` of a switch (``g`` the identity). Events that
 do not change the field (``release``, ``slide_end``; ``S = I``) and the complete-chattering map
-(a jump in time as well as in state) have the full form only.
+(a jump in time as well as in state) have the full form only. The chattering one is the
+kernel's own (:func:`pwsdyn.integrate._kernel.chatter_saltation`): one formula, one answer.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ import numpy as np
 
 from .. import _validate as V
 from ..errors import ArgumentError
-from ..integrate._kernel import REGULAR, SLIDE
+from ..integrate._kernel import REGULAR, SLIDE, chatter_saltation
 from ._context import (DiscreteState, ModelContext, check_state_name, event_states,
                        trajectory_start_state)
 
@@ -55,13 +56,27 @@ def _check_trajectory(traj, name: str = "traj") -> None:
                             "`variational=True`")
 
 
+def _chatter_full(ctx: ModelContext, name: str, t: float, x_before, mode: int,
+                  sliding_gain: float = 0.0) -> np.ndarray:
+    """Full saltation matrix of the complete-chattering map of impact event ``name`` entered
+    from mode ``mode`` at ``(t, x_before)``: the kernel's function, the matrix it applies."""
+    S = np.zeros((ctx.n, ctx.n))
+    chatter_saltation(ctx.cm.evaluate, ctx._pv, ctx.event_index(name), int(mode), ctx.nm,
+                      float(t), np.ascontiguousarray(x_before, dtype=float), ctx.etab, ctx.stab,
+                      float(sliding_gain), S)
+    return S
+
+
 def _saltation_pair(ctx: ModelContext, kind: str, name: str, t: float, x_before, x_after,
                     st_before: DiscreteState, st_after: DiscreteState, sliding_gain: float = 0.0):
-    """Full and projected saltation matrices at one event from the model's derivatives."""
+    """Full and projected saltation matrices at one event from the model's derivatives
+    (for ``chatter`` the kernel's full matrix and ``None``: it has no projected form)."""
     n = ctx.n
     x_before = np.asarray(x_before, dtype=float)
     x_after = np.asarray(x_after, dtype=float)
-    if kind in ("impact", "transition", "chatter"):
+    if kind == "chatter":
+        return _chatter_full(ctx, name, t, x_before, st_before.mode, sliding_gain), None
+    if kind in ("impact", "transition"):
         j = ctx.event_index(name)
         k = int(ctx.etab[j, 0])
         gx = ctx.g_x(j, t, x_before)
@@ -72,7 +87,7 @@ def _saltation_pair(ctx: ModelContext, kind: str, name: str, t: float, x_before,
         gt = np.zeros(n)
     else:
         raise ValueError(f"no saltation formula for a {kind!r} event (its saltation matrix is "
-                         f"the identity or, for chattering, the kernel's)")
+                         f"the identity)")
     f_in = ctx.field(t, x_before, st_before, sliding_gain)
     f_out = ctx.field(t, x_after, st_after, sliding_gain)
     hx = ctx.h_x(k, t, x_before)
@@ -88,7 +103,7 @@ def _saltation_pair(ctx: ModelContext, kind: str, name: str, t: float, x_before,
 
 def saltation_matrix(model, event: str, t: float, x, *, params=None, mode=None,
                      form: str = "full", sliding: str = "convex",
-                     sliding_gain: float = 0.0) -> np.ndarray:
+                     sliding_gain: float = 0.0, chatter: bool = False) -> np.ndarray:
     """Saltation matrix of a model event or switch at a point of its surface.
 
     Parameters
@@ -111,6 +126,11 @@ def saltation_matrix(model, event: str, t: float, x, *, params=None, mode=None,
     sliding, sliding_gain : str, float
         The sliding field's method and stabilising rate (as in :func:`pwsdyn.simulate`); the
         stabilising term vanishes on the surface.
+    chatter : bool
+        For an ``impact`` event: the saltation matrix of the complete-chattering map applied
+        at this impact instead (the jump to the accumulation point of the impacts and on to
+        sticking; ``form='full'`` only), the matrix :func:`pwsdyn.simulate` applies at a
+        ``chatter`` event. Default False.
 
     Returns
     -------
@@ -124,6 +144,11 @@ def saltation_matrix(model, event: str, t: float, x, *, params=None, mode=None,
     0.64
     """
     _check_form(form)
+    if not isinstance(chatter, bool):
+        raise V.fail("chatter", "True or False", chatter)
+    if chatter and form != "full":
+        raise ArgumentError("the complete-chattering map has no projected saltation matrix: "
+                            "use form='full' with chatter=True")
     model = V.model(model, kind="flow", caller="saltation_matrix()")
     model.parameter_vector(params)
     names = [e.name for e in model.events] + [s.name for s in model.switches]
@@ -148,6 +173,13 @@ def saltation_matrix(model, event: str, t: float, x, *, params=None, mode=None,
         st_a = DiscreteState(REGULAR, -1, ev.target if ev.target is not None else m)
         kind = ev.kind
         x_after = ctx.g(j, t, x)
+        if chatter:
+            if kind != "impact":
+                raise ArgumentError(f"chatter=True needs an impact event; {event!r} is a "
+                                    f"{kind} event")
+            return _chatter_full(ctx, event, t, x, m, sliding_gain)
+    elif chatter:
+        raise ArgumentError(f"chatter=True needs an impact event; {event!r} is a switch")
     else:
         s = ctx.switch_index(event)
         k, a, b = (int(v) for v in ctx.stab[s])
