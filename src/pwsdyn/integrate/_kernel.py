@@ -39,10 +39,17 @@ zero crossings: surfaces ``h`` (events, switches), normal velocities ``hdot`` (s
 and normal accelerations ``hddot`` (release from sticking). On every accepted step each is
 sampled on the dense output -- surfaces at the ends and at the interior extrema of the cubic
 Hermite fit from ``h`` and ``hdot`` at the ends, the other functions at the ends and the
-midpoint -- so a crossing and re-crossing inside one step (near grazing) is still found. The earliest crossing is bracketed and located by the Illinois
-method on the dense output to a few ulps, then the step is re-taken exactly to that time
-("landing step") and the time is polished with Newton steps on ``h`` (or ``hdot`` for a
-sliding exit) so the event state comes from the integrator itself, not from the interpolant.
+midpoint (the normal acceleration of a sticking motion also at the extrema of its Hermite
+fit, its slopes by central differences). Where such a function has one sign at two
+consecutive samples and an extremum towards zero between them (``hdot`` changes sign: near
+grazing, a short release window), that extremum is searched for on the dense output -- the
+exact flow on an exact step -- with a lower bound from the tangents at the bracket's ends
+(:func:`_extremum_search`), so a crossing and re-crossing inside one step is found whenever
+it is deeper than the dense output's error. The earliest crossing is bracketed and located
+by the Illinois method on the dense output to a few ulps, then the step is re-taken exactly
+to that time ("landing step") and the time is polished with Newton steps on ``h`` (or
+``hdot`` for a sliding exit) so the event state comes from the integrator itself, not from
+the interpolant.
 A surface that depends on ``t`` explicitly (a moving constraint) must also be resolved by the
 step: where the Hermite fit misses ``h`` at the step's midpoint by more than 1% the step is
 retaken shorter, so a state at rest cannot step over an oscillating wall.
@@ -765,6 +772,217 @@ def _crosses(v0, v1, direction):
     return (v0 > 0.0 and v1 <= 0.0) or (v0 < 0.0 and v1 >= 0.0)
 
 
+@njit(cache=True)
+def _watch_slope(ev, p, wtype, widx, wmode, nm, t, h, y, Q, n, deg, th, xs, buf, fbuf, hdx):
+    """d/dt of a watch function along the step's dense output at ``theta``: a central
+    difference (relative step ``_FD_STEP`` of the step; the dense output is a polynomial, so
+    ``theta +- step`` may lie just outside ``[0, 1]``). For the normal acceleration of a
+    sticking motion, whose time derivative the generated code does not carry."""
+    ta = t + (th - _FD_STEP) * h
+    tb = t + (th + _FD_STEP) * h
+    if not tb > ta:
+        return 0.0
+    _dense_eval(y, Q, th - _FD_STEP, n, deg, xs)
+    ga = _watch_value(ev, p, wtype, widx, wmode, nm, ta, xs, n, buf, fbuf, hdx)
+    _dense_eval(y, Q, th + _FD_STEP, n, deg, xs)
+    gb = _watch_value(ev, p, wtype, widx, wmode, nm, tb, xs, n, buf, fbuf, hdx)
+    return (gb - ga) / (tb - ta)
+
+
+@njit(cache=True)
+def _watch_pair(ev, p, wtype, widx, wmode, dkind, didx, mode, nm, t, h, y, Q, n, deg, th, xs,
+                buf, fbuf, hdx, f, etab, stab, slide_c, w1, w2, gx):
+    """Value and time derivative of a watch function at ``theta`` on the step's dense output
+    (the exact flow on an exact step). Surfaces: ``h`` and ``hdot`` from the model at the
+    interpolated state (one call in a regular mode; along the sticking or sliding field
+    otherwise); other watch functions: :func:`_watch_slope`."""
+    tt = t + th * h
+    _dense_eval(y, Q, th, n, deg, xs)
+    if wtype == WF_SURFACE:
+        if dkind == REGULAR:
+            ev(W_HHD, widx * nm + mode, tt, xs, p, buf)
+            return buf[0], buf[1]
+        ev(W_H, widx, tt, xs, p, buf)
+        g = buf[0]
+        _field(ev, p, dkind, didx, mode, nm, tt, xs, n, f, etab, stab, slide_c, w1, w2, gx, hdx)
+        return g, _surface_rate(ev, p, dkind, widx, mode, nm, tt, xs, f, n, buf, hdx)
+    g = _watch_value(ev, p, wtype, widx, wmode, nm, tt, xs, n, buf, fbuf, hdx)
+    return g, _watch_slope(ev, p, wtype, widx, wmode, nm, t, h, y, Q, n, deg, th, xs, buf, fbuf,
+                           hdx)
+
+
+@njit(cache=True)
+def _extremum_search(ev, p, wtype, widx, wmode, dkind, didx, mode, nm, t, h, y, Q, n, deg,
+                     a, ga, da, b, gb, db, xs, buf, fbuf, hdx, f, etab, stab, slide_c, w1, w2,
+                     gx):
+    """Bounded search for a crossing hidden at an extremum of a watch function ``g`` between
+    two samples ``a < b`` (in theta) of one sign ``s`` where ``s g`` decreases at ``a``
+    (``s da < 0``) and increases at ``b`` (``s db > 0``; ``da``, ``db`` are time derivatives).
+
+    With ``G = s g`` convex on the bracket, the tangents at its ends bound ``G`` from below;
+    their intersection gives the bound ``LB`` on its minimum. While ``LB <= 0`` the bracket
+    is shrunk by the zero of the secant of ``G'`` (Illinois, safeguarded by bisection), ``g``
+    and ``g'`` evaluated on the dense output, until a sample with ``G <= 0`` is found (the
+    crossing), ``LB > 0`` (no crossing) or the bound is tight to rounding. The bound is
+    second order in the bracket, so the error of one sample at an estimated extremum (the
+    Hermite fit's, which grows like ``h^3``) no longer decides whether a graze is seen: a
+    graze deeper than the dense output's error is found. Returns the sample with the smallest
+    ``G``: ``(theta, g, g')``."""
+    s = 1.0 if ga > 0.0 else -1.0
+    Ga = s * ga
+    Gb = s * gb
+    Da = s * da * h     # derivatives in theta units
+    Db = s * db * h
+    best_th = a
+    best_g = ga
+    best_d = da
+    if Gb < Ga:
+        best_th = b
+        best_g = gb
+        best_d = db
+    gnoise = 64.0 * _EPS * (Ga + Gb) + 1e-300
+    Sa = Da             # the Illinois-weighted end derivatives of the secant
+    Sb = Db
+    side = 0
+    width_check = b - a
+    for it in range(48):
+        W = b - a
+        if W * h <= 4.0 * _ulp(t + b * h):
+            break
+        u = (Gb - Ga - Db * W) / (Da - Db)
+        u = min(max(u, 0.0), W)
+        LB = max(Ga + Da * u, Gb + Db * (u - W))
+        if LB > 0.0 or s * best_g - LB <= gnoise:
+            break
+        m = a + W * Sa / (Sa - Sb)
+        if it % 2 == 1:
+            if W > 0.5 * width_check:
+                m = 0.5 * (a + b)
+            width_check = W
+        if not (a < m < b):
+            m = 0.5 * (a + b)
+        gm, dm = _watch_pair(ev, p, wtype, widx, wmode, dkind, didx, mode, nm, t, h, y, Q, n,
+                             deg, m, xs, buf, fbuf, hdx, f, etab, stab, slide_c, w1, w2, gx)
+        if not (np.isfinite(gm) and np.isfinite(dm)):
+            break
+        Gm = s * gm
+        Dm = s * dm * h
+        if Gm < s * best_g:
+            best_th = m
+            best_g = gm
+            best_d = dm
+        if Gm <= 0.0:
+            break
+        if Dm < 0.0:
+            a = m
+            Ga = Gm
+            Da = Dm
+            Sa = Dm
+            if side == -1:
+                Sb *= 0.5
+            side = -1
+        elif Dm > 0.0:
+            b = m
+            Gb = Gm
+            Db = Dm
+            Sb = Dm
+            if side == 1:
+                Sa *= 0.5
+            side = 1
+        else:
+            break
+    return best_th, best_g, best_d
+
+
+@njit(cache=True)
+def _graze_samples(ev, p, wtype, widx, wmode, wdir, dkind, didx, mode, nm, t, h, y, Q, n, deg,
+                   th, g, gd, ns, xs, buf, fbuf, hdx, f, etab, stab, slide_c, w1, w2, gx):
+    """Samples ``th[:ns]`` (increasing theta) of a watch function with values ``g`` and time
+    derivatives ``gd``: between consecutive samples of one sign where it moves towards zero
+    and then away (an extremum towards zero, in a direction the watch reacts to) run
+    :func:`_extremum_search` and insert the sample it returns. Stops at the first pair that
+    brackets a crossing. Returns the new number of samples."""
+    q = 0
+    while q < ns - 1 and ns < th.shape[0]:
+        ga = g[q]
+        gb = g[q + 1]
+        if _crosses(ga, gb, wdir):
+            break
+        if ga != 0.0 and gb != 0.0 and (ga > 0.0) == (gb > 0.0):
+            s = 1.0 if ga > 0.0 else -1.0
+            if s * wdir <= 0 and s * gd[q] < 0.0 and s * gd[q + 1] > 0.0:
+                tm, gm, dm = _extremum_search(ev, p, wtype, widx, wmode, dkind, didx, mode, nm,
+                                              t, h, y, Q, n, deg, th[q], ga, gd[q], th[q + 1],
+                                              gb, gd[q + 1], xs, buf, fbuf, hdx, f, etab, stab,
+                                              slide_c, w1, w2, gx)
+                if th[q] < tm < th[q + 1]:
+                    for r in range(ns, q + 1, -1):
+                        th[r] = th[r - 1]
+                        g[r] = g[r - 1]
+                        gd[r] = gd[r - 1]
+                    th[q + 1] = tm
+                    g[q + 1] = gm
+                    gd[q + 1] = dm
+                    ns += 1
+                    if _crosses(ga, gm, wdir):
+                        break
+                    q += 1
+        q += 1
+    return ns
+
+
+@njit(cache=True)
+def _hermite_extrema(v0, v1, d0, d1):
+    """Interior extrema ``ra <= rb`` in ``(0, 1)`` of the cubic Hermite fit with values ``v0``,
+    ``v1`` and theta-derivatives ``d0``, ``d1`` at the ends (2.0: none), by the
+    cancellation-free quadratic formula as in the surface sampling of :func:`run_kernel`."""
+    qa = 3.0 * (2.0 * v0 - 2.0 * v1 + d0 + d1)
+    qb = 2.0 * (-3.0 * v0 + 3.0 * v1 - 2.0 * d0 - d1)
+    disc = qb * qb - 4.0 * qa * d0
+    ra = 2.0
+    rb = 2.0
+    if disc >= 0.0:
+        qq = -0.5 * (qb + (np.sqrt(disc) if qb >= 0.0 else -np.sqrt(disc)))
+        if qa != 0.0:
+            ra = qq / qa
+        if qq != 0.0:
+            rb = d0 / qq
+        if ra > rb:
+            ra, rb = rb, ra
+    if not (0.0 < ra < 1.0):
+        ra = 2.0
+    if not (0.0 < rb < 1.0) or rb == ra:
+        rb = 2.0
+    if rb < ra:
+        ra, rb = rb, ra
+    return ra, rb
+
+
+@njit(cache=True)
+def _merge_samples(th, g, ns, th2, g2, ns2):
+    """Insert the interior samples ``th2[1:ns2-1]`` into the increasing samples ``th[:ns]``
+    (same ends), as room allows. Returns the new number of samples."""
+    for q2 in range(1, ns2 - 1):
+        if ns >= th.shape[0]:
+            break
+        tq = th2[q2]
+        r = ns
+        while r > 0 and th[r - 1] > tq:
+            th[r] = th[r - 1]
+            g[r] = g[r - 1]
+            r -= 1
+        if r > 0 and th[r - 1] == tq:
+            # already sampled there: undo the shift
+            for r2 in range(r, ns):
+                th[r2] = th[r2 + 1]
+                g[r2] = g[r2 + 1]
+            continue
+        th[r] = tq
+        g[r] = g2[q2]
+        ns += 1
+    return ns
+
+
 # --------------------------------------------------------------------------------------
 # event maps and saltation matrices
 # --------------------------------------------------------------------------------------
@@ -1416,6 +1634,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     noise = 0.0
     vals = np.zeros((_MAXW, 8))
     thetas = np.zeros(8)
+    rates = np.zeros(8)           # time derivatives of a watch function at the samples
+    ex_th = np.zeros(8)           # samples of the release watch's extremum search
+    ex_g = np.zeros(8)
 
     # first node
     nodes_t[0] = t
@@ -1763,13 +1984,35 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                                                 K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c,
                                                 w1, w2, gx, hdx, jac, xt, ft)
                     q_ready = True
+                rates[0] = r0
                 for q in range(1, ns):
-                    _dense_eval(y, Q, thetas[q], nY, deg, xs)
-                    vals[w, q] = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm,
-                                              t + thetas[q] * h, xs, n, buf, fbuf, hdx)
+                    if dkind == REGULAR:
+                        _dense_eval(y, Q, thetas[q], n, deg, xs)
+                        ev(W_HHD, widx[w] * nm + mode, t + thetas[q] * h, xs, p, buf)
+                        vals[w, q] = buf[0]
+                        rates[q] = buf[1]
+                    else:
+                        vq, rq = _watch_pair(ev, p, wtype[w], widx[w], wmode[w], dkind, didx,
+                                             mode, nm, t, h, y, Q, n, deg, thetas[q], xs, buf,
+                                             fbuf, hdx, ft, etab, stab, slide_c, w1, w2, gx)
+                        vals[w, q] = vq
+                        rates[q] = rq
                 thetas[ns] = 1.0
                 vals[w, ns] = v1
+                rates[ns] = r1
                 ns += 1
+                # an extremum of h towards zero between two samples (near grazing): bounded
+                # search on the dense output instead of trusting the fit's extremum
+                search = False
+                for q in range(ns - 1):
+                    if vals[w, q] * vals[w, q + 1] > 0.0:
+                        sg = 1.0 if vals[w, q] > 0.0 else -1.0
+                        if sg * wdir[w] <= 0 and sg * rates[q] < 0.0 < sg * rates[q + 1]:
+                            search = True
+                if search:
+                    ns = _graze_samples(ev, p, wtype[w], widx[w], wmode[w], wdir[w], dkind, didx,
+                                        mode, nm, t, h, y, Q, n, deg, thetas, vals[w], rates, ns,
+                                        xs, buf, fbuf, hdx, ft, etab, stab, slide_c, w1, w2, gx)
             else:
                 thetas[0] = 0.0
                 thetas[1] = 0.5
@@ -1797,6 +2040,45 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     bad_watch = True
                     break
                 wv[w] = vals[w, 2]
+                if wtype[w] == WF_HDDOT:
+                    # release from sticking: the free normal acceleration may turn positive
+                    # only in a short window around its maximum inside the step. Its slopes
+                    # at the ends (central differences on the dense output; the end one is
+                    # kept for the next step), the extrema of the Hermite fit and the bounded
+                    # search of surfaces add samples there
+                    if wvalid[w] == 1:
+                        sd0 = wd[w]
+                    else:
+                        sd0 = _watch_slope(ev, p, wtype[w], widx[w], wmode[w], nm, t, h, y, Q,
+                                           n, deg, 0.0, xs, buf, fbuf, hdx)
+                    sd1 = _watch_slope(ev, p, wtype[w], widx[w], wmode[w], nm, t, h, y, Q, n,
+                                       deg, 1.0, xs, buf, fbuf, hdx)
+                    wd[w] = sd1
+                    ra, rb = _hermite_extrema(vals[w, 0], vals[w, 2], sd0 * h, sd1 * h)
+                    ex_th[0] = 0.0
+                    ex_g[0] = vals[w, 0]
+                    rates[0] = sd0
+                    ne = 1
+                    for rr in (ra, rb):
+                        if 0.0 < rr < 1.0:
+                            vq, rq = _watch_pair(ev, p, wtype[w], widx[w], wmode[w], dkind,
+                                                 didx, mode, nm, t, h, y, Q, n, deg, rr, xs,
+                                                 buf, fbuf, hdx, ft, etab, stab, slide_c, w1,
+                                                 w2, gx)
+                            ex_th[ne] = rr
+                            ex_g[ne] = vq
+                            rates[ne] = rq
+                            ne += 1
+                    ex_th[ne] = 1.0
+                    ex_g[ne] = vals[w, 2]
+                    rates[ne] = sd1
+                    ne += 1
+                    if ne > 2:
+                        ne = _graze_samples(ev, p, wtype[w], widx[w], wmode[w], wdir[w], dkind,
+                                            didx, mode, nm, t, h, y, Q, n, deg, ex_th, ex_g,
+                                            rates, ne, xs, buf, fbuf, hdx, ft, etab, stab,
+                                            slide_c, w1, w2, gx)
+                        ns = _merge_samples(thetas, vals[w], ns, ex_th, ex_g, ne)
             forced = wforce[w] != 0.0 and t == last_t
             if forced:
                 vals[w, 0] = wforce[w] * max(abs(vals[w, 0]), 1e-300)
@@ -1931,6 +2213,14 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     q_ready = True
                 samp, n_samp, sk = _take_samples(t, h, y, Q, nY, n, deg, s0, sdt, sk, t_end,
                                                  samp, n_samp, xs, max_samp)
+            if t == last_t:
+                # the re-trigger guard holds while its function stays within the round-off
+                # band on the far side: a step ending there must not start the next one on the
+                # far side unguarded (a release whose flight rises less than the band would
+                # have its landing stepped over)
+                for ww in range(nw):
+                    if wforce[ww] * wv[ww] < 0.0 and abs(wv[ww]) <= noise:
+                        last_t = t_new
             t = t_new
             for i in range(nY):
                 y[i] = ynew[i]
@@ -2171,6 +2461,10 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                                  fbuf, w1, w2, etab, stab, slide_c, old_kind, old_idx, ytmp,
                                  dkind, didx)
         elif act == ACT_RELEASE:
+            # the flight starts on the sticking manifold {h = 0, hdot = 0}: the sticking steps
+            # drift off it by their local error, and a drift to the far side (deeper than the
+            # re-trigger guard's round-off band) would hide a short flight's landing
+            _project_stick(ev, p, etab[old_idx, 0], mode, nm, t, y, n, hdx, w2, buf)
             dkind = REGULAR
             didx = -1
             log_kind = K_RELEASE
