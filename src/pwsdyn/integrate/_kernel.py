@@ -12,7 +12,10 @@ Discrete state
 
 * ``REGULAR``: the vector field of mode ``mode``;
 * ``STICK``: sticking on the surface of impact event ``didx`` after a complete chattering
-  sequence: constrained motion ``f - lambda W`` (slides "Simulation: Chattering");
+  sequence, or after an impact that leaves the normal velocity at round-off while the free
+  motion presses into the surface (a plastic impact, an impact at rest): constrained motion
+  ``f - lambda W`` (slides "Simulation: Chattering"), on an oblique or curved surface the
+  frictionless motion along it, released where the constraint force vanishes;
 * ``SLIDE``: Filippov sliding on switch ``didx`` with the convex field
   ``f12 = (1 - alpha) f_above + alpha f_below`` (thesis eq. 2.7-2.8) or Utkin's equivalent
   control ``f(t, x, u_eq)`` (slides; switch table column 4), optionally with the stabilising
@@ -53,6 +56,19 @@ the interpolant.
 A surface that depends on ``t`` explicitly (a moving constraint) must also be resolved by the
 step: where the Hermite fit misses ``h`` at the step's midpoint by more than 1% the step is
 retaken shorter, so a state at rest cannot step over an oscillating wall.
+
+A function that is zero at the start of a step fires at that time if the next sample lies on
+the far side of the event direction, never otherwise. On the first step after a restart (the
+start of the run, every event) a surface within its round-off band (:func:`_surface_offset`)
+counts as zero, and its rate within its own band (:func:`_rate_band`) as tangency: a start on
+a wall moving (or curving) into it, a sliding exit or release that ends on another surface,
+is an event at that time whatever the sign of the round-off; a start on a surface moving away
+is none. The same band decides after an event: a round-off normal velocity is not "moving
+away", and after an impact with the free normal acceleration into the surface it is contact
+(``STICK``).
+
+Watch arrays are sized from the model (one entry per event and switch, plus spares), so any
+number of events and switches per mode is watched.
 
 Sampling
 --------
@@ -158,6 +174,7 @@ SLIDE_CONVEX, SLIDE_UTKIN = 0, 1
 _EPS = np.finfo(np.float64).eps
 #: Relative step of the central differences of the variational code (cube root of eps).
 _FD_STEP = 6e-6
+#: Spare entries of the watch list beyond one per event and switch (see the kernel's set-up).
 _MAXW = 64
 #: Terms of the Taylor-summed exponential of an exact step (||h M|| <= 1: 1/20! < 1e-18).
 _EXACT_TERMS = 20
@@ -402,6 +419,27 @@ def _surface_offset(ev, p, k, t, y, n, xmax, buf, hdx):
     for i in range(n):
         gmax = max(gmax, abs(hdx[i]))
     return hv, 64.0 * _EPS * xmax * gmax
+
+
+@njit(cache=True)
+def _start_on_surface(ev, p, k, dkind, mode, nm, t, y, n, v0, r0, buf, hdx):
+    """``(h, hdot)`` of surface ``k`` at the start of the first step after a restart, with
+    round-off taken as zero: a surface within its band (:func:`_surface_offset`) is ON it,
+    whatever the sign of that round-off (a slide exit or release that ends on a wall, a state
+    given on a constraint). Taken as exactly zero, the crossing test fires at ``t`` if the
+    flow goes into the event direction and never if it leaves. A rate within its own band
+    (:func:`_rate_band`) is tangency, zero too: a start tangent to the surface and curving
+    into it fires at ``t``, not where ``-c (t - t0)^2`` outgrows the round-off (~sqrt(eps)
+    later)."""
+    xmax = 1.0
+    for i in range(n):
+        xmax = max(xmax, abs(y[i]))
+    hv, tolb = _surface_offset(ev, p, k, t, y, n, xmax, buf, hdx)
+    if abs(v0) <= tolb:
+        v0 = 0.0
+        if dkind == REGULAR and abs(r0) <= _rate_band(ev, p, k, mode, nm, t, y, n, hdx):
+            r0 = 0.0
+    return v0, r0
 
 
 @njit(cache=True)
@@ -1011,6 +1049,49 @@ def _project_stick(ev, p, k, mode, nm, t, x, n, hdx, w2, buf):
             x[i] += c0 * w2[i] + c1 * hdx[i]
 
 
+#: Relative size of ``h_t + h_x f`` below which an event is grazing and its saltation matrix
+#: singular (the same test as :func:`pwsdyn.stability.saltation_matrix`).
+GRAZING_RTOL = 1e-13
+
+
+@njit(cache=True)
+def _grazing(den, hx, f, n):
+    """``den = h_t + h_x f`` is zero within ``GRAZING_RTOL |h_x| |f|`` (or not finite): the
+    flow is tangent to the surface and the saltation matrix, with ``den`` as its
+    denominator, is unbounded."""
+    return not (abs(den) > GRAZING_RTOL * np.sqrt(_dot(hx, hx, n)) * np.sqrt(_dot(f, f, n)))
+
+
+@njit(cache=True)
+def _rate_band(ev, p, k, mode, nm, t, x, n, hdx):
+    """The round-off band around zero of ``hdot`` of surface ``k`` in ``mode`` at (t, x): 64
+    ulps of the state and gradient scales, as :func:`_surface_offset` for ``h``. A normal
+    velocity within it is tangency; its sign is noise (after a plastic impact on an oblique
+    or curved surface ``hdot`` is +-1e-16)."""
+    ev(W_HDX, k * nm + mode, t, x, p, hdx)
+    xmax = 1.0
+    gmax = 1.0
+    for i in range(n):
+        xmax = max(xmax, abs(x[i]))
+        gmax = max(gmax, abs(hdx[i]))
+    return 64.0 * _EPS * xmax * gmax
+
+
+@njit(cache=True)
+def _stays_in_contact(ev, p, k, mode, nm, t, x, n, buf, fbuf, hdx):
+    """A state on impact surface ``k`` whose normal velocity ``hdot`` is round-off
+    (:func:`_rate_band`) while the free normal acceleration ``hdot_t + hdot_x f`` points into
+    the surface: contact (sticking, i.e. constrained motion along the surface), never free
+    flight through it."""
+    ev(W_HD, k * nm + mode, t, x, p, buf)
+    vn = buf[0]
+    if not abs(vn) <= _rate_band(ev, p, k, mode, nm, t, x, n, hdx):
+        return False
+    ev(W_F, mode, t, x, p, fbuf)
+    ev(W_HDT, k * nm + mode, t, x, p, buf)
+    return buf[0] + _dot(hdx, fbuf, n) < 0.0
+
+
 @njit(cache=True)
 def _event_saltation(ev, p, j, k, mode_in, mode_out, nm, t, x_in, x_out, n, S, gx, hx, buf,
                      f_in, f_out, gt, etab, stab, slide_c, old_kind, old_idx, tmp, new_kind,
@@ -1018,7 +1099,12 @@ def _event_saltation(ev, p, j, k, mode_in, mode_out, nm, t, x_in, x_out, n, S, g
     """S = g_x + (f_out - g_x f_in - g_t) h_x / (h_t + h_x f_in)  (slides, "Saltation
     matrices", with the time derivatives of time-dependent surfaces and resets): the full
     saltation matrix, ``Phi+ = S Phi-``. ``f_in`` is the field of the discrete state before the
-    event at ``x_in``, ``f_out`` the field of the state after it at ``x_out = g(x_in)``."""
+    event at ``x_in``, ``f_out`` the field of the state after it at ``x_out = g(x_in)``.
+
+    At a grazing event (``h_t + h_x f_in`` zero within :func:`_grazing`) the saltation matrix
+    is unbounded: S is all NaN, so the variational result (the event's transfer matrix, the
+    Jacobian through it) is marked singular instead of silently losing its singular term;
+    :func:`pwsdyn.stability.saltation_matrix` raises there by the same test."""
     w1 = np.zeros(n)
     w2 = np.zeros(n)
     hdx = np.zeros(n)
@@ -1031,6 +1117,9 @@ def _event_saltation(ev, p, j, k, mode_in, mode_out, nm, t, x_in, x_out, n, S, g
     ev(W_HX, k, t, x_in, p, hx)
     ev(W_HT, k, t, x_in, p, buf)
     den = buf[0] + _dot(hx, f_in, n)
+    if _grazing(den, hx, f_in, n):
+        S[:, :] = np.nan
+        return
     for i in range(n):
         gf = 0.0
         for c in range(n):
@@ -1046,7 +1135,8 @@ def _switch_saltation(ev, p, dkind, didx, mode_in, mode_out, nm, k, t, x, n, S, 
     """Crossing or sliding entry: S = I + (f_out - f_in) h_x / (h_t + h_x f_in), with f_in
     the field of the discrete state before (``old_kind``, ``old_idx``, ``mode_in``) and f_out
     that of the state after (the sliding field at sliding entry). At sliding entry
-    ``h_x S = 0``: the normal perturbation is lost (a zero multiplier)."""
+    ``h_x S = 0``: the normal perturbation is lost (a zero multiplier). Grazing (see
+    :func:`_grazing`): S is all NaN, as in :func:`_event_saltation`."""
     f_out = np.zeros(n)
     hdx = np.zeros(n)
     _field(ev, p, old_kind, old_idx, mode_in, nm, t, x, n, f_in, etab, stab, slide_c, w1, w2, gx,
@@ -1055,6 +1145,9 @@ def _switch_saltation(ev, p, dkind, didx, mode_in, mode_out, nm, k, t, x, n, S, 
     ev(W_HX, k, t, x, p, hx)
     ev(W_HT, k, t, x, p, buf)
     den = buf[0] + _dot(hx, f_in, n)
+    if _grazing(den, hx, f_in, n):
+        S[:, :] = np.nan
+        return
     for i in range(n):
         for c in range(n):
             S[i, c] = (1.0 if i == c else 0.0) + ((f_out[i] - f_in[i]) * hx[c] / den
@@ -1606,18 +1699,22 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
         # the mode on the right side of every switching surface; sliding from a start on one
         dkind, didx, mode = _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx)
 
-    # watch list
-    wtype = np.zeros(_MAXW, dtype=np.int64)
-    widx = np.zeros(_MAXW, dtype=np.int64)
-    wmode = np.zeros(_MAXW, dtype=np.int64)
-    wdir = np.zeros(_MAXW, dtype=np.int64)
-    wact = np.zeros(_MAXW, dtype=np.int64)
-    wref = np.zeros(_MAXW, dtype=np.int64)
-    wforce = np.zeros(_MAXW)      # forced sign at the start of the next step (re-trigger guard)
-    wv = np.zeros(_MAXW)          # watch values at the end of the last accepted step ...
-    wd = np.zeros(_MAXW)          # ... and their time derivatives (surfaces), reused next step
-    wvalid = np.zeros(_MAXW, dtype=np.int64)
-    wtdep = np.zeros(_MAXW, dtype=np.int64)  # surface depends on t explicitly (moving wall)
+    # watch list. Sized from the model's tables, never a fixed capacity: in any discrete
+    # state an event or a switch is watched at most once (the loops below add one entry per
+    # event or switch at most), plus the release (sticking) or the two exits (sliding); the
+    # _MAXW spare entries leave room for more functions per state
+    wcap = n_events + n_sw + _MAXW
+    wtype = np.zeros(wcap, dtype=np.int64)
+    widx = np.zeros(wcap, dtype=np.int64)
+    wmode = np.zeros(wcap, dtype=np.int64)
+    wdir = np.zeros(wcap, dtype=np.int64)
+    wact = np.zeros(wcap, dtype=np.int64)
+    wref = np.zeros(wcap, dtype=np.int64)
+    wforce = np.zeros(wcap)      # forced sign at the start of the next step (re-trigger guard)
+    wv = np.zeros(wcap)          # watch values at the end of the last accepted step ...
+    wd = np.zeros(wcap)          # ... and their time derivatives (surfaces), reused next step
+    wvalid = np.zeros(wcap, dtype=np.int64)
+    wtdep = np.zeros(wcap, dtype=np.int64)  # surface depends on t explicitly (moving wall)
     nw = 0
     # the surface/function that just fired, to suppress an immediate re-trigger
     last_type = -1
@@ -1632,7 +1729,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     last_depth = 0.0
 
     noise = 0.0
-    vals = np.zeros((_MAXW, 8))
+    vals = np.zeros((wcap, 8))
     thetas = np.zeros(8)
     rates = np.zeros(8)           # time derivatives of a watch function at the samples
     ex_th = np.zeros(8)           # samples of the release watch's extremum search
@@ -1909,6 +2006,13 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     v0 = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t, y, n, buf,
                                       fbuf, hdx)
                     r0 = _surface_rate(ev, p, dkind, widx[w], mode, nm, t, y, K[0], n, buf, hdx)
+                    if ((wact[w] == ACT_EVENT or wact[w] == ACT_SWITCH)
+                            and not (wforce[w] != 0.0 and t == last_t)):
+                        # first step after a restart (start of the run, any event): on the
+                        # surface within round-off is on it (the surface that just fired
+                        # keeps its guard)
+                        v0, r0 = _start_on_surface(ev, p, widx[w], dkind, mode, nm, t, y, n,
+                                                   v0, r0, buf, hdx)
                 if dkind == REGULAR:
                     ev(W_HHD, widx[w] * nm + mode, t_new, ynew, p, buf)
                     v1 = buf[0]
@@ -2116,6 +2220,13 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     fb = vq
                     side = 0
                     width_check = b_th - a_th
+                    if fa == 0.0:
+                        # the function is exactly zero at the left sample and moves into the
+                        # event direction from there (a start on the surface, or one within
+                        # its round-off band, see above): the crossing is at that sample. The
+                        # sign test below would take a zero end for the far side and slide
+                        # the bracket to the step's end
+                        b_th = a_th
                     for it in range(400):
                         if (b_th - a_th) * h <= 2.0 * _ulp(t + b_th * h):
                             break
@@ -2256,6 +2367,11 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 ynew[i] = ytmp[i]
             if (wtype[w] != WF_SURFACE and wtype[w] != WF_HDOT) or polish == 7:
                 break
+            if best_th == 0.0:
+                # the function was zero at the step's start (on the surface, see the bracket
+                # above): the event is at t, where the state is given; Newton on round-off
+                # values (tangency: hv / hd ~ 1e-16 / 1e-16) would move it anywhere
+                break
             # Newton on h(t + h_ev) (or on hdot of a mode, for a sliding exit) with the
             # landing step as the flow: quadratic, so a few iterations bring the watch function
             # to round-off even for slow (near-grazing, tangential-exit) arrivals
@@ -2321,6 +2437,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
         act = wact[w]
         new_sign = best_sign
         chatter_tail = False
+        contact_stick = False
         for i in range(nY):
             xs[i] = y[i]
         if act == ACT_EVENT:
@@ -2351,6 +2468,13 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                        gx, hdx)
                 vn = _surface_rate(ev, p, dkind, widx[w], mode, nm, t, y, fbuf, n, buf, hdx)
             moving_away = etab[j, 1] != 0 and vn * etab[j, 1] < 0.0
+            if moving_away:
+                # ... unless that velocity is round-off: a state on the surface and tangent to
+                # it (hdot +-1e-16 on an oblique or curved surface) is not leaving; the sign of
+                # the round-off must not decide (it would let the state sink into the surface
+                # until the re-trigger guard's noise band is passed)
+                if abs(vn) <= _rate_band(ev, p, widx[w], mode, nm, t, y, n, hdx):
+                    moving_away = False
             if not guard_ok or moving_away:
                 # no event: continue past this crossing
                 last_type = wtype[w]; last_idx = widx[w]; last_mode = wmode[w]
@@ -2456,6 +2580,18 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 # variant on the right side, or slide. An event without reset or target
                 # while sliding (a section, a terminal event) leaves the sliding motion alone.
                 dkind, didx, mode = _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx)
+            if (log_kind == K_IMPACT and dkind == REGULAR
+                    and _stays_in_contact(ev, p, k, mode, nm, t, y, n, buf, fbuf, hdx)):
+                # the reset left hdot at round-off (a plastic impact on an oblique or curved
+                # surface, an impact at rest) and the free motion presses into the surface:
+                # the state sticks (constrained motion along the surface, released where the
+                # constraint force vanishes), logged as a `stick` record after the impact, as
+                # after a chattering sequence. The impact's saltation matrix maps into the
+                # sticking field.
+                contact_stick = True
+                dkind = STICK
+                didx = j
+                _project_stick(ev, p, k, mode, nm, t, y, n, hdx, w2, buf)
             if nvar and log_kind != K_CHATTER and not chatter_tail:
                 _event_saltation(ev, p, j, k, old_mode, mode, nm, t, xs, y, n, S, gx, hdx, buf,
                                  fbuf, w1, w2, etab, stab, slide_c, old_kind, old_idx, ytmp,
@@ -2591,8 +2727,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             rec[4] = old_mode
             # the chatter record is the jump x_in -> Q(x_in); the change of discrete state
             # to sticking is the `stick` record that follows it
-            rec[5] = old_kind if log_kind == K_CHATTER else dkind
-            rec[6] = old_idx if log_kind == K_CHATTER else didx
+            rec[5] = old_kind if log_kind == K_CHATTER else (REGULAR if contact_stick else dkind)
+            rec[6] = old_idx if log_kind == K_CHATTER else (-1 if contact_stick else didx)
             rec[7] = old_mode if log_kind == K_CHATTER else mode
             rec[8] = n_nodes
             ev_t, ev_t2, ev_info, ev_xb, ev_xa = _log_event(ev_t, ev_t2, ev_info, ev_xb, ev_xa,
@@ -2613,6 +2749,20 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             ikind[n_nodes - 1] = 2 if log_kind == K_CHATTER else 1
             dense[n_nodes - 1, :, :] = 0.0
             n_nodes += 1
+            if contact_stick:
+                # the impact left the state in contact: sticking starts here (its own record,
+                # from the mode the reset gave, as after a chattering sequence)
+                rec[0] = K_STICK
+                rec[2] = REGULAR
+                rec[3] = -1
+                rec[4] = mode
+                rec[5] = dkind
+                rec[6] = didx
+                rec[7] = mode
+                rec[8] = n_nodes - 1
+                ev_t, ev_t2, ev_info, ev_xb, ev_xa = _log_event(ev_t, ev_t2, ev_info, ev_xb,
+                                                                ev_xa, n_ev, t, t, rec, y, y)
+                n_ev += 1
             if log_kind == K_CHATTER:
                 # the accumulation is followed by sticking: log it as its own event
                 rec[0] = K_STICK
@@ -2686,8 +2836,20 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             if dkind == REGULAR:
                 ev(W_HD, widx[w] * nm + mode, t, y, p, buf)
                 last_sign = 1.0 if buf[0] > 0.0 else -1.0
-                if buf[0] == 0.0:
-                    last_sign = 1.0 if etab[wref[w], 1] <= 0 else -1.0
+                vout = buf[0]
+                if etab[wref[w], 2] == EV_IMPACT and vout != 0.0:
+                    # hdot after an impact within round-off (a plastic impact that does not
+                    # stick: the free motion leaves tangentially): its sign is noise, the
+                    # state is on the allowed side
+                    if abs(vout) <= _rate_band(ev, p, widx[w], mode, nm, t, y, n, hdx):
+                        vout = 0.0
+                if vout == 0.0:
+                    # tangent after the event: an impact leaves the state on the admissible
+                    # side, a transition has crossed into the event direction
+                    if etab[wref[w], 2] == EV_IMPACT or etab[wref[w], 1] == 0:
+                        last_sign = 1.0 if etab[wref[w], 1] <= 0 else -1.0
+                    else:
+                        last_sign = 1.0 if etab[wref[w], 1] > 0 else -1.0
             else:
                 last_sign = 1.0
         elif act == ACT_RELEASE:

@@ -154,7 +154,10 @@ def simulate(model, x0, t_span, params: Mapping[str, float] | None = None, **opt
         Integrate the variational equations with saltation matrices at every event; the
         result then has ``jacobian`` (``dx(t_end)/dx0``) and ``transfer_matrices`` (the flow
         Jacobian of each smooth segment and the full saltation matrix of each event, see
-        :mod:`pwsdyn.stability`).
+        :mod:`pwsdyn.stability`). At a grazing event (the flow tangent to the surface,
+        ``|h_t + h_x f| <= 1e-13 |h_x| |f|``) the saltation matrix is unbounded: the kernel
+        makes it NaN, so that event's transfer matrix and ``jacobian`` are NaN (marked
+        singular; :func:`pwsdyn.saltation_matrix` raises there).
     dense : bool
         Store every step with its dense output (default). ``False`` keeps only the event log
         and the end state (for sweeps).

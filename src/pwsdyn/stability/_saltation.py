@@ -23,6 +23,13 @@ and the Filippov ``crossing`` and ``slide_start`` of a switch (``g`` the identit
 do not change the field (``release``, ``slide_end``; ``S = I``) and the complete-chattering map
 (a jump in time as well as in state) have the full form only. The chattering one is the
 kernel's own (:func:`pwsdyn.integrate._kernel.chatter_saltation`): one formula, one answer.
+
+Grazing: where the flow is tangent to the surface, ``|h_t + h_x f_in| <= GRAZING_RTOL |h_x|
+|f_in|`` (``GRAZING_RTOL = 1e-13``, shared with the kernel), both forms are unbounded. The
+functions here raise :class:`~pwsdyn.errors.ArgumentError` saying so; the kernel, which cannot
+raise in the middle of a run, makes the event's saltation matrix all NaN (so
+``Trajectory.transfer_matrices`` at that event and ``Trajectory.jacobian`` are NaN: the
+variational result is marked singular, never silently finite without its singular term).
 """
 
 from __future__ import annotations
@@ -31,7 +38,7 @@ import numpy as np
 
 from .. import _validate as V
 from ..errors import ArgumentError
-from ..integrate._kernel import REGULAR, SLIDE, chatter_saltation
+from ..integrate._kernel import GRAZING_RTOL, REGULAR, SLIDE, chatter_saltation
 from ._context import (DiscreteState, ModelContext, check_state_name, event_states,
                        trajectory_start_state)
 
@@ -93,9 +100,10 @@ def _saltation_pair(ctx: ModelContext, kind: str, name: str, t: float, x_before,
     hx = ctx.h_x(k, t, x_before)
     den = ctx.h_t(k, t, x_before) + hx @ f_in
     scale = np.linalg.norm(hx) * max(np.linalg.norm(f_in), 1e-300)
-    if not np.isfinite(den) or abs(den) <= 1e-13 * scale:
-        raise ArgumentError(f"{kind} {name!r} at t={t:.17g} is grazing (h_t + h_x f = {den:.3e}): "
-                         f"its saltation matrix is unbounded")
+    if not np.isfinite(den) or abs(den) <= GRAZING_RTOL * scale:
+        raise ArgumentError(f"{kind} {name!r} at t={t:.17g} is grazing (h_t + h_x f = {den:.3e}, "
+                            f"|h_x| |f| = {scale:.3e}): its saltation matrix is unbounded (a "
+                            f"simulation with variational=True gives NaN there)")
     full = gx + np.outer(f_out - gx @ f_in - gt, hx) / den
     proj = gx - np.outer(gx @ f_in + gt, hx) / den
     return full, proj
@@ -135,6 +143,12 @@ def saltation_matrix(model, event: str, t: float, x, *, params=None, mode=None,
     Returns
     -------
     numpy.ndarray, shape (n, n)
+
+    Raises
+    ------
+    ArgumentError
+        The flow grazes the surface at ``x`` (``|h_t + h_x f_in| <= 1e-13 |h_x| |f_in|``): the
+        saltation matrix is unbounded (see the module docstring; the kernel gives NaN there).
 
     Examples
     --------
