@@ -26,7 +26,7 @@ from typing import Any, Mapping
 
 import sympy as sp
 
-from ..errors import ArgumentError, ModelError
+from ..errors import ArgumentError, ModelError, PwsdynError
 from .expressions import check_expression, parse_expression
 
 #: Name of the independent variable in expressions.
@@ -338,7 +338,7 @@ def load_model(source, **kwargs) -> Model:
     if isinstance(source, Model) or getattr(source, "is_map", False):
         return source
     if isinstance(source, Mapping):
-        return model_from_dict(dict(source), origin="<dict>")
+        return _built(model_from_dict, dict(source), origin="<dict>")
     if isinstance(source, (str, Path)):
         text_source = str(source)
         path = Path(text_source)
@@ -358,6 +358,22 @@ def load_model(source, **kwargs) -> Model:
                     f"got {type(source).__name__}")
 
 
+def _built(build, *args, origin: str, **kwargs):
+    """``build(*args, origin=origin, ...)``, with any error that is not pwsdyn's own turned into
+    a :class:`ModelError` naming the source: model files are untrusted input, and SymPy raises
+    many kinds of errors on degenerate expressions."""
+    try:
+        return build(*args, origin=origin, **kwargs)
+    except PwsdynError:
+        raise
+    except RecursionError:
+        raise ModelError("the model is nested too deeply to build", source=origin) from None
+    except (TypeError, ValueError, ArithmeticError, AttributeError, IndexError,
+            KeyError) as exc:
+        raise ModelError(f"the model cannot be built ({type(exc).__name__}: {exc})",
+                         source=origin) from None
+
+
 def _model_from_toml_text(text: str, origin: str) -> Model:
     try:
         data = tomllib.loads(text)
@@ -372,7 +388,7 @@ def _model_from_toml_text(text: str, origin: str) -> Model:
             elif "end of document" in str(exc):
                 line = max(1, len(text.splitlines()))
         raise ModelError(f"malformed TOML: {exc}", source=origin, line=line) from None
-    return model_from_dict(data, origin=origin, text=text)
+    return _built(model_from_dict, data, origin=origin, text=text)
 
 
 class _Where:
@@ -637,6 +653,10 @@ def model_from_dict(data: dict, origin: str = "<dict>", text: str | None = None)
             variables=tuple(names[s] for s in states) + (t,))
     except ModelError as exc:
         raise W.error(exc.reason, exc.field or "modes") from None
+    except (TypeError, ValueError, ArithmeticError) as exc:
+        # SymPy on a variant that is not defined: Max(0**-7.3, x) where Heaviside(x) = 0
+        raise W.error(f"a mode split at its discontinuous terms has a variant SymPy cannot "
+                      f"build ({type(exc).__name__}: {exc})", "modes") from None
     # a variant of a split mode can hold a constant its parent did not: Min(x, -5)**-0.5 is
     # (-5)**-0.5, complex, where x > -5
     def refuse(prefix, fieldname):
