@@ -220,6 +220,14 @@ def _generate_body(model: Model) -> str:
         what = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise ModelError(f"model {model.name!r} needs a function that cannot be compiled "
                          f"({what}); simplify the expression", source=model.origin) from None
+    except ModelError:
+        raise
+    except (TypeError, ValueError, ArithmeticError, AttributeError, IndexError,
+            KeyError) as exc:
+        # SymPy on a degenerate derivative (an undefined constant, an incomparable Max)
+        raise ModelError(f"model {model.name!r} cannot be differentiated "
+                         f"({type(exc).__name__}: {str(exc)[:200]})",
+                         source=model.origin) from None
 
 
 def _emit_body(model: Model) -> str:
