@@ -75,8 +75,25 @@ def test_non_affine_modes_are_rejected_with_a_reason(rhs, words):
 
 
 def test_exact_option_is_validated():
-    with pytest.raises(ValueError, match="`exact` must be True or False"):
+    with pytest.raises(ValueError, match="`exact` must be 'auto', True or False"):
         pwsdyn.simulate("impact-oscillator", [-0.5, 0.0], 1.0, exact="yes")
+
+
+def test_exact_auto_is_the_default_and_runs_models_without_affine_modes():
+    """``exact='auto'`` (the default) propagates the affine modes exactly -- the same run as
+    ``exact=True`` -- and runs a model without any on the Runge-Kutta pair, where
+    ``exact=True`` refuses it."""
+    a = pwsdyn.simulate("impact-oscillator", [-0.5, 0.0], 20.0)
+    b = pwsdyn.simulate("impact-oscillator", [-0.5, 0.0], 20.0, exact=True)
+    assert a.options["exact"] == "auto"
+    np.testing.assert_array_equal(a.t, b.t)
+    np.testing.assert_array_equal(a.x, b.x)
+    model = _oscillator("-x**3", {})
+    c = pwsdyn.simulate(model, [0.1, 0.0], 1.0)
+    d = pwsdyn.simulate(model, [0.1, 0.0], 1.0, exact=False)
+    np.testing.assert_array_equal(c.x, d.x)
+    with pytest.raises(ValueError, match="exact=True.*affine"):
+        pwsdyn.simulate(model, [0.1, 0.0], 1.0, exact=True)
 
 
 # --------------------------------------------------------------------------------------
@@ -107,7 +124,7 @@ def test_forced_damped_oscillator_matches_closed_form_with_dense_output():
     # 5e-14 at t = 5, 21.75, 40, 60. DOP853 at rtol 1e-13 is off by 3.3e-13 here.
     np.testing.assert_allclose(traj(ts), exact, rtol=0, atol=3e-13)
     # steps of 1/||M|| (15 per forcing period here) against ~50 of RK45 at rtol 1e-10
-    rk = pwsdyn.simulate(model, x0, (0, 60), dense=False)
+    rk = pwsdyn.simulate(model, x0, (0, 60), dense=False, method="RK45", exact=False)
     assert traj.stats["steps"] < rk.stats["steps"] / 3
 
 
@@ -126,8 +143,8 @@ def test_resonant_forcing_without_damping():
 def test_ball_in_flight_and_static_floor_impacts():
     """Parabolic flights (a nilpotent M): impact times of the static-floor ball to 1e-13."""
     e, g = 0.8, 9.81
-    traj = pwsdyn.simulate("bouncing-ball", {"y": 1.0, "v": 0.0}, (0, 3.5), params={"e": e},
-                           exact=True)
+    traj = pwsdyn.simulate("bouncing-ball", {"y": 1.0, "v": 0.0}, (0, 3.5),
+                           params={"e": e, "A": 0.0}, exact=True)
     impacts = traj.event_times("impact")
     t1 = math.sqrt(2 / g)
     expected = [t1]

@@ -318,7 +318,12 @@ def test_smoothed_reference_approaches_the_sliding_solution():
     0.0048, 5.3e-4 for eps = 1e-1 ... 1e-4)."""
     V, T = 0.2, 15.0
     traj = pwsdyn.simulate(belt(V=V, mu=1.0), [0.0, 0.0], (0.0, T))
-    assert traj.event_counts() == {"slide_start": 1, "slide_end": 1}
+    # one sticking phase. The slip after it returns one period later exactly to where
+    # sticking ended, (x, v) = (1, V), tangent to the surface: a touch whose time is defined
+    # only to ~sqrt(eps), which rounding may log as a sliding episode of zero length (3e-8)
+    slides = traj.sliding_intervals()
+    assert slides[0][1] - slides[0][0] > 4.0
+    assert all(b - a < 1e-6 for a, b, _ in slides[1:]), slides
     tt = np.linspace(0.0, T, 301)
     ref = traj(tt)
     errors = []
@@ -405,7 +410,8 @@ def test_reaching_the_intersection_of_two_surfaces_while_sliding_is_reported():
     assert traj.t_final == pytest.approx(1.0, abs=1e-12)
     assert np.max(np.abs(traj.x_final)) <= 1e-12
     assert "intersection of two switching surfaces" in traj.message
-    with pytest.raises(SolveError, match="intersection.*Stopped at t=1"):
+    # t = 1 to rounding (the exact flow of the constant fields: 1 - 4e-16)
+    with pytest.raises(SolveError, match=r"intersection.*Stopped at t=(1\b|0\.999999999999)"):
         pwsdyn.simulate(m, [1.0, 0.5], (0.0, 3.0))
 
 
@@ -616,7 +622,7 @@ def test_cli_summary_counts_crossings_sliding_segments_and_time():
     res = CliRunner().invoke(cli_main, ["simulate", "stick-slip-oscillator", "--sliding",
                                         "utkin"])
     assert res.exit_code == 0, res.output
-    traj = pwsdyn.simulate("stick-slip-oscillator", [0.0, 0.0], (0.0, 40.0))
+    traj = pwsdyn.simulate("stick-slip-oscillator", [0.0, 0.0], (0.0, 40.0), sliding="utkin")
     total = sum(b - a for a, b, _ in traj.sliding_intervals())
     line = next(ln for ln in res.output.splitlines() if ln.startswith("switching"))
     assert "0 crossings, 4 sliding segments" in line

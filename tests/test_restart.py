@@ -12,6 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 import pwsdyn
+from _closed_forms import release_time
 from pwsdyn.errors import ArgumentError
 from pwsdyn.integrate._start import BAND_ULPS, round_off_band
 
@@ -189,14 +190,6 @@ def test_shooting_from_a_sticking_guess_finds_the_resting_orbit():
 # --------------------------------------------------------------------------------------
 # (5) vibrating table: a sticking restart stays stuck until the release
 # --------------------------------------------------------------------------------------
-
-def release_time(A, w, t0):
-    """Closed form: the ball leaves the table where its acceleration -A w^2 sin(w t) falls to
-    -g, sin(w t) = g / (A w^2) with sin increasing: the first such time after t0."""
-    phi = math.asin(G / (A * w * w))
-    k = math.ceil((w * t0 - phi) / (2 * math.pi))
-    return (phi + 2 * math.pi * k) / w
-
 
 @pytest.mark.parametrize("A, w, phase", [(0.1, 12.0, 3.5), (0.05, 20.0, 5.0),
                                          (0.2, 8.0, 3.0)])

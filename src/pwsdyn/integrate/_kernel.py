@@ -70,6 +70,15 @@ away", and after an impact with the free normal acceleration into the surface it
 Watch arrays are sized from the model (one entry per event and switch, plus spares), so any
 number of events and switches per mode is watched.
 
+Output
+------
+``iopt[IO_SAVE]``: ``SAVE_EVENTS`` stores the nodes on both sides of every event and the end
+(sweeps); ``SAVE_DENSE`` every step with its power-form dense output; ``SAVE_NODES`` every
+step with its length only -- the dense output is rebuilt when it is read by taking the step
+again from its start node (:func:`dense_coefficients`: the same stages from the same numbers,
+so the same coefficients), which costs the run nothing (storing it doubled the cost of a
+Runge-Kutta run and added the three extra stages of DOP853's interpolant to every step).
+
 Sampling
 --------
 With ``FO_SAMPLE_DT > 0`` the state at ``FO_SAMPLE_T0 + k FO_SAMPLE_DT`` is recorded from each
@@ -81,7 +90,9 @@ Exact propagation
 With ``iopt[IO_EXACT]`` the regular modes that are affine in the state with harmonic forcing
 (:mod:`pwsdyn.model.affine`) are not integrated but propagated by the exact flow
 ``z(t + h) = exp(h M) z(t)`` of the state augmented with the forcing. Steps are limited to
-``||h M||_inf <= 1`` (after scaling the constant and forcing columns): a full step is one
+``||h D^-1 M D||_inf <= 1`` (after scaling the constant and forcing columns; ``D`` balances
+``M`` by powers of two, so a stiff spring's steps follow its frequency, not its stiffness:
+:func:`_affine_setup`): a full step is one
 product with a propagator made once per mode and run (:func:`_exact_propagator`), any other
 step sums the Taylor series of the vector (:func:`_exact_step`), whose terms are the step's
 dense output -- the exact flow, so the event search runs on it and the landing on an event
@@ -155,6 +166,10 @@ IO_MODE0, IO_NMODES, IO_MAXSTEPS, IO_MAXEVENTS, IO_METHOD, IO_VAR, IO_CHATTER, I
 IO_STOP_MASK, IO_STOP_REF, IO_STOP_COUNT, IO_DKIND0, IO_DIDX0 = range(8, 13)
 # exact propagation of the affine modes (1) instead of the Runge-Kutta pair (0)
 IO_EXACT = 13
+# values of iopt[IO_SAVE]: the nodes of events and the end only; every step with its dense
+# output (power-form coefficients, ``dense``); every step with its length only (``hstep``:
+# the dense output is rebuilt on demand from the node by :func:`dense_coefficients`)
+SAVE_EVENTS, SAVE_DENSE, SAVE_NODES = 0, 1, 2
 IO_N = 14
 # values of iopt[IO_VAR]: no variational equations; Phi = dx(t)/dx0 through every event; or per
 # segment: Phi restarts at the identity after each event and each event record carries the
@@ -171,6 +186,14 @@ FO_N = 9
 SW_FILIPPOV, SW_CONTINUOUS = 0, 1
 SLIDE_CONVEX, SLIDE_UTKIN = 0, 1
 
+#: The decorator of the helpers that allocate nothing: compiled without numba's reference
+#: counting (``_nrt=False``). With it every call increfs and decrefs each array argument
+#: at entry and exit -- two atomic updates per array, ~20 per call of the vector field of a
+#: sticking or sliding state, measured a third of the time of an event and of a landing step.
+#: The arrays are the kernel's, alive for the whole run, so borrowing them is safe; a helper
+#: that allocates (growing the outputs, saltation matrices) keeps ``njit(cache=True)``.
+_hot = njit(cache=True, _nrt=False)
+
 _EPS = np.finfo(np.float64).eps
 #: Relative step of the central differences of the variational code (cube root of eps).
 _FD_STEP = 6e-6
@@ -178,6 +201,10 @@ _FD_STEP = 6e-6
 _MAXW = 64
 #: Terms of the Taylor-summed exponential of an exact step (||h M|| <= 1: 1/20! < 1e-18).
 _EXACT_TERMS = 20
+#: Events this many ulps of t apart happen at one instant: the re-trigger guards of all of
+#: them hold at the restart (a function that fired is not fired again by the start-on-surface
+#: rule after another event at the same instant moved t by round-off).
+_COINCIDENT_ULPS = 64.0
 
 
 # --------------------------------------------------------------------------------------
@@ -211,24 +238,20 @@ def _grow1(a, need):
     return b
 
 
-@njit(cache=True)
+@_hot
 def _log_event(log_t, log_t2, log_info, log_xb, log_xa, n_ev, t, t_after, rec, xb, xa):
-    """Append one record to the event log, growing its arrays; returns the arrays."""
-    log_t = _grow1(log_t, n_ev + 1)
-    log_t2 = _grow1(log_t2, n_ev + 1)
-    log_info = _grow2(log_info, n_ev + 1)
-    log_xb = _grow2(log_xb, n_ev + 1)
-    log_xa = _grow2(log_xa, n_ev + 1)
+    """Write record ``n_ev`` of the event log (the kernel keeps room for it: see its outer
+    loop)."""
     log_t[n_ev] = t
     log_t2[n_ev] = t_after
     for c in range(rec.shape[0]):
         log_info[n_ev, c] = rec[c]
-    log_xb[n_ev, :] = xb
-    log_xa[n_ev, :] = xa
-    return log_t, log_t2, log_info, log_xb, log_xa
+    for c in range(xb.shape[0]):
+        log_xb[n_ev, c] = xb[c]
+        log_xa[n_ev, c] = xa[c]
 
 
-@njit(cache=True)
+@_hot
 def _dot(a, b, n):
     s = 0.0
     for i in range(n):
@@ -236,7 +259,7 @@ def _dot(a, b, n):
     return s
 
 
-@njit(cache=True)
+@_hot
 def _ulp(t):
     return max(abs(t), 1.0) * _EPS
 
@@ -245,7 +268,7 @@ def _ulp(t):
 # vector fields of the discrete states
 # --------------------------------------------------------------------------------------
 
-@njit(cache=True)
+@_hot
 def _impact_direction(ev, p, j, k, mode, nm, t, x, n, W, gx, hdx):
     """W of the impact law ``x+ = x- + W hdot`` (slides, "Simulation: Chattering").
 
@@ -265,7 +288,7 @@ def _impact_direction(ev, p, j, k, mode, nm, t, x, n, W, gx, hdx):
     return _dot(hdx, W, n)
 
 
-@njit(cache=True)
+@_hot
 def _field(ev, p, dkind, didx, mode, nm, t, x, n, out, etab, stab, slide_c, w1, w2, gx, hdx):
     """Vector field of the current discrete state at (t, x) into out[:n]."""
     if dkind == REGULAR:
@@ -327,7 +350,7 @@ def _field(ev, p, dkind, didx, mode, nm, t, x, n, out, etab, stab, slide_c, w1, 
                 out[i] -= g * hdx[i]
 
 
-@njit(cache=True)
+@_hot
 def _equivalent_control(ev, p, s, t, x, buf):
     """Utkin's equivalent control on switch ``s``: the root ``u`` of
     ``g(u) = h_t + h_x f(t, x, u)`` in ``[-1, 1]`` (``u = +1`` is the field above the surface,
@@ -374,7 +397,7 @@ def _equivalent_control(ev, p, s, t, x, buf):
     return u
 
 
-@njit(cache=True)
+@_hot
 def _project_surface(ev, p, k, t, y, n, hdx, buf):
     """One Newton step onto ``h = 0`` along ``h_x``: at sliding entry the state is a few ulps
     off the surface; this removes them, so a linear ``h`` is then held to round-off."""
@@ -387,7 +410,7 @@ def _project_surface(ev, p, k, t, y, n, hdx, buf):
             y[i] -= hv * hdx[i] / nrm2
 
 
-@njit(cache=True)
+@_hot
 def _partner(stab, k, m):
     """The mode across surface ``k`` from mode ``m`` (-1 if no switch joins them)."""
     for s in range(stab.shape[0]):
@@ -399,7 +422,7 @@ def _partner(stab, k, m):
     return -1
 
 
-@njit(cache=True)
+@_hot
 def _find_switch(stab, k, a, b):
     """The switch on surface ``k`` with mode ``a`` above and ``b`` below (-1 if none)."""
     for s in range(stab.shape[0]):
@@ -408,7 +431,7 @@ def _find_switch(stab, k, a, b):
     return -1
 
 
-@njit(cache=True)
+@_hot
 def _surface_offset(ev, p, k, t, y, n, xmax, buf, hdx):
     """h of surface ``k`` at (t, y) and the round-off band around zero it is judged with
     (64 ulps of the state and gradient scales)."""
@@ -421,7 +444,7 @@ def _surface_offset(ev, p, k, t, y, n, xmax, buf, hdx):
     return hv, 64.0 * _EPS * xmax * gmax
 
 
-@njit(cache=True)
+@_hot
 def _start_on_surface(ev, p, k, dkind, mode, nm, t, y, n, v0, r0, buf, hdx):
     """``(h, hdot)`` of surface ``k`` at the start of the first step after a restart, with
     round-off taken as zero: a surface within its band (:func:`_surface_offset`) is ON it,
@@ -442,7 +465,7 @@ def _start_on_surface(ev, p, k, dkind, mode, nm, t, y, n, v0, r0, buf, hdx):
     return v0, r0
 
 
-@njit(cache=True)
+@_hot
 def _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx):
     """The discrete state that the switches impose at ``(t, y)`` starting from ``mode``.
 
@@ -501,7 +524,7 @@ def _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx):
     return REGULAR, -1, mode
 
 
-@njit(cache=True)
+@_hot
 def _rhs(ev, p, dkind, didx, mode, nm, t, y, n, nvar, out, etab, stab, slide_c,
          w1, w2, gx, hdx, jac, xt, ft):
     """Right-hand side of the (optionally variational) system."""
@@ -519,7 +542,7 @@ def _rhs(ev, p, dkind, didx, mode, nm, t, y, n, nvar, out, etab, stab, slide_c,
             out[n + i * n + c] = s
 
 
-@njit(cache=True)
+@_hot
 def _jacobian(ev, p, dkind, didx, mode, nm, t, y, n, f0, etab, stab, slide_c,
               w1, w2, gx, hdx, jac, xt, ft):
     """Jacobian of the current field: symbolic in a regular mode, central differences of the
@@ -547,7 +570,7 @@ def _jacobian(ev, p, dkind, didx, mode, nm, t, y, n, f0, etab, stab, slide_c,
 # Runge-Kutta step and dense output
 # --------------------------------------------------------------------------------------
 
-@njit(cache=True)
+@_hot
 def _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_last, ytmp,
                etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft):
     """Stages 1..s_last of an explicit RK step (stage 0 = K[0] is given)."""
@@ -566,7 +589,7 @@ def _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_la
                  slide_c, w1, w2, gx, hdx, jac, xt, ft)
 
 
-@njit(cache=True)
+@_hot
 def _error_norm(K, E, method, s, y, ynew, h, i0, i1, rtol, atol):
     """Scaled RMS error of the components ``y[i0:i1]``.
 
@@ -601,7 +624,7 @@ def _error_norm(K, E, method, s, y, ynew, h, i0, i1, rtol, atol):
     return abs(h) * e5 / np.sqrt((e5 + 0.01 * e3) * m)
 
 
-@njit(cache=True)
+@_hot
 def _dense_coeffs(K, P, h, nY, s_ext, deg, out):
     """out[i, k] = h * sum_j K[j, i] P[j, k]  (power form, theta^(k+1))."""
     for i in range(nY):
@@ -614,7 +637,7 @@ def _dense_coeffs(K, P, h, nY, s_ext, deg, out):
             out[i, k] = h * acc
 
 
-@njit(cache=True)
+@_hot
 def _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_fsal, P, Q, ytmp,
                 etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft):
     """Dense output of the step just taken: extra stages (DOP853) and power-form
@@ -639,40 +662,43 @@ def _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_f
 @njit(cache=True)
 def _take_samples(t, h, y, Q, nY, n, deg, s0, sdt, k, t_end, samp, n_samp, xs, max_samp):
     """Record the states at the sample times ``s0 + k sdt`` in ``(t, t + h]`` (and not past
-    ``t_end``) from the step's dense output, at most ``max_samp`` in all. Returns
-    ``(samp, n_samp, k)``."""
+    ``t_end``) from the step's dense output into ``samp`` (allocated for all of them), at most
+    ``max_samp`` in all. Returns ``(n_samp, k)``."""
     ts = s0 + k * sdt
     # bounded: the kernel admits only finite s0, t, h, t_end and 0 < sdt < inf, so ts grows
     # with k; the cap bounds a tiny sdt (the kernel's set-up already refuses more samples
     # than it, so it is only a backstop and never drops a sample of a run it accepted)
     while ts <= t + h and ts <= t_end and n_samp < max_samp:
         _dense_eval(y, Q, (ts - t) / h if h > 0.0 else 1.0, nY, deg, xs)
-        samp = _grow2(samp, n_samp + 1)
         samp[n_samp, 0] = ts
         for i in range(n):
             samp[n_samp, 1 + i] = xs[i]
         n_samp += 1
         k += 1
         ts = s0 + k * sdt
-    return samp, n_samp, k
+    return n_samp, k
 
 
-@njit(cache=True)
-def _exact_step(M, sc, nz, n, t, y, h, z, v, Q, ynew):
-    """One exact step of an affine mode: ``z(t + h) = exp(h M) z(t)`` for the augmented state
-    ``z = (x, 1, cos(w_j t), sin(w_j t), ...)`` (:mod:`pwsdyn.model.affine`).
+@_hot
+def _exact_step(M, sc, wt, md, nz, n, t, y, h, z, v, Q, ynew):
+    """One exact step of affine mode ``md``: ``z(t + h) = exp(h M) z(t)`` for the augmented
+    state ``z = (x, 1, cos(w_j t), sin(w_j t), ...)`` (:mod:`pwsdyn.model.affine`); ``M``,
+    ``sc``, ``wt`` are the per-mode tables of :func:`_affine_setup` (indexed here, not sliced
+    by the caller: an array view costs two atomic reference-count updates per step).
 
     The exponential is summed as its Taylor series ``sum_k (h M)^k z / k!`` (dense products: a
     compressed-row product skipping the zeros of ``M`` measured slower at these sizes). The
-    caller keeps ``||h M||_inf <= 1``, so the terms fall faster than ``1/k!`` and the sum is
-    exact to rounding after at most ``_EXACT_TERMS`` terms; it stops once a term is below
-    1e-18 of ``z``. The terms are also the dense output: ``x(t + theta h) = x + sum_k
+    caller keeps ``||h D^-1 M D||_inf <= 1`` (``D`` the balancing scales of the mode, ``wt``
+    their inverses, powers of two: see :func:`_affine_setup`), so in the balanced coordinates
+    the terms fall faster than ``1/k!`` and the sum is exact to rounding after at most
+    ``_EXACT_TERMS`` terms; it stops once a term is below 1e-18 of ``z`` (both measured in
+    those coordinates). The terms are also the dense output: ``x(t + theta h) = x + sum_k
     Q[:, k-1] theta^k`` is the same series at ``theta h``, so events are located on the exact
     flow too. Columns of ``Q`` past the last term are zeroed."""
-    _augment(M, sc, nz, n, t, y, z)
+    _augment(M, sc, md, nz, n, t, y, z)
     zmax = 0.0
     for i in range(nz):
-        zmax = max(zmax, abs(z[i]))
+        zmax = max(zmax, abs(z[i]) * wt[md, i])
     for i in range(n):
         ynew[i] = y[i]
     ncol = Q.shape[1]
@@ -684,9 +710,9 @@ def _exact_step(M, sc, nz, n, t, y, h, z, v, Q, ynew):
         for i in range(nz):
             acc = 0.0
             for m in range(nz):
-                acc += M[i, m] * z[m]
+                acc += M[md, i, m] * z[m]
             v[i] = c * acc
-            big = max(big, abs(v[i]))
+            big = max(big, abs(v[i]) * wt[md, i])
         for i in range(nz):
             z[i] = v[i]
         for i in range(n):
@@ -700,57 +726,182 @@ def _exact_step(M, sc, nz, n, t, y, h, z, v, Q, ynew):
             Q[i, kk] = 0.0
 
 
-@njit(cache=True)
-def _exact_propagator(M, nz, h, Pm, T1, T2):
-    """``Pm = exp(h M)`` summed as its Taylor series (``||h M||_inf <= 1``, as in
-    :func:`_exact_step`): steps of the same length then cost one matrix-vector product."""
+@_hot
+def _exact_propagator(M, wt, md, nz, h, Pm, T1, T2):
+    """``Pm = exp(h M)`` summed as its Taylor series (``||h D^-1 M D||_inf <= 1``, as in
+    :func:`_exact_step`; the stop test on the balanced entries ``T_ic d_c / d_i``): steps of
+    the same length then cost one matrix-vector product."""
     for i in range(nz):
         for c in range(nz):
             T1[i, c] = 1.0 if i == c else 0.0
-            Pm[i, c] = T1[i, c]
+            Pm[md, i, c] = T1[i, c]
     for k in range(1, _EXACT_TERMS + 1):
         big = 0.0
         for i in range(nz):
             for c in range(nz):
                 acc = 0.0
                 for m in range(nz):
-                    acc += T1[i, m] * M[m, c]
+                    acc += T1[i, m] * M[md, m, c]
                 T2[i, c] = acc * h / k
-                big = max(big, abs(T2[i, c]))
+                big = max(big, abs(T2[i, c]) * wt[md, i] / wt[md, c])
         for i in range(nz):
             for c in range(nz):
                 T1[i, c] = T2[i, c]
-                Pm[i, c] += T2[i, c]
+                Pm[md, i, c] += T2[i, c]
         if big <= 1e-18:
             break
 
 
-@njit(cache=True)
-def _exact_apply(M, sc, Pm, nz, n, t, y, z, ynew):
-    """``x(t + h)`` from a cached propagator ``Pm = exp(h M)`` (see :func:`_exact_step`)."""
-    _augment(M, sc, nz, n, t, y, z)
+@_hot
+def _exact_apply(M, sc, Pm, md, nz, n, t, y, z, ynew):
+    """``x(t + h)`` from a cached propagator ``Pm[md] = exp(h M)`` (see :func:`_exact_step`)."""
+    _augment(M, sc, md, nz, n, t, y, z)
     for i in range(n):
         acc = 0.0
         for m in range(nz):
-            acc += Pm[i, m] * z[m]
+            acc += Pm[md, i, m] * z[m]
         ynew[i] = acc
 
 
+@_hot
+def _balance(M, nz, w, B):
+    """Balancing of ``M`` by a diagonal similarity of powers of two (Parlett & Reinsch 1969,
+    as LAPACK's ``gebal`` without permutations): ``B = D^-1 M D`` with row and column norms
+    (off the diagonal) made comparable. Writes ``w = 1 / diag(D)`` (exact: powers of two) and
+    returns ``||B||_inf``. Rows or columns that are zero off the diagonal (the constant of the
+    augmented state) keep their scale.
+
+    The exponential's Taylor terms in the balanced coordinates are those of ``M`` scaled by
+    powers of two, so only the step bound and the stop tests use ``D``: a stiff spring
+    ``[[0, 1], [-k, -c]]`` has ``||M|| ~ k`` but ``||B|| ~ sqrt(k)``, its frequency."""
+    for i in range(nz):
+        w[i] = 1.0
+        for c in range(nz):
+            B[i, c] = M[i, c]
+    for sweep in range(64):
+        done = True
+        for i in range(nz):
+            c = 0.0
+            r = 0.0
+            for j in range(nz):
+                if j != i:
+                    c += abs(B[j, i])
+                    r += abs(B[i, j])
+            if c == 0.0 or r == 0.0 or not (np.isfinite(c) and np.isfinite(r)):
+                continue
+            g = r / 2.0
+            f = 1.0
+            tot = c + r
+            while c < g and f < 2.0 ** 500:
+                f *= 2.0
+                c *= 4.0
+            g = r * 2.0
+            while c > g and f > 2.0 ** -500:
+                f /= 2.0
+                c /= 4.0
+            if (c + r) / f < 0.95 * tot:
+                done = False
+                # column i times f, row i divided by f: D_ii *= f
+                w[i] /= f
+                for j in range(nz):
+                    B[i, j] /= f
+                    B[j, i] *= f
+        if done:
+            break
+    nrm = 0.0
+    for i in range(nz):
+        row = 0.0
+        for c in range(nz):
+            row += abs(B[i, c])
+        nrm = max(nrm, row)
+    return nrm
+
+
 @njit(cache=True)
-def _augment(M, sc, nz, n, t, y, z):
+def _affine_setup(ev, t0, x0, p, n, nm, enabled):
+    """The exact propagation data of a run: ``(nz, ok, M, hmax, scale, weight)``.
+
+    ``nz`` is the size of the augmented state (0: exact propagation off, or no mode is
+    affine); per mode ``ok`` (affine with a finite matrix), its augmented matrix ``M`` with the
+    constant and forcing columns divided by ``scale``, the largest exact step ``hmax`` with
+    ``||hmax D^-1 M D||_inf <= 1`` and the inverse balancing scales ``weight = 1 / diag(D)``
+    (:func:`_balance`; the identity where balancing does not lower the norm)."""
+    nz = 0
+    if enabled:
+        abuf = np.zeros(1)
+        ev(W_AFFINE, -1, t0, x0, p, abuf)
+        nz = int(abuf[0])
+    aff_ok = np.zeros(nm, dtype=np.int64)
+    aff_M = np.zeros((nm, max(nz, 1), max(nz, 1)))
+    aff_h = np.zeros(nm)
+    aff_s = np.ones((nm, max(nz, 1)))
+    aff_w = np.ones((nm, max(nz, 1)))
+    if nz > 0:
+        abuf = np.zeros(1 + nz * nz)
+        B = np.zeros((nz, nz))
+        wb = np.ones(nz)
+        for m in range(nm):
+            ev(W_AFFINE, m, t0, x0, p, abuf)
+            if abuf[0] == 0.0:
+                continue
+            for i in range(nz):
+                for c in range(nz):
+                    aff_M[m, i, c] = abuf[1 + i * nz + c]
+            # scale the constant and each (cos, sin) pair of z by the largest coefficient
+            # multiplying it (z = (x, s_0, s_1 cos, s_1 sin, ...), those columns of M divided
+            # by s): the step bound ||h M|| <= 1 then reflects the dynamics, not the units of
+            # b or of the forcing amplitude (a ball in flight: b = -g)
+            for c in range(n, nz):
+                aff_s[m, c] = 1.0
+            for c in range(n, nz):
+                if c > n and (c - n) % 2 == 0:
+                    continue  # the sin column shares the scale of its cos column
+                big = 0.0
+                for i in range(n):
+                    big = max(big, abs(aff_M[m, i, c]))
+                    if c > n:
+                        big = max(big, abs(aff_M[m, i, c + 1]))
+                if big > 1.0 and np.isfinite(big):
+                    aff_s[m, c] = big
+                    if c > n:
+                        aff_s[m, c + 1] = big
+            for c in range(n, nz):
+                for i in range(n):
+                    aff_M[m, i, c] /= aff_s[m, c]
+            nrm = 0.0
+            for i in range(nz):
+                row = 0.0
+                for c in range(nz):
+                    row += abs(aff_M[m, i, c])
+                nrm = max(nrm, row)
+            if not np.isfinite(nrm):
+                continue
+            # balanced: the step bound of a stiff spring is its frequency, not its stiffness
+            nb = _balance(aff_M[m], nz, wb, B)
+            if nb < nrm:
+                nrm = nb
+                for i in range(nz):
+                    aff_w[m, i] = wb[i]
+            aff_ok[m] = 1
+            aff_h[m] = 1.0 / nrm if nrm > 0.0 else np.inf
+    return nz, aff_ok, aff_M, aff_h, aff_s, aff_w
+
+
+@_hot
+def _augment(M, sc, md, nz, n, t, y, z):
     """The augmented state ``z = (x, s_0, s_1 cos(w_1 t), s_1 sin(w_1 t), ...)``, the
     frequencies read off the rotation blocks ``(0, -w_j; w_j, 0)`` of ``M`` and the scales
     ``s`` from ``sc`` (``M``'s columns are divided by them: see the kernel's set-up)."""
     for i in range(n):
         z[i] = y[i]
-    z[n] = sc[n]
+    z[n] = sc[md, n]
     for j in range((nz - n - 1) // 2):
-        om = M[n + 2 + 2 * j, n + 1 + 2 * j]
-        z[n + 1 + 2 * j] = sc[n + 1 + 2 * j] * np.cos(om * t)
-        z[n + 2 + 2 * j] = sc[n + 2 + 2 * j] * np.sin(om * t)
+        om = M[md, n + 2 + 2 * j, n + 1 + 2 * j]
+        z[n + 1 + 2 * j] = sc[md, n + 1 + 2 * j] * np.cos(om * t)
+        z[n + 2 + 2 * j] = sc[md, n + 2 + 2 * j] * np.sin(om * t)
 
 
-@njit(cache=True)
+@_hot
 def _dense_eval(y0, Q, theta, nY, deg, out):
     for i in range(nY):
         acc = 0.0
@@ -763,7 +914,7 @@ def _dense_eval(y0, Q, theta, nY, deg, out):
 # watch functions
 # --------------------------------------------------------------------------------------
 
-@njit(cache=True)
+@_hot
 def _watch_value(ev, p, wtype, widx, wmode, nm, t, x, n, buf, fbuf, hdx):
     if wtype == WF_SURFACE:
         ev(W_H, widx, t, x, p, buf)
@@ -778,7 +929,7 @@ def _watch_value(ev, p, wtype, widx, wmode, nm, t, x, n, buf, fbuf, hdx):
     return buf[0] + _dot(hdx, fbuf, n)
 
 
-@njit(cache=True)
+@_hot
 def _surface_rate(ev, p, dkind, k, mode, nm, t, x, f, n, buf, hdx):
     """dh/dt along the current field f: one call of the compiled hdot in a regular mode."""
     if dkind == REGULAR:
@@ -789,7 +940,7 @@ def _surface_rate(ev, p, dkind, k, mode, nm, t, x, f, n, buf, hdx):
     return buf[0] + _dot(hdx, f, n)
 
 
-@njit(cache=True)
+@_hot
 def _hdot_rate(ev, p, k, wm, nm, t, x, f, n, buf, hdx):
     """d/dt of ``hdot`` of mode ``wm`` on surface ``k`` along the current field ``f``:
     ``hdot_t + hdot_x f`` (to polish a sliding exit, where that ``hdot`` reaches zero)."""
@@ -798,7 +949,7 @@ def _hdot_rate(ev, p, k, wm, nm, t, x, f, n, buf, hdx):
     return buf[0] + _dot(hdx, f, n)
 
 
-@njit(cache=True)
+@_hot
 def _crosses(v0, v1, direction):
     """A zero crossing from v0 to v1 in ``direction``. A function that starts exactly at zero
     and moves in the event direction crosses (a start on an impact surface with approaching
@@ -810,7 +961,7 @@ def _crosses(v0, v1, direction):
     return (v0 > 0.0 and v1 <= 0.0) or (v0 < 0.0 and v1 >= 0.0)
 
 
-@njit(cache=True)
+@_hot
 def _watch_slope(ev, p, wtype, widx, wmode, nm, t, h, y, Q, n, deg, th, xs, buf, fbuf, hdx):
     """d/dt of a watch function along the step's dense output at ``theta``: a central
     difference (relative step ``_FD_STEP`` of the step; the dense output is a polynomial, so
@@ -827,7 +978,7 @@ def _watch_slope(ev, p, wtype, widx, wmode, nm, t, h, y, Q, n, deg, th, xs, buf,
     return (gb - ga) / (tb - ta)
 
 
-@njit(cache=True)
+@_hot
 def _watch_pair(ev, p, wtype, widx, wmode, dkind, didx, mode, nm, t, h, y, Q, n, deg, th, xs,
                 buf, fbuf, hdx, f, etab, stab, slide_c, w1, w2, gx):
     """Value and time derivative of a watch function at ``theta`` on the step's dense output
@@ -849,7 +1000,7 @@ def _watch_pair(ev, p, wtype, widx, wmode, dkind, didx, mode, nm, t, h, y, Q, n,
                            hdx)
 
 
-@njit(cache=True)
+@_hot
 def _extremum_search(ev, p, wtype, widx, wmode, dkind, didx, mode, nm, t, h, y, Q, n, deg,
                      a, ga, da, b, gb, db, xs, buf, fbuf, hdx, f, etab, stab, slide_c, w1, w2,
                      gx):
@@ -932,7 +1083,7 @@ def _extremum_search(ev, p, wtype, widx, wmode, dkind, didx, mode, nm, t, h, y, 
     return best_th, best_g, best_d
 
 
-@njit(cache=True)
+@_hot
 def _graze_samples(ev, p, wtype, widx, wmode, wdir, dkind, didx, mode, nm, t, h, y, Q, n, deg,
                    th, g, gd, ns, xs, buf, fbuf, hdx, f, etab, stab, slide_c, w1, w2, gx):
     """Samples ``th[:ns]`` (increasing theta) of a watch function with values ``g`` and time
@@ -969,7 +1120,7 @@ def _graze_samples(ev, p, wtype, widx, wmode, wdir, dkind, didx, mode, nm, t, h,
     return ns
 
 
-@njit(cache=True)
+@_hot
 def _hermite_extrema(v0, v1, d0, d1):
     """Interior extrema ``ra <= rb`` in ``(0, 1)`` of the cubic Hermite fit with values ``v0``,
     ``v1`` and theta-derivatives ``d0``, ``d1`` at the ends (2.0: none), by the
@@ -996,7 +1147,7 @@ def _hermite_extrema(v0, v1, d0, d1):
     return ra, rb
 
 
-@njit(cache=True)
+@_hot
 def _merge_samples(th, g, ns, th2, g2, ns2):
     """Insert the interior samples ``th2[1:ns2-1]`` into the increasing samples ``th[:ns]``
     (same ends), as room allows. Returns the new number of samples."""
@@ -1025,7 +1176,7 @@ def _merge_samples(th, g, ns, th2, g2, ns2):
 # event maps and saltation matrices
 # --------------------------------------------------------------------------------------
 
-@njit(cache=True)
+@_hot
 def _project_stick(ev, p, k, mode, nm, t, x, n, hdx, w2, buf):
     """Project x onto {h = 0, hdot = 0} along span(h_x, hdot_x) (two Newton iterations)."""
     for it in range(3):
@@ -1054,7 +1205,7 @@ def _project_stick(ev, p, k, mode, nm, t, x, n, hdx, w2, buf):
 GRAZING_RTOL = 1e-13
 
 
-@njit(cache=True)
+@_hot
 def _grazing(den, hx, f, n):
     """``den = h_t + h_x f`` is zero within ``GRAZING_RTOL |h_x| |f|`` (or not finite): the
     flow is tangent to the surface and the saltation matrix, with ``den`` as its
@@ -1062,7 +1213,7 @@ def _grazing(den, hx, f, n):
     return not (abs(den) > GRAZING_RTOL * np.sqrt(_dot(hx, hx, n)) * np.sqrt(_dot(f, f, n)))
 
 
-@njit(cache=True)
+@_hot
 def _rate_band(ev, p, k, mode, nm, t, x, n, hdx):
     """The round-off band around zero of ``hdot`` of surface ``k`` in ``mode`` at (t, x): 64
     ulps of the state and gradient scales, as :func:`_surface_offset` for ``h``. A normal
@@ -1077,7 +1228,16 @@ def _rate_band(ev, p, k, mode, nm, t, x, n, hdx):
     return 64.0 * _EPS * xmax * gmax
 
 
-@njit(cache=True)
+@_hot
+def _free_normal_acc(ev, p, k, mode, nm, t, x, n, buf, fbuf, hdx):
+    """The free normal acceleration ``hdot_t + hdot_x f`` of surface ``k`` in ``mode``."""
+    ev(W_F, mode, t, x, p, fbuf)
+    ev(W_HDX, k * nm + mode, t, x, p, hdx)
+    ev(W_HDT, k * nm + mode, t, x, p, buf)
+    return buf[0] + _dot(hdx, fbuf, n)
+
+
+@_hot
 def _stays_in_contact(ev, p, k, mode, nm, t, x, n, buf, fbuf, hdx):
     """A state on impact surface ``k`` whose normal velocity ``hdot`` is round-off
     (:func:`_rate_band`) while the free normal acceleration ``hdot_t + hdot_x f`` points into
@@ -1154,7 +1314,7 @@ def _switch_saltation(ev, p, dkind, didx, mode_in, mode_out, nm, k, t, x, n, S, 
                                                   if den != 0.0 else 0.0)
 
 
-@njit(cache=True)
+@_hot
 def _chatter_map(ev, p, j, k, mode, nm, t, x, n, out, W, gx, hdx, f, buf):
     """Complete-chattering map Q and time q at x (slides; Nordmark & Piiroinen 2009).
     Returns the duration q(x) - t; writes Q(x) into out."""
@@ -1171,7 +1331,7 @@ def _chatter_map(ev, p, j, k, mode, nm, t, x, n, out, W, gx, hdx, f, buf):
     return 2.0 * r * vin / ((1.0 - r) * acc)
 
 
-@njit(cache=True)
+@_hot
 def _chatter_event_map(ev, p, j, k, mode, nm, t, x, n, out, W, gx, hdx, f, buf, hx):
     """The complete-chattering event map as the kernel applies it: ``(t_in, x_in) -> (t_out,
     x_out)`` with ``t_out = q(t_in, x_in)`` and ``x_out`` the map ``Q(t_in, x_in)`` (slides,
@@ -1183,7 +1343,7 @@ def _chatter_event_map(ev, p, j, k, mode, nm, t, x, n, out, W, gx, hdx, f, buf, 
     return t_out
 
 
-@njit(cache=True)
+@_hot
 def _chatter_coef(ev, p, j, k, mode, nm, t, x, n, c, W, gx, hdx, f, buf):
     """The coefficients of the complete-chattering map, smooth functions of ``(t, x)``:
     ``Q = x + c hdot``, ``q = b hdot`` with ``b = 2 r / ((1 - r) a)`` and
@@ -1199,7 +1359,7 @@ def _chatter_coef(ev, p, j, k, mode, nm, t, x, n, c, W, gx, hdx, f, buf):
     return 2.0 * r / ((1.0 - r) * acc)
 
 
-@njit(cache=True)
+@_hot
 def _stick_gradients(ev, p, k, mode, nm, t, x, n, mu0, mu1, out, hdx):
     """``G = mu0 h_x + mu1 hdot_x`` at ``(t, x)`` into out (the normal displacement of the
     projection onto the sticking manifold, as a function of the point)."""
@@ -1493,6 +1653,102 @@ def state_field(ev, p, dkind, didx, mode, nm, t, x, etab, stab, slide_c, out):
 
 
 # --------------------------------------------------------------------------------------
+# dense output on demand
+# --------------------------------------------------------------------------------------
+
+def _dense_coefficients(ev, p, etab, stab, iopt, fopt, A, C, P, s_fsal, t0, x0, nodes_t,
+                        nodes_y, nodes_s, hstep, which, deg):
+    """Power-form dense output (as stored with ``SAVE_DENSE``) of the step intervals
+    ``which`` of a run made with ``SAVE_NODES``, rebuilt from their start nodes: the step from
+    ``(nodes_t[i], nodes_y[i])`` of length ``hstep[i]`` in the discrete state ``nodes_s[i]``
+    is taken again -- the Runge-Kutta stages and the dense-output stages, or the Taylor terms
+    of the exact flow -- with the run's options (``iopt``, ``fopt``, the tableau). The
+    stages are computed as in the kernel from the same numbers, so the coefficients are the
+    ones it would have stored (to rounding: after a projected sliding step the kernel's first
+    stage is the field before the projection). Rows of intervals with ``hstep <= 0`` (jumps,
+    chattering gaps) are zero. Not for variational runs, whose nodes are transformed after
+    the run (they store their dense output: ``SAVE_DENSE``)."""
+    n = x0.shape[0]
+    nm = iopt[IO_NMODES]
+    nvar = 1 if iopt[IO_VAR] != VAR_NONE else 0
+    nY = nodes_y.shape[1]
+    slide_c = fopt[FO_SLIDE_C]
+    nz, aff_ok, aff_M, aff_h, aff_s, aff_w = _affine_setup(
+        ev, t0, x0, p, n, nm, iopt.shape[0] > IO_EXACT and iopt[IO_EXACT] != 0)
+    s_ext = A.shape[0]
+    K = np.zeros((s_ext, nY))
+    ytmp = np.zeros(nY)
+    y = np.zeros(nY)
+    Q = np.zeros((nY, max(deg, P.shape[1], _EXACT_TERMS if nz > 0 else 1)))
+    w1 = np.zeros(n)
+    w2 = np.zeros(n)
+    gx = np.zeros(n * n)
+    hdx = np.zeros(n)
+    jac = np.zeros(n * n)
+    xt = np.zeros(n)
+    ft = np.zeros(n)
+    zv = np.zeros(max(nz, 1))
+    zv1 = np.zeros(max(nz, 1))
+    xe = np.zeros(n)
+    out = np.zeros((which.shape[0], nY, deg))
+    for r in range(which.shape[0]):
+        i = which[r]
+        h = hstep[i]
+        if not h > 0.0:
+            continue
+        dkind = nodes_s[i, 0]
+        didx = nodes_s[i, 1]
+        mode = nodes_s[i, 2]
+        t = nodes_t[i]
+        for c in range(nY):
+            y[c] = nodes_y[i, c]
+        if nz > 0 and dkind == REGULAR and nvar == 0 and aff_ok[mode] == 1:
+            _exact_step(aff_M, aff_s, aff_w, mode, nz, n, t, y, h, zv, zv1, Q, xe)
+        else:
+            _rhs(ev, p, dkind, didx, mode, nm, t, y, n, nvar, K[0], etab, stab, slide_c,
+                 w1, w2, gx, hdx, jac, xt, ft)
+            _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_fsal,
+                       ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
+            _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_fsal, P,
+                        Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
+        for c in range(nY):
+            for k in range(deg):
+                out[r, c, k] = Q[c, k]
+    return out
+
+
+def _dense_coefficients_signature():
+    from numba import types as nt
+
+    from ..model.codegen import EVALUATE_TYPE
+    f1 = nt.float64[::1]
+    f2 = nt.float64[:, ::1]
+    i1 = nt.int64[::1]
+    i2 = nt.int64[:, ::1]
+    return nt.float64[:, :, ::1](EVALUATE_TYPE, f1, i2, i2, i1, f1, f2, f1, f2, nt.int64,
+                                 nt.float64, f1, f1, f2, i2, f1, i1, nt.int64)
+
+
+_DENSE_COEFFICIENTS = None
+
+
+def dense_coefficients(*args):
+    """:func:`_dense_coefficients`, compiled on first use (then loaded from numba's cache):
+    runs that never evaluate their dense output do not wait for it."""
+    global _DENSE_COEFFICIENTS
+    if _DENSE_COEFFICIENTS is None:
+        import warnings
+
+        from numba.core.errors import NumbaExperimentalFeatureWarning
+        with warnings.catch_warnings():
+            # the first-class function type of the model's `evaluate` (as in the kernel)
+            warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
+            _DENSE_COEFFICIENTS = njit(_dense_coefficients_signature(), cache=True,
+                                       nogil=True)(_dense_coefficients)
+    return _DENSE_COEFFICIENTS(*args)
+
+
+# --------------------------------------------------------------------------------------
 # the kernel
 # --------------------------------------------------------------------------------------
 
@@ -1505,7 +1761,7 @@ def _kernel_signature():
     i1 = nt.int64[::1]
     i2 = nt.int64[:, ::1]
     ret = nt.Tuple((nt.int64, nt.float64, f1, i1, f1, f2, i2, nt.float64[:, :, ::1], i1, f1, f1,
-                    i2, f2, f2, i1, f2))
+                    i2, f2, f2, i1, f2, f1))
     return ret(EVALUATE_TYPE, nt.float64, nt.float64, f1, f1, i2, i2, i2, i1, f1, f2, f1, f2, f2,
                nt.int64)
 
@@ -1528,8 +1784,11 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
 
     Returns
     -------
-    status, nodes_t, nodes_y, nodes_state (kind, idx, mode), dense (per interval), interval kind
-    (0 step, 1 jump, 2 chatter gap), event log (t, t_after, info, x_before, x_after), stats
+    status, t, y, final discrete state, nodes_t, nodes_y, nodes_state (kind, idx, mode), dense
+    (per interval; ``SAVE_DENSE`` only, else no rows), interval kind (0 step, 1 jump, 2
+    chatter gap), event log (t, t_after, info, x_before, x_after), stats, samples, and the
+    length of the step of each interval (0 for jumps; with ``SAVE_NODES`` the dense output is
+    rebuilt from it, :func:`dense_coefficients`)
     """
     n = x0.shape[0]
     nm = iopt[IO_NMODES]
@@ -1548,68 +1807,25 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     max_steps = iopt[IO_MAXSTEPS]
     max_events = iopt[IO_MAXEVENTS]
     chatter_on = iopt[IO_CHATTER]
-    save_all = iopt[IO_SAVE]
+    save_all = iopt[IO_SAVE] != SAVE_EVENTS
+    store_q = iopt[IO_SAVE] == SAVE_DENSE
     rtol = fopt[FO_RTOL]
     atol = fopt[FO_ATOL]
     hmax = fopt[FO_HMAX]
     chat_rel = fopt[FO_CHAT_REL]
+    # a negative ratio is the default one, applied only where the chattering map is accurate
+    chat_gated = chat_rel < 0.0
+    chat_rel = abs(chat_rel)
     chat_abs = fopt[FO_CHAT_ABS]
     slide_c = fopt[FO_SLIDE_C]
     s_ext = A.shape[0]
     deg = P.shape[1]
     n_events = etab.shape[0]
-    # exact propagation of affine modes: their augmented matrices and the largest step with
-    # ||h M||_inf <= 1 (the Taylor sum of _exact_step then converges in _EXACT_TERMS terms)
-    nz = 0
-    if iopt.shape[0] > IO_EXACT and iopt[IO_EXACT] != 0:
-        abuf = np.zeros(1)
-        ev(W_AFFINE, -1, t0, x0, p, abuf)
-        nz = int(abuf[0])
-    aff_ok = np.zeros(nm, dtype=np.int64)
-    aff_M = np.zeros((nm, max(nz, 1), max(nz, 1)))
-    aff_h = np.zeros(nm)
-    aff_s = np.ones((nm, max(nz, 1)))
+    # exact propagation of affine modes: their augmented matrices, balancing weights and the
+    # largest step (see _affine_setup)
+    nz, aff_ok, aff_M, aff_h, aff_s, aff_w = _affine_setup(
+        ev, t0, x0, p, n, nm, iopt.shape[0] > IO_EXACT and iopt[IO_EXACT] != 0)
     if nz > 0:
-        abuf = np.zeros(1 + nz * nz)
-        for m in range(nm):
-            ev(W_AFFINE, m, t0, x0, p, abuf)
-            if abuf[0] == 0.0:
-                continue
-            for i in range(nz):
-                for c in range(nz):
-                    aff_M[m, i, c] = abuf[1 + i * nz + c]
-            # scale the constant and each (cos, sin) pair of z by the largest coefficient
-            # multiplying it (z = (x, s_0, s_1 cos, s_1 sin, ...), those columns of M divided
-            # by s): the step bound ||h M|| <= 1 then reflects the dynamics, not the units of
-            # b or of the forcing amplitude (a ball in flight: b = -g)
-            for c in range(n, nz):
-                aff_s[m, c] = 1.0
-            for c in range(n, nz):
-                if c > n and (c - n) % 2 == 0:
-                    continue  # the sin column shares the scale of its cos column
-                big = 0.0
-                for i in range(n):
-                    big = max(big, abs(aff_M[m, i, c]))
-                    if c > n:
-                        big = max(big, abs(aff_M[m, i, c + 1]))
-                if big > 1.0 and np.isfinite(big):
-                    aff_s[m, c] = big
-                    if c > n:
-                        aff_s[m, c + 1] = big
-            for c in range(n, nz):
-                for i in range(n):
-                    aff_M[m, i, c] /= aff_s[m, c]
-            nrm = 0.0
-            for i in range(nz):
-                row = 0.0
-                for c in range(nz):
-                    row += abs(aff_M[m, i, c])
-                nrm = max(nrm, row)
-            if not np.isfinite(nrm):
-                continue
-            aff_ok[m] = 1
-            aff_h[m] = 1.0 / nrm if nrm > 0.0 else np.inf
-
         deg = max(deg, _EXACT_TERMS)
     zv = np.zeros(max(nz, 1))
     zv1 = np.zeros(max(nz, 1))
@@ -1624,6 +1840,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
 
     # work arrays
     K = np.zeros((s_ext, nY))
+    kst = np.zeros(nY)
     ytmp = np.zeros(nY)
     ynew = np.zeros(nY)
     y = np.zeros(nY)
@@ -1647,7 +1864,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     nodes_t = np.empty(cap)
     nodes_y = np.empty((cap, nY))
     nodes_s = np.empty((cap, 3), dtype=np.int64)
-    dense = np.empty((cap, nY, deg))
+    # power-form dense output per interval (SAVE_DENSE only) and the length of each step
+    dense = np.empty((cap if store_q else 0, nY, deg))
+    hstep = np.empty(cap)
     ikind = np.empty(cap, dtype=np.int64)
     ecap = 16
     ev_t = np.empty(ecap)
@@ -1722,6 +1941,23 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     last_mode = -1
     last_sign = 0.0
     last_t = np.nan
+    # events at one instant: the guards of functions that fired earlier at last_t (kept with
+    # the last one's), and crossings that coincide with the event being handled (found
+    # between the bracketed and the polished event time) still to fire at pend_t
+    co_type = np.zeros(wcap, dtype=np.int64)
+    co_idx = np.zeros(wcap, dtype=np.int64)
+    co_mode = np.zeros(wcap, dtype=np.int64)
+    co_sign = np.zeros(wcap)
+    co_t = np.zeros(wcap)
+    n_co = 0
+    pend_type = np.zeros(wcap, dtype=np.int64)
+    pend_idx = np.zeros(wcap, dtype=np.int64)
+    pend_mode = np.zeros(wcap, dtype=np.int64)
+    pend_act = np.zeros(wcap, dtype=np.int64)
+    pend_ref = np.zeros(wcap, dtype=np.int64)
+    n_pend = 0
+    pend_t = np.nan
+    wpend = np.zeros(wcap, dtype=np.int64)
     # chattering chain bookkeeping
     chain_event = -1
     chain_vmax = 0.0
@@ -1744,8 +1980,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     n_nodes = 1
 
     # stroboscopic sampling on the dense output (no event, no landing step)
-    samp = np.empty((16, 1 + n))
     n_samp = 0
+    n_need = 0
     s0 = 0.0
     sdt = 0.0
     sk = 0
@@ -1764,7 +2000,14 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             status = ST_MAX_STEPS
             sdt = 0.0
         sk = int(kf) if status == ST_SUCCESS else 0
-        if sdt > 0.0 and s0 + sk * sdt == t:
+        if sdt > 0.0:
+            # room for every sample (at most max_steps + 2, checked above): the array is not
+            # grown inside the stepping loop (see the outer loop below)
+            n_need = int(max(0.0, min((t_end - s0) / sdt - kf, float(max_steps)))) + 3
+    samp = np.empty((max(n_need, 1), 1 + n))
+    max_samp = min(max_samp, samp.shape[0])
+    if sdt > 0.0:
+        if s0 + sk * sdt == t:
             samp[0, 0] = t
             for i in range(n):
                 samp[0, 1 + i] = y[i]
@@ -1779,1117 +2022,1248 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     # factor <= 0.9, a step grows it by <= 10, and h below 4 ulp(t) ends the run, so the
     # rejections are bounded too -- provided t and h stay finite, which the checks at each
     # restart (t, y, field) and before each step (h) guarantee.
-    while True:
-        if restart:
-            if status != ST_SUCCESS:
-                # refused input (above); tested here, not in the loop condition, which
-                # measured ~40% slower on every step
+    # The stepping loop never reassigns an array: numba keeps a reassigned array in a phi
+    # variable and updates its reference count (two atomic operations) at every pass of the
+    # loop, ~15% of a step for the seven output arrays. Room for the next iteration's nodes
+    # (at most two) and event records (at most two) is made here, in an outer loop that the
+    # stepping loop leaves only to grow them.
+    finished = False
+    while not finished:
+        if n_nodes + 4 > nodes_t.shape[0]:
+            need = 2 * nodes_t.shape[0] + 4
+            nodes_t = _grow1(nodes_t, need)
+            nodes_y = _grow2(nodes_y, need)
+            nodes_s = _grow2(nodes_s, need)
+            ikind = _grow1(ikind, need)
+            hstep = _grow1(hstep, need)
+            if store_q:
+                dense = _grow3(dense, need)
+        if n_ev + 4 > ev_t.shape[0]:
+            need = 2 * ev_t.shape[0] + 4
+            ev_t = _grow1(ev_t, need)
+            ev_t2 = _grow1(ev_t2, need)
+            ev_info = _grow2(ev_info, need)
+            ev_xb = _grow2(ev_xb, need)
+            ev_xa = _grow2(ev_xa, need)
+        finished = True
+        while True:
+            if n_nodes + 4 > nodes_t.shape[0] or n_ev + 4 > ev_t.shape[0]:
+                finished = False
                 break
-            # (re)build the watch list for the current discrete state
-            nw = 0
-            for j in range(n_events):
-                if eactive[j, mode] == 0:
-                    continue
-                if dkind == STICK and etab[j, 0] == etab[didx, 0]:
-                    continue
-                if dkind == SLIDE:
-                    continue
-                wtype[nw] = WF_SURFACE; widx[nw] = etab[j, 0]; wmode[nw] = mode
-                wdir[nw] = etab[j, 1]; wact[nw] = ACT_EVENT; wref[nw] = j
-                nw += 1
-            for s in range(n_sw):
-                if dkind == SLIDE:
-                    # another surface bounding the sliding pair's modes: crossing it while
-                    # sliding, or reaching the intersection of the two surfaces
-                    if stab[s, 0] == stab[didx, 0]:
-                        continue
-                    if (stab[s, 1] != stab[didx, 1] and stab[s, 2] != stab[didx, 1]
-                            and stab[s, 1] != stab[didx, 2] and stab[s, 2] != stab[didx, 2]):
-                        continue
-                    dup = False
-                    for ww in range(nw):
-                        if wact[ww] == ACT_INTERSECTION and widx[ww] == stab[s, 0]:
-                            dup = True
-                    if dup:
-                        continue
-                    wtype[nw] = WF_SURFACE; widx[nw] = stab[s, 0]; wmode[nw] = mode
-                    wdir[nw] = 0; wact[nw] = ACT_INTERSECTION; wref[nw] = s
-                    nw += 1
-                    continue
-                if stab[s, 1] == mode or stab[s, 2] == mode:
-                    if (dkind == STICK and stab.shape[1] > 3 and stab[s, 3] == SW_CONTINUOUS):
-                        # a kink surface that the sticking motion lies in (bilinear damping of
-                        # a relative velocity held at zero against a stop): the two variants
-                        # agree there, and its sign is round-off
-                        ev(W_H, stab[s, 0], t, y, p, buf)
-                        xmax = 1.0
-                        for i in range(n):
-                            xmax = max(xmax, abs(y[i]))
-                        if abs(buf[0]) <= 1e3 * _EPS * xmax:
-                            continue
-                    wtype[nw] = WF_SURFACE; widx[nw] = stab[s, 0]; wmode[nw] = mode
-                    wdir[nw] = -1 if stab[s, 1] == mode else 1
-                    wact[nw] = ACT_SWITCH; wref[nw] = s
-                    nw += 1
-            if dkind == STICK:
-                k = etab[didx, 0]
-                wtype[nw] = WF_HDDOT; widx[nw] = k; wmode[nw] = mode
-                wdir[nw] = 1; wact[nw] = ACT_RELEASE; wref[nw] = didx
-                nw += 1
-            if dkind == SLIDE:
-                k = stab[didx, 0]
-                # leave above when hdot of the above field turns positive (alpha -> 0),
-                # below when hdot of the below field turns negative (alpha -> 1)
-                wtype[nw] = WF_HDOT; widx[nw] = k; wmode[nw] = stab[didx, 1]
-                wdir[nw] = 1; wact[nw] = ACT_EXIT_ABOVE; wref[nw] = didx
-                nw += 1
-                wtype[nw] = WF_HDOT; widx[nw] = k; wmode[nw] = stab[didx, 2]
-                wdir[nw] = -1; wact[nw] = ACT_EXIT_BELOW; wref[nw] = didx
-                nw += 1
+            if restart:
+                if status != ST_SUCCESS:
+                    # refused input (above); tested here, not in the loop condition, which
+                    # measured ~40% slower on every step
+                    break
+                # (re)build the watch list for the current discrete state
+                nw = 0
                 for j in range(n_events):
-                    if eactive[j, stab[didx, 1]] == 0 and eactive[j, stab[didx, 2]] == 0:
+                    if eactive[j, mode] == 0:
+                        continue
+                    if dkind == STICK and etab[j, 0] == etab[didx, 0]:
+                        continue
+                    if dkind == SLIDE:
                         continue
                     wtype[nw] = WF_SURFACE; widx[nw] = etab[j, 0]; wmode[nw] = mode
                     wdir[nw] = etab[j, 1]; wact[nw] = ACT_EVENT; wref[nw] = j
                     nw += 1
-            for w in range(nw):
-                wvalid[w] = 0
-                wtdep[w] = 0
-                if wtype[w] == WF_SURFACE:
-                    if wact[w] == ACT_EVENT and etab.shape[1] > 6:
-                        wtdep[w] = etab[wref[w], 6]
-                    elif wact[w] != ACT_EVENT and stab.shape[1] > 5:
-                        wtdep[w] = stab[wref[w], 5]
-                wforce[w] = 0.0
-                if (t == last_t and wtype[w] == last_type and widx[w] == last_idx
-                        and (wtype[w] == WF_SURFACE or wmode[w] == last_mode)):
-                    wforce[w] = last_sign
-            _rhs(ev, p, dkind, didx, mode, nm, t, y, n, nvar, K[0], etab, stab, slide_c,
-                 w1, w2, gx, hdx, jac, xt, ft)
-            stats[2] += 1
-            # at the start and after every event (a reset, a chattering jump in time, a new
-            # mode): time, state and field must be finite. A NaN field here would make the
-            # first step size NaN (a step then neither accepted nor rejected for good).
-            ok = np.isfinite(t)
-            for i in range(nY):
-                if not (np.isfinite(y[i]) and np.isfinite(K[0, i])):
-                    ok = False
-            if not ok:
-                status = ST_NONFINITE
-                break
-            if h <= 0.0:
-                # initial step (Hairer, Norsett & Wanner I, II.4): from the scales of y and f
-                d0 = 0.0
-                d1 = 0.0
-                for i in range(n):
-                    sc = atol + rtol * abs(y[i])
-                    d0 += (y[i] / sc) ** 2
-                    d1 += (K[0, i] / sc) ** 2
-                d0 = np.sqrt(d0 / n)
-                d1 = np.sqrt(d1 / n)
-                h = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
-                h = min(h, abs(t_end - t))
-            restart = False
-
-        if t >= t_end:
-            break
-        if stats[0] >= max_steps:
-            status = ST_MAX_STEPS
-            break
-        if not np.isfinite(h):
-            # NaN from the error control (an error norm 0/0) or the initial-step estimate;
-            # compared with anything it is false, so it must not reach the clipping below
-            status = ST_NONFINITE
-            break
-        exact_now = nz > 0 and dkind == REGULAR and nvar == 0 and aff_ok[mode] == 1
-        if exact_now:
-            h = min(h, aff_h[mode])
-        h = min(h, hmax, t_end - t)
-        if h < 4.0 * _ulp(t):
-            if t_end - t <= 4.0 * _ulp(t):
-                t = t_end
-                break
-            status = ST_STEP_TOO_SMALL
-            break
-
-        q_made = False
-        if exact_now:
-            # ---- one exact step of an affine mode (no error: the step is limited only by
-            # the convergence of the Taylor sum, the largest step and the events)
-            if h == min(aff_h[mode], hmax):
-                # a full step: one product with the propagator, made once per mode and run
-                if h != aff_ph[mode]:
-                    _exact_propagator(aff_M[mode], nz, h, aff_P[mode], T1, T2)
-                    aff_ph[mode] = h
-                _exact_apply(aff_M[mode], aff_s[mode], aff_P[mode], nz, n, t, y, zv, ynew)
-            else:
-                # a shorter one (before an event, t_end, or a moving surface): the Taylor sum
-                # of the vector, whose terms are the dense output
-                _exact_step(aff_M[mode], aff_s[mode], nz, n, t, y, h, zv, zv1, Q, ynew)
-                q_made = True
-            ev(W_F, mode, t + h, ynew, p, K[s_fsal])
-            stats[2] += 1
-            err = 0.0
-            for i in range(n):
-                if not (np.isfinite(K[s_fsal, i]) and np.isfinite(ynew[i])):
-                    err = np.inf
-            finite = err == 0.0
-        else:
-            # ---- one RK step (stages written out here: this is the hot loop)
-            fast = dkind == REGULAR and nvar == 0
-            for st in range(1, s_fsal + 1):
-                cst = t + C[st] * h
+                for s in range(n_sw):
+                    if dkind == SLIDE:
+                        # another surface bounding the sliding pair's modes: crossing it while
+                        # sliding, or reaching the intersection of the two surfaces
+                        if stab[s, 0] == stab[didx, 0]:
+                            continue
+                        if (stab[s, 1] != stab[didx, 1] and stab[s, 2] != stab[didx, 1]
+                                and stab[s, 1] != stab[didx, 2] and stab[s, 2] != stab[didx, 2]):
+                            continue
+                        dup = False
+                        for ww in range(nw):
+                            if wact[ww] == ACT_INTERSECTION and widx[ww] == stab[s, 0]:
+                                dup = True
+                        if dup:
+                            continue
+                        wtype[nw] = WF_SURFACE; widx[nw] = stab[s, 0]; wmode[nw] = mode
+                        wdir[nw] = 0; wact[nw] = ACT_INTERSECTION; wref[nw] = s
+                        nw += 1
+                        continue
+                    if stab[s, 1] == mode or stab[s, 2] == mode:
+                        if (dkind == STICK and stab.shape[1] > 3 and stab[s, 3] == SW_CONTINUOUS):
+                            # a kink surface that the sticking motion lies in (bilinear damping of
+                            # a relative velocity held at zero against a stop): the two variants
+                            # agree there, and its sign is round-off
+                            ev(W_H, stab[s, 0], t, y, p, buf)
+                            xmax = 1.0
+                            for i in range(n):
+                                xmax = max(xmax, abs(y[i]))
+                            if abs(buf[0]) <= 1e3 * _EPS * xmax:
+                                continue
+                        wtype[nw] = WF_SURFACE; widx[nw] = stab[s, 0]; wmode[nw] = mode
+                        wdir[nw] = -1 if stab[s, 1] == mode else 1
+                        wact[nw] = ACT_SWITCH; wref[nw] = s
+                        nw += 1
+                if dkind == STICK:
+                    k = etab[didx, 0]
+                    wtype[nw] = WF_HDDOT; widx[nw] = k; wmode[nw] = mode
+                    wdir[nw] = 1; wact[nw] = ACT_RELEASE; wref[nw] = didx
+                    nw += 1
+                if dkind == SLIDE:
+                    k = stab[didx, 0]
+                    # leave above when hdot of the above field turns positive (alpha -> 0),
+                    # below when hdot of the below field turns negative (alpha -> 1)
+                    wtype[nw] = WF_HDOT; widx[nw] = k; wmode[nw] = stab[didx, 1]
+                    wdir[nw] = 1; wact[nw] = ACT_EXIT_ABOVE; wref[nw] = didx
+                    nw += 1
+                    wtype[nw] = WF_HDOT; widx[nw] = k; wmode[nw] = stab[didx, 2]
+                    wdir[nw] = -1; wact[nw] = ACT_EXIT_BELOW; wref[nw] = didx
+                    nw += 1
+                    for j in range(n_events):
+                        if eactive[j, stab[didx, 1]] == 0 and eactive[j, stab[didx, 2]] == 0:
+                            continue
+                        wtype[nw] = WF_SURFACE; widx[nw] = etab[j, 0]; wmode[nw] = mode
+                        wdir[nw] = etab[j, 1]; wact[nw] = ACT_EVENT; wref[nw] = j
+                        nw += 1
+                for w in range(nw):
+                    wvalid[w] = 0
+                    wtdep[w] = 0
+                    if wtype[w] == WF_SURFACE:
+                        if wact[w] == ACT_EVENT and etab.shape[1] > 6:
+                            wtdep[w] = etab[wref[w], 6]
+                        elif wact[w] != ACT_EVENT and stab.shape[1] > 5:
+                            wtdep[w] = stab[wref[w], 5]
+                    wforce[w] = 0.0
+                    if (t == last_t and wtype[w] == last_type and widx[w] == last_idx
+                            and (wtype[w] == WF_SURFACE or wmode[w] == last_mode)):
+                        wforce[w] = last_sign
+                    else:
+                        for c in range(n_co):
+                            if (wtype[w] == co_type[c] and widx[w] == co_idx[c]
+                                    and (wtype[w] == WF_SURFACE or wmode[w] == co_mode[c])
+                                    and abs(t - co_t[c]) <= _COINCIDENT_ULPS * _ulp(t)):
+                                wforce[w] = co_sign[c]
+                    wpend[w] = 0
+                    if t == pend_t and wforce[w] == 0.0:
+                        for c in range(n_pend):
+                            if (pend_type[c] == wtype[w] and pend_idx[c] == widx[w]
+                                    and pend_mode[c] == wmode[w] and pend_act[c] == wact[w]
+                                    and pend_ref[c] == wref[w]):
+                                wpend[w] = 1
+                _rhs(ev, p, dkind, didx, mode, nm, t, y, n, nvar, kst, etab, stab, slide_c,
+                     w1, w2, gx, hdx, jac, xt, ft)
                 for i in range(nY):
-                    acc = 0.0
-                    for m in range(st):
-                        acc += A[st, m] * K[m, i]
-                    ytmp[i] = y[i] + h * acc
-                if fast:
-                    ev(W_F, mode, cst, ytmp, p, K[st])
-                else:
-                    _rhs(ev, p, dkind, didx, mode, nm, cst, ytmp, n, nvar, K[st], etab, stab,
-                         slide_c, w1, w2, gx, hdx, jac, xt, ft)
-            stats[2] += s_fsal
-            # the FSAL stage was evaluated at y + h sum B K = the new solution
-            finite = True
-            for i in range(nY):
-                ynew[i] = ytmp[i]
-                if not (np.isfinite(K[s_fsal, i]) and np.isfinite(ynew[i])):
-                    finite = False
-            err = (_error_norm(K, E, method, s_fsal, y, ynew, h, 0, n, rtol, atol) if finite
-                   else np.inf)
-            if nvar and finite:
-                err = max(err, _error_norm(K, E, method, s_fsal, y, ynew, h, n, nY, rtol, atol))
-        if not (err <= 1.0):
-            stats[1] += 1
-            if not finite or err != err:
-                h *= 0.25
-                if h < 4.0 * _ulp(t):
+                    K[0, i] = kst[i]
+                stats[2] += 1
+                # at the start and after every event (a reset, a chattering jump in time, a new
+                # mode): time, state and field must be finite. A NaN field here would make the
+                # first step size NaN (a step then neither accepted nor rejected for good).
+                ok = np.isfinite(t)
+                for i in range(nY):
+                    if not (np.isfinite(y[i]) and np.isfinite(K[0, i])):
+                        ok = False
+                if not ok:
                     status = ST_NONFINITE
                     break
-            else:
-                h *= max(0.2, 0.9 * err ** (-1.0 / order))
-            continue
-        stats[0] += 1
-        # dense output coefficients are made only when needed (stored steps, interior samples)
-        q_ready = q_made
-        if save_all and not q_ready:
-            if exact_now:
-                _exact_step(aff_M[mode], aff_s[mode], nz, n, t, y, h, zv, zv1, Q, xe)
-            else:
-                stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A,
-                                        C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2, gx,
-                                        hdx, jac, xt, ft)
-            q_ready = True
-        t_new = t + h
-        if t_new > t_end or h >= t_end - t:
-            # the last step, clipped to t_end - t: t + (t_end - t) can round one ulp past (or
-            # short of) t_end; the run ends exactly at t_end
-            t_new = t_end
+                if h <= 0.0:
+                    # initial step (Hairer, Norsett & Wanner I, II.4): from the scales of y and f
+                    d0 = 0.0
+                    d1 = 0.0
+                    for i in range(n):
+                        sc = atol + rtol * abs(y[i])
+                        d0 += (y[i] / sc) ** 2
+                        d1 += (K[0, i] / sc) ** 2
+                    d0 = np.sqrt(d0 / n)
+                    d1 = np.sqrt(d1 / n)
+                    h = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+                    h = min(h, abs(t_end - t))
+                restart = False
 
-        # ---- event detection on [t, t_new]
-        best = -1
-        best_th = 2.0
-        best_sign = 0.0
-        unresolved = False
-        bad_watch = False  # a watch function (surface, hdot, hddot) NaN or inf at a step end
-        tratio = 0.0   # largest midpoint mismatch / tolerance of time-dependent surfaces
-        for w in range(nw):
-            # Samples in increasing theta. Surfaces: the ends and the interior extrema of the
-            # cubic Hermite fit built from h and hdot at the ends (where a graze hides);
-            # other watch functions: the ends and the midpoint.
-            if wtype[w] == WF_SURFACE:
-                if wvalid[w] == 1:
-                    v0 = wv[w]
-                    r0 = wd[w]
-                else:
-                    v0 = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t, y, n, buf,
-                                      fbuf, hdx)
-                    r0 = _surface_rate(ev, p, dkind, widx[w], mode, nm, t, y, K[0], n, buf, hdx)
-                    if ((wact[w] == ACT_EVENT or wact[w] == ACT_SWITCH)
-                            and not (wforce[w] != 0.0 and t == last_t)):
-                        # first step after a restart (start of the run, any event): on the
-                        # surface within round-off is on it (the surface that just fired
-                        # keeps its guard)
-                        v0, r0 = _start_on_surface(ev, p, widx[w], dkind, mode, nm, t, y, n,
-                                                   v0, r0, buf, hdx)
-                if dkind == REGULAR:
-                    ev(W_HHD, widx[w] * nm + mode, t_new, ynew, p, buf)
-                    v1 = buf[0]
-                    r1 = buf[1]
-                else:
-                    v1 = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t_new, ynew, n,
-                                      buf, fbuf, hdx)
-                    r1 = _surface_rate(ev, p, dkind, widx[w], mode, nm, t_new, ynew, K[s_fsal],
-                                       n, buf, hdx)
-                if not (np.isfinite(v0) and np.isfinite(v1)):
-                    bad_watch = True
+            if t >= t_end:
+                break
+            if stats[0] >= max_steps:
+                status = ST_MAX_STEPS
+                break
+            if not np.isfinite(h):
+                # NaN from the error control (an error norm 0/0) or the initial-step estimate;
+                # compared with anything it is false, so it must not reach the clipping below
+                status = ST_NONFINITE
+                break
+            exact_now = nz > 0 and dkind == REGULAR and nvar == 0 and aff_ok[mode] == 1
+            if exact_now:
+                h = min(h, aff_h[mode])
+            h = min(h, hmax, t_end - t)
+            if h < 4.0 * _ulp(t):
+                if t_end - t <= 4.0 * _ulp(t):
+                    t = t_end
                     break
-                wv[w] = v1
-                wd[w] = r1
-                d0 = r0 * h
-                d1 = r1 * h
-                if wtdep[w] == 1:
-                    # a surface that moves in time (an oscillating constraint) while the state
-                    # barely does (a mass at rest, free flight): the error control does not see
-                    # the surface, so a step may span several of its oscillations. The cubic
-                    # Hermite fit must reproduce h at the midpoint, or the step is retaken
-                    # shorter.
+                status = ST_STEP_TOO_SMALL
+                break
+
+            q_made = False
+            if exact_now:
+                # ---- one exact step of an affine mode (no error: the step is limited only by
+                # the convergence of the Taylor sum, the largest step and the events)
+                if h == min(aff_h[mode], hmax):
+                    # a full step: one product with the propagator, made once per mode and run
+                    if h != aff_ph[mode]:
+                        _exact_propagator(aff_M, aff_w, mode, nz, h, aff_P, T1, T2)
+                        aff_ph[mode] = h
+                    _exact_apply(aff_M, aff_s, aff_P, mode, nz, n, t, y, zv, ynew)
+                else:
+                    # a shorter one (before an event, t_end, or a moving surface): the Taylor sum
+                    # of the vector, whose terms are the dense output
+                    _exact_step(aff_M, aff_s, aff_w, mode,
+                                nz, n, t, y, h, zv, zv1, Q, ynew)
+                    q_made = True
+                ev(W_F, mode, t + h, ynew, p, kst)
+                for i in range(n):
+                    K[s_fsal, i] = kst[i]
+                stats[2] += 1
+                err = 0.0
+                for i in range(n):
+                    if not (np.isfinite(K[s_fsal, i]) and np.isfinite(ynew[i])):
+                        err = np.inf
+                finite = err == 0.0
+            else:
+                # ---- one RK step (stages written out here: this is the hot loop)
+                fast = dkind == REGULAR and nvar == 0
+                for st in range(1, s_fsal + 1):
+                    cst = t + C[st] * h
+                    for i in range(nY):
+                        acc = 0.0
+                        for m in range(st):
+                            acc += A[st, m] * K[m, i]
+                        ytmp[i] = y[i] + h * acc
+                    # into a scratch vector: passing the row K[st] makes an array view, whose
+                    # reference counting (two atomic updates) measured 30% of a step
+                    if fast:
+                        ev(W_F, mode, cst, ytmp, p, kst)
+                    else:
+                        _rhs(ev, p, dkind, didx, mode, nm, cst, ytmp, n, nvar, kst, etab, stab,
+                             slide_c, w1, w2, gx, hdx, jac, xt, ft)
+                    for i in range(nY):
+                        K[st, i] = kst[i]
+                stats[2] += s_fsal
+                # the FSAL stage was evaluated at y + h sum B K = the new solution
+                finite = True
+                for i in range(nY):
+                    ynew[i] = ytmp[i]
+                    if not (np.isfinite(K[s_fsal, i]) and np.isfinite(ynew[i])):
+                        finite = False
+                err = (_error_norm(K, E, method, s_fsal, y, ynew, h, 0, n, rtol, atol) if finite
+                       else np.inf)
+                if nvar and finite:
+                    err = max(err, _error_norm(K, E, method, s_fsal, y, ynew, h, n, nY, rtol,
+                              atol))
+            if not (err <= 1.0):
+                stats[1] += 1
+                if not finite or err != err:
+                    h *= 0.25
+                    if h < 4.0 * _ulp(t):
+                        status = ST_NONFINITE
+                        break
+                else:
+                    h *= max(0.2, 0.9 * err ** (-1.0 / order))
+                continue
+            stats[0] += 1
+            # dense output coefficients are made only when needed (stored steps, interior samples)
+            q_ready = q_made
+            if store_q and not q_ready:
+                if exact_now:
+                    _exact_step(aff_M, aff_s, aff_w, mode, nz, n, t, y, h, zv, zv1, Q, xe)
+                else:
+                    stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K,
+                                            A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2,
+                                            gx, hdx, jac, xt, ft)
+                q_ready = True
+            t_new = t + h
+            if t_new > t_end or h >= t_end - t:
+                # the last step, clipped to t_end - t: t + (t_end - t) can round one ulp past (or
+                # short of) t_end; the run ends exactly at t_end
+                t_new = t_end
+
+            # ---- event detection on [t, t_new]
+            best = -1
+            best_th = 2.0
+            best_sign = 0.0
+            unresolved = False
+            bad_watch = False  # a watch function (surface, hdot, hddot) NaN or inf at a step end
+            tratio = 0.0   # largest midpoint mismatch / tolerance of time-dependent surfaces
+            for w in range(nw):
+                # Samples in increasing theta. Surfaces: the ends and the interior extrema of the
+                # cubic Hermite fit built from h and hdot at the ends (where a graze hides);
+                # other watch functions: the ends and the midpoint.
+                if wtype[w] == WF_SURFACE:
+                    if wvalid[w] == 1:
+                        v0 = wv[w]
+                        r0 = wd[w]
+                    else:
+                        v0 = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t, y, n, buf,
+                                          fbuf, hdx)
+                        r0 = _surface_rate(ev, p, dkind, widx[w], mode, nm, t, y, K[0], n, buf,
+                                           hdx)
+                        if ((wact[w] == ACT_EVENT or wact[w] == ACT_SWITCH)
+                                and not (wforce[w] != 0.0 and t == last_t)):
+                            # first step after a restart (start of the run, any event): on the
+                            # surface within round-off is on it (the surface that just fired
+                            # keeps its guard)
+                            v0, r0 = _start_on_surface(ev, p, widx[w], dkind, mode, nm, t, y, n,
+                                                       v0, r0, buf, hdx)
+                            if wpend[w] == 1:
+                                # crossed at the instant of the event just handled (see below):
+                                # on the surface now, it fires here if the flow still goes on
+                                v0 = 0.0
+                    if dkind == REGULAR:
+                        ev(W_HHD, widx[w] * nm + mode, t_new, ynew, p, buf)
+                        v1 = buf[0]
+                        r1 = buf[1]
+                    else:
+                        v1 = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t_new, ynew, n,
+                                          buf, fbuf, hdx)
+                        # (kst holds the last stage, K[s_fsal]: no array view per step)
+                        r1 = _surface_rate(ev, p, dkind, widx[w], mode, nm, t_new, ynew, kst, n,
+                                           buf, hdx)
+                    if not (np.isfinite(v0) and np.isfinite(v1)):
+                        bad_watch = True
+                        break
+                    wv[w] = v1
+                    wd[w] = r1
+                    d0 = r0 * h
+                    d1 = r1 * h
+                    if wtdep[w] == 1:
+                        # a surface that moves in time (an oscillating constraint) while the state
+                        # barely does (a mass at rest, free flight): the error control does not see
+                        # the surface, so a step may span several of its oscillations. The cubic
+                        # Hermite fit must reproduce h at the midpoint, or the step is retaken
+                        # shorter.
+                        if not q_ready:
+                            if exact_now:
+                                _exact_step(aff_M, aff_s, aff_w, mode,
+                                            nz, n, t, y, h, zv, zv1, Q, xe)
+                            else:
+                                stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY,
+                                                        n, nvar, K, A, C, s_fsal, P, Q, ytmp, etab,
+                                                        stab, slide_c, w1, w2, gx, hdx, jac, xt,
+                                                        ft)
+                            q_ready = True
+                        _dense_eval(y, Q, 0.5, nY, deg, xs)
+                        hm = _watch_value(ev, p, WF_SURFACE, widx[w], wmode[w], nm, t + 0.5 * h,
+                                          xs, n, buf, fbuf, hdx)
+                        hh = 0.5 * (v0 + v1) + 0.125 * (d0 - d1)
+                        hsc = max(abs(v0), abs(v1), abs(hm))
+                        ratio = abs(hm - hh) / (0.01 * hsc + 64.0 * _EPS * (1.0 + hsc))
+                        tratio = max(tratio, ratio)
+                        if ratio > 1.0:
+                            unresolved = True
+                            break
+                    # H(th) = ca th^3 + cb th^2 + d0 th + v0;  H'(th) = 3 ca th^2 + 2 cb th + d0
+                    ca = 2.0 * v0 - 2.0 * v1 + d0 + d1
+                    cb = -3.0 * v0 + 3.0 * v1 - 2.0 * d0 - d1
+                    qa = 3.0 * ca
+                    qb = 2.0 * cb
+                    ns = 1
+                    thetas[0] = 0.0
+                    vals[w, 0] = v0
+                    # roots of H' by the cancellation-free form (Numerical Recipes 5.6): the cubic
+                    # term vanishes for parabolic h, where the textbook formula loses all digits
+                    disc = qb * qb - 4.0 * qa * d0
+                    ra = 2.0
+                    rb = 2.0
+                    if disc >= 0.0:
+                        qq = -0.5 * (qb + (np.sqrt(disc) if qb >= 0.0 else -np.sqrt(disc)))
+                        if qa != 0.0:
+                            ra = qq / qa
+                        if qq != 0.0:
+                            rb = d0 / qq
+                        if ra > rb:
+                            ra, rb = rb, ra
+                        if 0.0 < ra < 1.0:
+                            thetas[ns] = ra
+                            ns += 1
+                        if 0.0 < rb < 1.0 and rb > ra:
+                            thetas[ns] = rb
+                            ns += 1
+                    if ns > 1 and not q_ready:
+                        if exact_now:
+                            _exact_step(aff_M, aff_s, aff_w, mode,
+                                        nz, n, t, y, h, zv, zv1, Q, xe)
+                        else:
+                            stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n,
+                                                    nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab,
+                                                    slide_c, w1, w2, gx, hdx, jac, xt, ft)
+                        q_ready = True
+                    rates[0] = r0
+                    for q in range(1, ns):
+                        if dkind == REGULAR:
+                            _dense_eval(y, Q, thetas[q], n, deg, xs)
+                            ev(W_HHD, widx[w] * nm + mode, t + thetas[q] * h, xs, p, buf)
+                            vals[w, q] = buf[0]
+                            rates[q] = buf[1]
+                        else:
+                            vq, rq = _watch_pair(ev, p, wtype[w], widx[w], wmode[w], dkind, didx,
+                                                 mode, nm, t, h, y, Q, n, deg, thetas[q], xs, buf,
+                                                 fbuf, hdx, ft, etab, stab, slide_c, w1, w2, gx)
+                            vals[w, q] = vq
+                            rates[q] = rq
+                    thetas[ns] = 1.0
+                    vals[w, ns] = v1
+                    rates[ns] = r1
+                    ns += 1
+                    # an extremum of h towards zero between two samples (near grazing): bounded
+                    # search on the dense output instead of trusting the fit's extremum
+                    search = False
+                    for q in range(ns - 1):
+                        if vals[w, q] * vals[w, q + 1] > 0.0:
+                            sg = 1.0 if vals[w, q] > 0.0 else -1.0
+                            if sg * wdir[w] <= 0 and sg * rates[q] < 0.0 < sg * rates[q + 1]:
+                                search = True
+                    if search:
+                        ns = _graze_samples(ev, p, wtype[w], widx[w], wmode[w], wdir[w], dkind,
+                                            didx, mode, nm, t, h, y, Q, n, deg, thetas, vals[w],
+                                            rates, ns, xs, buf, fbuf, hdx, ft, etab, stab, slide_c,
+                                            w1, w2, gx)
+                else:
+                    thetas[0] = 0.0
+                    thetas[1] = 0.5
+                    thetas[2] = 1.0
+                    ns = 3
+                    if wvalid[w] == 1:
+                        vals[w, 0] = wv[w]
+                    else:
+                        vals[w, 0] = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t, y, n,
+                                                  buf, fbuf, hdx)
+                        if wpend[w] == 1:
+                            # changed sign at the instant of the event just handled (see below)
+                            vals[w, 0] = 0.0
                     if not q_ready:
                         if exact_now:
-                            _exact_step(aff_M[mode], aff_s[mode], nz, n, t, y, h, zv, zv1, Q, xe)
+                            _exact_step(aff_M, aff_s, aff_w, mode,
+                                        nz, n, t, y, h, zv, zv1, Q, xe)
                         else:
                             stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n,
                                                     nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab,
                                                     slide_c, w1, w2, gx, hdx, jac, xt, ft)
                         q_ready = True
                     _dense_eval(y, Q, 0.5, nY, deg, xs)
-                    hm = _watch_value(ev, p, WF_SURFACE, widx[w], wmode[w], nm, t + 0.5 * h, xs,
-                                      n, buf, fbuf, hdx)
-                    hh = 0.5 * (v0 + v1) + 0.125 * (d0 - d1)
-                    hsc = max(abs(v0), abs(v1), abs(hm))
-                    ratio = abs(hm - hh) / (0.01 * hsc + 64.0 * _EPS * (1.0 + hsc))
-                    tratio = max(tratio, ratio)
-                    if ratio > 1.0:
-                        unresolved = True
+                    vals[w, 1] = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t + 0.5 * h,
+                                              xs, n, buf, fbuf, hdx)
+                    vals[w, 2] = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t_new, ynew,
+                                              n, buf, fbuf, hdx)
+                    if not (np.isfinite(vals[w, 0]) and np.isfinite(vals[w, 2])):
+                        bad_watch = True
                         break
-                # H(th) = ca th^3 + cb th^2 + d0 th + v0;  H'(th) = 3 ca th^2 + 2 cb th + d0
-                ca = 2.0 * v0 - 2.0 * v1 + d0 + d1
-                cb = -3.0 * v0 + 3.0 * v1 - 2.0 * d0 - d1
-                qa = 3.0 * ca
-                qb = 2.0 * cb
-                ns = 1
-                thetas[0] = 0.0
-                vals[w, 0] = v0
-                # roots of H' by the cancellation-free form (Numerical Recipes 5.6): the cubic
-                # term vanishes for parabolic h, where the textbook formula loses all digits
-                disc = qb * qb - 4.0 * qa * d0
-                ra = 2.0
-                rb = 2.0
-                if disc >= 0.0:
-                    qq = -0.5 * (qb + (np.sqrt(disc) if qb >= 0.0 else -np.sqrt(disc)))
-                    if qa != 0.0:
-                        ra = qq / qa
-                    if qq != 0.0:
-                        rb = d0 / qq
-                    if ra > rb:
-                        ra, rb = rb, ra
-                    if 0.0 < ra < 1.0:
-                        thetas[ns] = ra
-                        ns += 1
-                    if 0.0 < rb < 1.0 and rb > ra:
-                        thetas[ns] = rb
-                        ns += 1
-                if ns > 1 and not q_ready:
-                    if exact_now:
-                        _exact_step(aff_M[mode], aff_s[mode], nz, n, t, y, h, zv, zv1, Q, xe)
-                    else:
-                        stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar,
-                                                K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c,
-                                                w1, w2, gx, hdx, jac, xt, ft)
-                    q_ready = True
-                rates[0] = r0
+                    wv[w] = vals[w, 2]
+                    if wtype[w] == WF_HDDOT:
+                        # release from sticking: the free normal acceleration may turn positive
+                        # only in a short window around its maximum inside the step. Its slopes
+                        # at the ends (central differences on the dense output; the end one is
+                        # kept for the next step), the extrema of the Hermite fit and the bounded
+                        # search of surfaces add samples there
+                        if wvalid[w] == 1:
+                            sd0 = wd[w]
+                        else:
+                            sd0 = _watch_slope(ev, p, wtype[w], widx[w], wmode[w], nm, t, h, y, Q,
+                                               n, deg, 0.0, xs, buf, fbuf, hdx)
+                        sd1 = _watch_slope(ev, p, wtype[w], widx[w], wmode[w], nm, t, h, y, Q, n,
+                                           deg, 1.0, xs, buf, fbuf, hdx)
+                        wd[w] = sd1
+                        ra, rb = _hermite_extrema(vals[w, 0], vals[w, 2], sd0 * h, sd1 * h)
+                        ex_th[0] = 0.0
+                        ex_g[0] = vals[w, 0]
+                        rates[0] = sd0
+                        ne = 1
+                        for rr in (ra, rb):
+                            if 0.0 < rr < 1.0:
+                                vq, rq = _watch_pair(ev, p, wtype[w], widx[w], wmode[w], dkind,
+                                                     didx, mode, nm, t, h, y, Q, n, deg, rr, xs,
+                                                     buf, fbuf, hdx, ft, etab, stab, slide_c, w1,
+                                                     w2, gx)
+                                ex_th[ne] = rr
+                                ex_g[ne] = vq
+                                rates[ne] = rq
+                                ne += 1
+                        ex_th[ne] = 1.0
+                        ex_g[ne] = vals[w, 2]
+                        rates[ne] = sd1
+                        ne += 1
+                        if ne > 2:
+                            ne = _graze_samples(ev, p, wtype[w], widx[w], wmode[w], wdir[w], dkind,
+                                                didx, mode, nm, t, h, y, Q, n, deg, ex_th, ex_g,
+                                                rates, ne, xs, buf, fbuf, hdx, ft, etab, stab,
+                                                slide_c, w1, w2, gx)
+                            ns = _merge_samples(thetas, vals[w], ns, ex_th, ex_g, ne)
+                forced = wforce[w] != 0.0 and t == last_t
+                if forced:
+                    vals[w, 0] = wforce[w] * max(abs(vals[w, 0]), 1e-300)
+                    # right after an event on this function, values at round-off level are noise
+                    noise = 0.0
+                    for i in range(n):
+                        noise = max(noise, abs(y[i]))
+                    noise = max(1e3 * _EPS * (1.0 + noise), last_depth)
+                # the first crossing in the event direction between consecutive samples
+                prev_th = thetas[0]
+                prev_v = vals[w, 0]
                 for q in range(1, ns):
-                    if dkind == REGULAR:
-                        _dense_eval(y, Q, thetas[q], n, deg, xs)
-                        ev(W_HHD, widx[w] * nm + mode, t + thetas[q] * h, xs, p, buf)
-                        vals[w, q] = buf[0]
-                        rates[q] = buf[1]
-                    else:
-                        vq, rq = _watch_pair(ev, p, wtype[w], widx[w], wmode[w], dkind, didx,
-                                             mode, nm, t, h, y, Q, n, deg, thetas[q], xs, buf,
-                                             fbuf, hdx, ft, etab, stab, slide_c, w1, w2, gx)
-                        vals[w, q] = vq
-                        rates[q] = rq
-                thetas[ns] = 1.0
-                vals[w, ns] = v1
-                rates[ns] = r1
-                ns += 1
-                # an extremum of h towards zero between two samples (near grazing): bounded
-                # search on the dense output instead of trusting the fit's extremum
-                search = False
-                for q in range(ns - 1):
-                    if vals[w, q] * vals[w, q + 1] > 0.0:
-                        sg = 1.0 if vals[w, q] > 0.0 else -1.0
-                        if sg * wdir[w] <= 0 and sg * rates[q] < 0.0 < sg * rates[q + 1]:
-                            search = True
-                if search:
-                    ns = _graze_samples(ev, p, wtype[w], widx[w], wmode[w], wdir[w], dkind, didx,
-                                        mode, nm, t, h, y, Q, n, deg, thetas, vals[w], rates, ns,
-                                        xs, buf, fbuf, hdx, ft, etab, stab, slide_c, w1, w2, gx)
-            else:
-                thetas[0] = 0.0
-                thetas[1] = 0.5
-                thetas[2] = 1.0
-                ns = 3
-                if wvalid[w] == 1:
-                    vals[w, 0] = wv[w]
-                else:
-                    vals[w, 0] = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t, y, n,
-                                              buf, fbuf, hdx)
-                if not q_ready:
-                    if exact_now:
-                        _exact_step(aff_M[mode], aff_s[mode], nz, n, t, y, h, zv, zv1, Q, xe)
-                    else:
-                        stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar,
-                                                K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c,
-                                                w1, w2, gx, hdx, jac, xt, ft)
-                    q_ready = True
-                _dense_eval(y, Q, 0.5, nY, deg, xs)
-                vals[w, 1] = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t + 0.5 * h,
-                                          xs, n, buf, fbuf, hdx)
-                vals[w, 2] = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t_new, ynew,
-                                          n, buf, fbuf, hdx)
-                if not (np.isfinite(vals[w, 0]) and np.isfinite(vals[w, 2])):
-                    bad_watch = True
-                    break
-                wv[w] = vals[w, 2]
-                if wtype[w] == WF_HDDOT:
-                    # release from sticking: the free normal acceleration may turn positive
-                    # only in a short window around its maximum inside the step. Its slopes
-                    # at the ends (central differences on the dense output; the end one is
-                    # kept for the next step), the extrema of the Hermite fit and the bounded
-                    # search of surfaces add samples there
-                    if wvalid[w] == 1:
-                        sd0 = wd[w]
-                    else:
-                        sd0 = _watch_slope(ev, p, wtype[w], widx[w], wmode[w], nm, t, h, y, Q,
-                                           n, deg, 0.0, xs, buf, fbuf, hdx)
-                    sd1 = _watch_slope(ev, p, wtype[w], widx[w], wmode[w], nm, t, h, y, Q, n,
-                                       deg, 1.0, xs, buf, fbuf, hdx)
-                    wd[w] = sd1
-                    ra, rb = _hermite_extrema(vals[w, 0], vals[w, 2], sd0 * h, sd1 * h)
-                    ex_th[0] = 0.0
-                    ex_g[0] = vals[w, 0]
-                    rates[0] = sd0
-                    ne = 1
-                    for rr in (ra, rb):
-                        if 0.0 < rr < 1.0:
-                            vq, rq = _watch_pair(ev, p, wtype[w], widx[w], wmode[w], dkind,
-                                                 didx, mode, nm, t, h, y, Q, n, deg, rr, xs,
-                                                 buf, fbuf, hdx, ft, etab, stab, slide_c, w1,
-                                                 w2, gx)
-                            ex_th[ne] = rr
-                            ex_g[ne] = vq
-                            rates[ne] = rq
-                            ne += 1
-                    ex_th[ne] = 1.0
-                    ex_g[ne] = vals[w, 2]
-                    rates[ne] = sd1
-                    ne += 1
-                    if ne > 2:
-                        ne = _graze_samples(ev, p, wtype[w], widx[w], wmode[w], wdir[w], dkind,
-                                            didx, mode, nm, t, h, y, Q, n, deg, ex_th, ex_g,
-                                            rates, ne, xs, buf, fbuf, hdx, ft, etab, stab,
-                                            slide_c, w1, w2, gx)
-                        ns = _merge_samples(thetas, vals[w], ns, ex_th, ex_g, ne)
-            forced = wforce[w] != 0.0 and t == last_t
-            if forced:
-                vals[w, 0] = wforce[w] * max(abs(vals[w, 0]), 1e-300)
-                # right after an event on this function, values at round-off level are noise
-                noise = 0.0
-                for i in range(n):
-                    noise = max(noise, abs(y[i]))
-                noise = max(1e3 * _EPS * (1.0 + noise), last_depth)
-            # the first crossing in the event direction between consecutive samples
-            prev_th = thetas[0]
-            prev_v = vals[w, 0]
-            for q in range(1, ns):
-                th = thetas[q]
-                vq = vals[w, q]
-                # a bracket that starts before the earliest crossing found so far may hold an
-                # earlier one (two surfaces crossed in one step: the later sample end is no bound)
-                if prev_th >= best_th:
-                    break
-                if forced and abs(vq) <= noise:
+                    th = thetas[q]
+                    vq = vals[w, q]
+                    # a bracket that starts before the earliest crossing found so far may hold
+                    # an earlier one (two surfaces crossed in one step: the later sample end is
+                    # no bound)
+                    if prev_th >= best_th:
+                        break
+                    if forced and abs(vq) <= noise:
+                        prev_th = th
+                        continue
+                    if _crosses(prev_v, vq, wdir[w]):
+                        if not q_ready:
+                            if exact_now:
+                                _exact_step(aff_M, aff_s, aff_w, mode,
+                                            nz, n, t, y, h, zv, zv1, Q, xe)
+                            else:
+                                stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY,
+                                                        n, nvar, K, A, C, s_fsal, P, Q, ytmp, etab,
+                                                        stab, slide_c, w1, w2, gx, hdx, jac, xt,
+                                                        ft)
+                            q_ready = True
+                        # locate by Illinois on the dense output within [prev_th, th]
+                        a_th = prev_th
+                        b_th = th
+                        fa = prev_v
+                        fb = vq
+                        side = 0
+                        width_check = b_th - a_th
+                        if fa == 0.0:
+                            # the function is exactly zero at the left sample and moves into the
+                            # event direction from there (a start on the surface, or one within
+                            # its round-off band, see above): the crossing is at that sample. The
+                            # sign test below would take a zero end for the far side and slide
+                            # the bracket to the step's end
+                            b_th = a_th
+                        for it in range(400):
+                            if (b_th - a_th) * h <= 2.0 * _ulp(t + b_th * h):
+                                break
+                            m_th = ((a_th * fb - b_th * fa) / (fb - fa) if fb != fa
+                                    else 0.5 * (a_th + b_th))
+                            # safeguard: bisect when two secant steps did not halve the bracket
+                            # (Illinois stalls when one end value is tiny, e.g. right after an
+                            # event)
+                            if it % 2 == 1:
+                                if b_th - a_th > 0.5 * width_check:
+                                    m_th = 0.5 * (a_th + b_th)
+                                width_check = b_th - a_th
+                            if not (a_th < m_th < b_th):
+                                m_th = 0.5 * (a_th + b_th)
+                            _dense_eval(y, Q, m_th, nY, deg, xs)
+                            fm = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t + m_th * h,
+                                              xs, n, buf, fbuf, hdx)
+                            if forced and abs(fm) <= noise:
+                                # still on the side just left: round-off around the last event
+                                fm = wforce[w] * max(abs(fm), 1e-300)
+                            if (fm > 0.0) == (fa > 0.0) and fm != 0.0:
+                                a_th = m_th
+                                fa = fm
+                                if side == -1:
+                                    fb *= 0.5
+                                side = -1
+                            else:
+                                b_th = m_th
+                                fb = fm
+                                if side == 1:
+                                    fa *= 0.5
+                                side = 1
+                        if b_th < best_th:
+                            best_th = b_th
+                            best = w
+                            best_sign = -1.0 if prev_v > 0.0 else 1.0
+                        break
                     prev_th = th
-                    continue
-                if _crosses(prev_v, vq, wdir[w]):
+                    prev_v = vq
+
+            if bad_watch:
+                # a crossing of a NaN surface can never be seen: events would be missed silently.
+                # Treated like a non-finite stage: retake the step shorter, down to the point
+                # where the function turns non-finite (or at once, if it is at the start)
+                stats[1] += 1
+                for ww in range(nw):
+                    wvalid[ww] = 0
+                h *= 0.25
+                if h < 4.0 * _ulp(t):
+                    status = ST_NONFINITE
+                    break
+                continue
+
+            if unresolved:
+                # retake the step shorter (the surface was not resolved); cached watch values
+                # belong to the rejected step
+                stats[1] += 1
+                # the Hermite midpoint error is O(h^4)
+                h *= max(0.2, 0.9 * tratio ** -0.25)
+                for ww in range(nw):
+                    wvalid[ww] = 0
+                continue
+
+            if best < 0:
+                # accept the whole step
+                if dkind == SLIDE:
+                    # keep the sliding state on its surface: the Runge-Kutta step conserves a
+                    # linear h exactly but drifts off a curved or moving one by the local error;
+                    # one Newton step along h_x removes that (projection; it leaves the sliding
+                    # field non-stiff, unlike a large gain C of the -C h grad h term)
+                    _project_surface(ev, p, stab[didx, 0], t_new, ynew, n, hdx, buf)
+                if save_all:
+                    if store_q:
+                        for i in range(nY):
+                            for k in range(deg):
+                                dense[n_nodes - 1, i, k] = Q[i, k]
+                    for i in range(nY):
+                        nodes_y[n_nodes, i] = ynew[i]
+                    ikind[n_nodes - 1] = 0
+                    hstep[n_nodes - 1] = h
+                    nodes_t[n_nodes] = t_new
+                    nodes_s[n_nodes, 0] = dkind
+                    nodes_s[n_nodes, 1] = didx
+                    nodes_s[n_nodes, 2] = mode
+                    n_nodes += 1
+                if sdt > 0.0 and s0 + sk * sdt <= t_new:
                     if not q_ready:
                         if exact_now:
-                            _exact_step(aff_M[mode], aff_s[mode], nz, n, t, y, h, zv, zv1, Q, xe)
+                            _exact_step(aff_M, aff_s, aff_w, mode,
+                                        nz, n, t, y, h, zv, zv1, Q, xe)
                         else:
                             stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n,
                                                     nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab,
                                                     slide_c, w1, w2, gx, hdx, jac, xt, ft)
                         q_ready = True
-                    # locate by Illinois on the dense output within [prev_th, th]
-                    a_th = prev_th
-                    b_th = th
-                    fa = prev_v
-                    fb = vq
-                    side = 0
-                    width_check = b_th - a_th
-                    if fa == 0.0:
-                        # the function is exactly zero at the left sample and moves into the
-                        # event direction from there (a start on the surface, or one within
-                        # its round-off band, see above): the crossing is at that sample. The
-                        # sign test below would take a zero end for the far side and slide
-                        # the bracket to the step's end
-                        b_th = a_th
-                    for it in range(400):
-                        if (b_th - a_th) * h <= 2.0 * _ulp(t + b_th * h):
-                            break
-                        m_th = (a_th * fb - b_th * fa) / (fb - fa) if fb != fa else 0.5 * (a_th + b_th)
-                        # safeguard: bisect when two secant steps did not halve the bracket
-                        # (Illinois stalls when one end value is tiny, e.g. right after an event)
-                        if it % 2 == 1:
-                            if b_th - a_th > 0.5 * width_check:
-                                m_th = 0.5 * (a_th + b_th)
-                            width_check = b_th - a_th
-                        if not (a_th < m_th < b_th):
-                            m_th = 0.5 * (a_th + b_th)
-                        _dense_eval(y, Q, m_th, nY, deg, xs)
-                        fm = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t + m_th * h,
-                                          xs, n, buf, fbuf, hdx)
-                        if forced and abs(fm) <= noise:
-                            # still on the side just left: round-off around the last event
-                            fm = wforce[w] * max(abs(fm), 1e-300)
-                        if (fm > 0.0) == (fa > 0.0) and fm != 0.0:
-                            a_th = m_th
-                            fa = fm
-                            if side == -1:
-                                fb *= 0.5
-                            side = -1
-                        else:
-                            b_th = m_th
-                            fb = fm
-                            if side == 1:
-                                fa *= 0.5
-                            side = 1
-                    if b_th < best_th:
-                        best_th = b_th
-                        best = w
-                        best_sign = -1.0 if prev_v > 0.0 else 1.0
+                    n_samp, sk = _take_samples(t, h, y, Q, nY, n, deg, s0, sdt, sk, t_end,
+                                                     samp, n_samp, xs, max_samp)
+                if t == last_t:
+                    # the re-trigger guard holds while its function stays within the round-off
+                    # band on the far side: a step ending there must not start the next one on the
+                    # far side unguarded (a release whose flight rises less than the band would
+                    # have its landing stepped over)
+                    for ww in range(nw):
+                        if wforce[ww] * wv[ww] < 0.0 and abs(wv[ww]) <= noise:
+                            last_t = t_new
+                t = t_new
+                for i in range(nY):
+                    y[i] = ynew[i]
+                    K[0, i] = K[s_fsal, i]
+                for ww in range(nw):
+                    wvalid[ww] = 1
+                fac = 10.0 if err == 0.0 else min(10.0, max(0.2, 0.9 * err ** (-1.0 / order)))
+                if tratio > 0.0:
+                    # nor grow past the resolution of a moving surface
+                    fac = min(fac, max(0.2, 0.9 * tratio ** -0.25))
+                h = h * fac
+                continue
+
+            # ---- an event inside the step: land exactly on it with a shortened step, then
+            # polish the time with Newton on the watch function (h / hdot) for surfaces. The
+            # dense output of an exact step is the exact flow: there the landing "step" is its
+            # evaluation, and the step's Taylor terms are rescaled to the shorter interval.
+            w = best
+            h_ev = best_th * h
+            for i in range(nY):
+                Kland[0, i] = K[0, i]
+            for polish in range(8):
+                if exact_now:
+                    _dense_eval(y, Q, h_ev / h, nY, deg, ytmp)
+                    ev(W_F, mode, t + h_ev, ytmp, p, Kland[s_fsal])
+                    stats[2] += 1
+                else:
+                    _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, nvar, Kland, A, C,
+                               s_fsal, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
+                    stats[2] += s_fsal
+                stats[5] += 1
+                for i in range(nY):
+                    ynew[i] = ytmp[i]
+                if (wtype[w] != WF_SURFACE and wtype[w] != WF_HDOT) or polish == 7:
                     break
-                prev_th = th
-                prev_v = vq
-
-        if bad_watch:
-            # a crossing of a NaN surface can never be seen: events would be missed silently.
-            # Treated like a non-finite stage: retake the step shorter, down to the point
-            # where the function turns non-finite (or at once, if it is at the start)
-            stats[1] += 1
+                if best_th == 0.0:
+                    # the function was zero at the step's start (on the surface, see the bracket
+                    # above): the event is at t, where the state is given; Newton on round-off
+                    # values (tangency: hv / hd ~ 1e-16 / 1e-16) would move it anywhere
+                    break
+                # Newton on h(t + h_ev) (or on hdot of a mode, for a sliding exit) with the
+                # landing step as the flow: quadratic, so a few iterations bring the watch function
+                # to round-off even for slow (near-grazing, tangential-exit) arrivals
+                hv = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t + h_ev, ynew, n, buf,
+                                  fbuf, hdx)
+                if wtype[w] == WF_SURFACE:
+                    hd = _surface_rate(ev, p, dkind, widx[w], mode, nm, t + h_ev, ynew,
+                                       Kland[s_fsal], n, buf, hdx)
+                else:
+                    hd = _hdot_rate(ev, p, widx[w], wmode[w], nm, t + h_ev, ynew, Kland[s_fsal], n,
+                                    buf, hdx)
+                if hd == 0.0 or hv == 0.0:
+                    break
+                dt = -hv / hd
+                # (a NaN correction, from a NaN watch function, keeps the bracketed time)
+                if (not np.isfinite(dt) or abs(dt) <= 2.0 * _ulp(t + h_ev) or h_ev + dt <= 0.0
+                        or h_ev + dt > h):
+                    break
+                h_ev += dt
+            # landing-step dense output (extra stages for DOP853; Taylor terms rescaled), where it
+            # is stored or sampled
+            if exact_now and (store_q or sdt > 0.0):
+                ratio = h_ev / h
+                scale = 1.0
+                for k in range(deg):
+                    scale *= ratio
+                    for i in range(n):
+                        Q[i, k] *= scale
+            elif store_q or sdt > 0.0:
+                stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, nvar,
+                                        Kland, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1,
+                                        w2, gx, hdx, jac, xt, ft)
+            t_ev = min(t + h_ev, t_end)
+            # Events at one instant: another watched function (an event surface, a release or a
+            # sliding exit) that changed sign between the step's start and the polished event
+            # time crossed within the location error of this event (this one was bracketed
+            # first; polishing moved its time past the other crossing). It fires at the same
+            # time, right after this one (unless the new motion leaves it), instead of being
+            # found on its far side after the restart and lost (a release lost that way left a
+            # ball stuck to a table that pulls it).
+            n_pend = 0
+            pend_t = t_ev
             for ww in range(nw):
-                wvalid[ww] = 0
-            h *= 0.25
-            if h < 4.0 * _ulp(t):
-                status = ST_NONFINITE
-                break
-            continue
-
-        if unresolved:
-            # retake the step shorter (the surface was not resolved); cached watch values
-            # belong to the rejected step
-            stats[1] += 1
-            # the Hermite midpoint error is O(h^4)
-            h *= max(0.2, 0.9 * tratio ** -0.25)
-            for ww in range(nw):
-                wvalid[ww] = 0
-            continue
-
-        if best < 0:
-            # accept the whole step
-            if dkind == SLIDE:
-                # keep the sliding state on its surface: the Runge-Kutta step conserves a
-                # linear h exactly but drifts off a curved or moving one by the local error;
-                # one Newton step along h_x removes that (projection; it leaves the sliding
-                # field non-stiff, unlike a large gain C of the -C h grad h term)
-                _project_surface(ev, p, stab[didx, 0], t_new, ynew, n, hdx, buf)
-            if save_all:
-                if n_nodes + 1 > nodes_t.shape[0]:
-                    nodes_t = _grow1(nodes_t, n_nodes + 1)
-                    nodes_y = _grow2(nodes_y, n_nodes + 1)
-                    nodes_s = _grow2(nodes_s, n_nodes + 1)
-                    dense = _grow3(dense, n_nodes + 1)
-                    ikind = _grow1(ikind, n_nodes + 1)
+                if ww == w or (wtype[ww] == WF_SURFACE and widx[ww] == widx[w]):
+                    continue
+                vw = _watch_value(ev, p, wtype[ww], widx[ww], wmode[ww], nm, t_ev, ynew, n, buf,
+                                  fbuf, hdx)
+                if vals[ww, 0] != 0.0 and _crosses(vals[ww, 0], vw, wdir[ww]):
+                    pend_type[n_pend] = wtype[ww]
+                    pend_idx[n_pend] = widx[ww]
+                    pend_mode[n_pend] = wmode[ww]
+                    pend_act[n_pend] = wact[ww]
+                    pend_ref[n_pend] = wref[ww]
+                    n_pend += 1
+            if sdt > 0.0:
+                # samples up to the event (one at the event time takes the state before it)
+                n_samp, sk = _take_samples(t, h_ev, y, Q, nY, n, deg, s0, sdt, sk, t_end,
+                                                 samp, n_samp, xs, max_samp)
+            # store the node just before the event (always, also when not saving all steps)
+            if store_q:
                 for i in range(nY):
                     for k in range(deg):
                         dense[n_nodes - 1, i, k] = Q[i, k]
-                    nodes_y[n_nodes, i] = ynew[i]
-                ikind[n_nodes - 1] = 0
-                nodes_t[n_nodes] = t_new
-                nodes_s[n_nodes, 0] = dkind
-                nodes_s[n_nodes, 1] = didx
-                nodes_s[n_nodes, 2] = mode
-                n_nodes += 1
-            if sdt > 0.0 and s0 + sk * sdt <= t_new:
-                if not q_ready:
-                    if exact_now:
-                        _exact_step(aff_M[mode], aff_s[mode], nz, n, t, y, h, zv, zv1, Q, xe)
-                    else:
-                        stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar,
-                                                K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c,
-                                                w1, w2, gx, hdx, jac, xt, ft)
-                    q_ready = True
-                samp, n_samp, sk = _take_samples(t, h, y, Q, nY, n, deg, s0, sdt, sk, t_end,
-                                                 samp, n_samp, xs, max_samp)
-            if t == last_t:
-                # the re-trigger guard holds while its function stays within the round-off
-                # band on the far side: a step ending there must not start the next one on the
-                # far side unguarded (a release whose flight rises less than the band would
-                # have its landing stepped over)
-                for ww in range(nw):
-                    if wforce[ww] * wv[ww] < 0.0 and abs(wv[ww]) <= noise:
-                        last_t = t_new
-            t = t_new
+            ikind[n_nodes - 1] = 0 if save_all else 1
+            hstep[n_nodes - 1] = h_ev
+            nodes_t[n_nodes] = t_ev
+            for i in range(nY):
+                nodes_y[n_nodes, i] = ynew[i]
+            nodes_s[n_nodes, 0] = dkind
+            nodes_s[n_nodes, 1] = didx
+            nodes_s[n_nodes, 2] = mode
+            n_nodes += 1
+
+            # ---- handle the event
+            n_ev0 = n_ev
             for i in range(nY):
                 y[i] = ynew[i]
-                K[0, i] = K[s_fsal, i]
-            for ww in range(nw):
-                wvalid[ww] = 1
-            fac = 10.0 if err == 0.0 else min(10.0, max(0.2, 0.9 * err ** (-1.0 / order)))
-            if tratio > 0.0:
-                # nor grow past the resolution of a moving surface
-                fac = min(fac, max(0.2, 0.9 * tratio ** -0.25))
-            h = h * fac
-            continue
-
-        # ---- an event inside the step: land exactly on it with a shortened step, then
-        # polish the time with Newton on the watch function (h / hdot) for surfaces. The
-        # dense output of an exact step is the exact flow: there the landing "step" is its
-        # evaluation, and the step's Taylor terms are rescaled to the shorter interval.
-        w = best
-        h_ev = best_th * h
-        for i in range(nY):
-            Kland[0, i] = K[0, i]
-        for polish in range(8):
-            if exact_now:
-                _dense_eval(y, Q, h_ev / h, nY, deg, ytmp)
-                ev(W_F, mode, t + h_ev, ytmp, p, Kland[s_fsal])
-                stats[2] += 1
-            else:
-                _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, nvar, Kland, A, C,
-                           s_fsal, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
-                stats[2] += s_fsal
-            stats[5] += 1
+            t = t_ev
+            old_kind = dkind
+            old_idx = didx
+            old_mode = mode
+            log_kind = -1
+            log_ref = wref[w]
+            t_after = t
+            act = wact[w]
+            new_sign = best_sign
+            chatter_tail = False
+            contact_stick = False
             for i in range(nY):
-                ynew[i] = ytmp[i]
-            if (wtype[w] != WF_SURFACE and wtype[w] != WF_HDOT) or polish == 7:
-                break
-            if best_th == 0.0:
-                # the function was zero at the step's start (on the surface, see the bracket
-                # above): the event is at t, where the state is given; Newton on round-off
-                # values (tangency: hv / hd ~ 1e-16 / 1e-16) would move it anywhere
-                break
-            # Newton on h(t + h_ev) (or on hdot of a mode, for a sliding exit) with the
-            # landing step as the flow: quadratic, so a few iterations bring the watch function
-            # to round-off even for slow (near-grazing, tangential-exit) arrivals
-            hv = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t + h_ev, ynew, n, buf,
-                              fbuf, hdx)
-            if wtype[w] == WF_SURFACE:
-                hd = _surface_rate(ev, p, dkind, widx[w], mode, nm, t + h_ev, ynew,
-                                   Kland[s_fsal], n, buf, hdx)
-            else:
-                hd = _hdot_rate(ev, p, widx[w], wmode[w], nm, t + h_ev, ynew, Kland[s_fsal], n,
-                                buf, hdx)
-            if hd == 0.0 or hv == 0.0:
-                break
-            dt = -hv / hd
-            # (a NaN correction, from a NaN watch function, keeps the bracketed time)
-            if (not np.isfinite(dt) or abs(dt) <= 2.0 * _ulp(t + h_ev) or h_ev + dt <= 0.0
-                    or h_ev + dt > h):
-                break
-            h_ev += dt
-        # landing-step dense output (extra stages for DOP853; Taylor terms rescaled)
-        if exact_now:
-            ratio = h_ev / h
-            scale = 1.0
-            for k in range(deg):
-                scale *= ratio
-                for i in range(n):
-                    Q[i, k] *= scale
-        else:
-            stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, nvar, Kland,
-                                    A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2, gx,
-                                    hdx, jac, xt, ft)
-        t_ev = min(t + h_ev, t_end)
-        if sdt > 0.0:
-            # samples up to the event (one at the event time takes the state before it)
-            samp, n_samp, sk = _take_samples(t, h_ev, y, Q, nY, n, deg, s0, sdt, sk, t_end,
-                                             samp, n_samp, xs, max_samp)
-        # store the node just before the event (always, also when not saving all steps)
-        nodes_t = _grow1(nodes_t, n_nodes + 3)
-        nodes_y = _grow2(nodes_y, n_nodes + 3)
-        nodes_s = _grow2(nodes_s, n_nodes + 3)
-        dense = _grow3(dense, n_nodes + 3)
-        ikind = _grow1(ikind, n_nodes + 3)
-        dense[n_nodes - 1, :, :] = Q
-        ikind[n_nodes - 1] = 0 if save_all else 1
-        nodes_t[n_nodes] = t_ev
-        nodes_y[n_nodes, :] = ynew
-        nodes_s[n_nodes, 0] = dkind
-        nodes_s[n_nodes, 1] = didx
-        nodes_s[n_nodes, 2] = mode
-        n_nodes += 1
-
-        # ---- handle the event
-        n_ev0 = n_ev
-        for i in range(nY):
-            y[i] = ynew[i]
-        t = t_ev
-        old_kind = dkind
-        old_idx = didx
-        old_mode = mode
-        log_kind = -1
-        log_ref = wref[w]
-        t_after = t
-        act = wact[w]
-        new_sign = best_sign
-        chatter_tail = False
-        contact_stick = False
-        for i in range(nY):
-            xs[i] = y[i]
-        if act == ACT_EVENT:
-            j = wref[w]
-            ev(W_GUARD, j, t, y, p, buf)
-            guard_ok = buf[0] != 0.0
-            if not guard_ok:
-                # events on one surface with complementary guards (stick or reverse at v = 0,
-                # thesis eq. 5.4): the crossing belongs to the one whose guard holds
-                for ww in range(nw):
-                    if (ww != w and wact[ww] == ACT_EVENT and wtype[ww] == WF_SURFACE
-                            and widx[ww] == widx[w]
-                            and (wdir[ww] == 0 or wdir[ww] * new_sign > 0.0)):
-                        ev(W_GUARD, wref[ww], t, y, p, buf)
-                        if buf[0] != 0.0:
-                            w = ww
-                            j = wref[ww]
-                            log_ref = j
-                            guard_ok = True
-                            break
-            # a crossing whose normal velocity points against the event direction is
-            # round-off around a previous event (the state is already leaving): not an event
-            if dkind == REGULAR:
-                ev(W_HD, widx[w] * nm + mode, t, y, p, buf)
-                vn = buf[0]
-            else:
-                _field(ev, p, dkind, didx, mode, nm, t, y, n, fbuf, etab, stab, slide_c, w1, w2,
-                       gx, hdx)
-                vn = _surface_rate(ev, p, dkind, widx[w], mode, nm, t, y, fbuf, n, buf, hdx)
-            moving_away = etab[j, 1] != 0 and vn * etab[j, 1] < 0.0
-            if moving_away:
-                # ... unless that velocity is round-off: a state on the surface and tangent to
-                # it (hdot +-1e-16 on an oblique or curved surface) is not leaving; the sign of
-                # the round-off must not decide (it would let the state sink into the surface
-                # until the re-trigger guard's noise band is passed)
-                if abs(vn) <= _rate_band(ev, p, widx[w], mode, nm, t, y, n, hdx):
-                    moving_away = False
-            if not guard_ok or moving_away:
-                # no event: continue past this crossing
-                last_type = wtype[w]; last_idx = widx[w]; last_mode = wmode[w]
-                last_sign = new_sign
+                xs[i] = y[i]
+            if act == ACT_EVENT:
+                j = wref[w]
+                ev(W_GUARD, j, t, y, p, buf)
+                guard_ok = buf[0] != 0.0
+                if not guard_ok:
+                    # events on one surface with complementary guards (stick or reverse at v = 0,
+                    # thesis eq. 5.4): the crossing belongs to the one whose guard holds
+                    for ww in range(nw):
+                        if (ww != w and wact[ww] == ACT_EVENT and wtype[ww] == WF_SURFACE
+                                and widx[ww] == widx[w]
+                                and (wdir[ww] == 0 or wdir[ww] * new_sign > 0.0)):
+                            ev(W_GUARD, wref[ww], t, y, p, buf)
+                            if buf[0] != 0.0:
+                                w = ww
+                                j = wref[ww]
+                                log_ref = j
+                                guard_ok = True
+                                break
+                # a crossing whose normal velocity points against the event direction is
+                # round-off around a previous event (the state is already leaving): not an event
+                if dkind == REGULAR:
+                    ev(W_HD, widx[w] * nm + mode, t, y, p, buf)
+                    vn = buf[0]
+                else:
+                    _field(ev, p, dkind, didx, mode, nm, t, y, n, fbuf, etab, stab, slide_c, w1,
+                           w2, gx, hdx)
+                    vn = _surface_rate(ev, p, dkind, widx[w], mode, nm, t, y, fbuf, n, buf, hdx)
+                moving_away = etab[j, 1] != 0 and vn * etab[j, 1] < 0.0
                 if moving_away:
-                    last_sign = 1.0 if vn > 0.0 else -1.0
-                    # the state sits a little on the far side (round-off of an earlier event)
-                    # and is moving back: values within that depth are not a new crossing
-                    ev(W_H, widx[w], t, y, p, buf)
-                    last_depth = 4.0 * abs(buf[0])
-                last_t = t
-                # the interval [t_ev, ...] continues smoothly: mark the stored interval as step
-                ikind[n_nodes - 2] = 0 if save_all else 1
-                restart = True
-                continue
-            k = etab[j, 0]
-            if etab[j, 2] == EV_IMPACT:
-                # normal velocity and acceleration at impact, impact direction W, restitution r
-                ev(W_HD, k * nm + mode, t, y, p, buf)
-                vin = buf[0]
-                ev(W_F, mode, t, y, p, fbuf)
-                ev(W_HDX, k * nm + mode, t, y, p, hdx)
-                ev(W_HDT, k * nm + mode, t, y, p, buf)
-                acc = buf[0] + _dot(hdx, fbuf, n)
-                hw = _impact_direction(ev, p, j, k, mode, nm, t, y, n, w1, gx, hdx)
-                r = -(1.0 + hw)
-                if chain_event != j:
-                    chain_event = j
-                    chain_vmax = 0.0
-                chain_vmax = max(chain_vmax, abs(vin))
-                # velocity floor: a bounce of speed v rises v^2 / (2|a|); below the position
-                # tolerance it cannot be told from sticking (default when chat_abs < 0)
-                vfloor = chat_abs
-                if vfloor < 0.0:
-                    xmax = 0.0
-                    for i in range(n):
-                        xmax = max(xmax, abs(y[i]))
-                    vfloor = np.sqrt(2.0 * abs(acc) * (atol + rtol * xmax))
-                do_chatter = (chatter_on == 1 and acc < 0.0 and r >= 0.0 and r < 1.0
-                              and (abs(vin) <= chat_rel * chain_vmax or abs(vin) <= vfloor
-                                   or r == 0.0))
-                # complete-chattering map (Nordmark & Piiroinen 2009; slides):
-                # x_out = x_in + (2 r f_in / a + W) hdot_in / (1 - r),
-                # t_out = t_in + 2 r hdot_in / ((1 - r) a)
-                dtc = 2.0 * r * vin / ((1.0 - r) * acc) if do_chatter else 0.0
-                if do_chatter and not (t + dtc <= t_end):
-                    # the accumulation point lies beyond t_end: up to t_end the motion is a
-                    # finite number of ordinary impacts, so take this one (and the next ones)
-                    # as an impact and integrate on; jumping would end the run past t_end
-                    # with the state of a time not asked for
-                    do_chatter = False
-                    # ... unless the bounces are below the velocity floor: they rise less than
-                    # the position tolerance, so the event search cannot resolve them (their
-                    # crossings drown in the round-off band of the re-trigger guard and the
-                    # state would fall through the surface). Up to t_end the motion then is
-                    # the start of the chattering sequence, within the resolution of the run:
-                    # end at t_end on the chord from x_in to the accumulation state (Q(x_in)
-                    # projected onto the sticking manifold, as below) that a chattering gap
-                    # is drawn with (error O(floor) in hdot, O(tolerance) in h)
-                    chatter_tail = abs(vin) <= vfloor and dtc > 0.0
-                if chatter_tail:
-                    for i in range(n):
-                        ytmp[i] = xs[i] + (2.0 * r * fbuf[i] / acc + w1[i]) * vin / (1.0 - r)
-                    _project_stick(ev, p, k, mode, nm, t + dtc, ytmp, n, hdx, w2, buf)
-                    th = (t_end - t) / dtc
-                    for i in range(n):
-                        y[i] = (1.0 - th) * xs[i] + th * ytmp[i]
-                    log_kind = -1
-                elif do_chatter:
-                    for i in range(n):
-                        y[i] = xs[i] + (2.0 * r * fbuf[i] / acc + w1[i]) * vin / (1.0 - r)
-                    if nvar:
-                        _chatter_saltation(ev, p, j, k, mode, nm, t, xs, n, S, etab, stab,
-                                           slide_c)
-                    t_after = t + dtc
-                    # Q is first order in hdot; the accumulation point lies on the sticking
-                    # manifold {h = 0, hdot = 0} by definition, so we project onto it
-                    _project_stick(ev, p, k, mode, nm, t_after, y, n, hdx, w2, buf)
-                    log_kind = K_CHATTER
-                    dkind = STICK
-                    didx = j
-                    stats[4] += 1
-                    chain_event = -1
+                    # ... unless that velocity is round-off: a state on the surface and tangent to
+                    # it (hdot +-1e-16 on an oblique or curved surface) is not leaving; the sign of
+                    # the round-off must not decide (it would let the state sink into the surface
+                    # until the re-trigger guard's noise band is passed)
+                    if abs(vn) <= _rate_band(ev, p, widx[w], mode, nm, t, y, n, hdx):
+                        moving_away = False
+                if not guard_ok or moving_away:
+                    # no event: continue past this crossing
+                    last_type = wtype[w]; last_idx = widx[w]; last_mode = wmode[w]
+                    last_sign = new_sign
+                    if moving_away:
+                        last_sign = 1.0 if vn > 0.0 else -1.0
+                        # the state sits a little on the far side (round-off of an earlier event)
+                        # and is moving back: values within that depth are not a new crossing
+                        ev(W_H, widx[w], t, y, p, buf)
+                        last_depth = 4.0 * abs(buf[0])
+                    last_t = t
+                    # the interval [t_ev, ...] continues smoothly: mark the stored interval as step
+                    ikind[n_nodes - 2] = 0 if save_all else 1
+                    restart = True
+                    continue
+                k = etab[j, 0]
+                if etab[j, 2] == EV_IMPACT:
+                    # normal velocity and acceleration at impact, impact direction W, restitution r
+                    ev(W_HD, k * nm + mode, t, y, p, buf)
+                    vin = buf[0]
+                    ev(W_F, mode, t, y, p, fbuf)
+                    ev(W_HDX, k * nm + mode, t, y, p, hdx)
+                    ev(W_HDT, k * nm + mode, t, y, p, buf)
+                    acc = buf[0] + _dot(hdx, fbuf, n)
+                    hw = _impact_direction(ev, p, j, k, mode, nm, t, y, n, w1, gx, hdx)
+                    r = -(1.0 + hw)
+                    if chain_event != j:
+                        chain_event = j
+                        chain_vmax = 0.0
+                    chain_vmax = max(chain_vmax, abs(vin))
+                    # velocity floor: a bounce of speed v rises v^2 / (2|a|); below the position
+                    # tolerance it cannot be told from sticking (default when chat_abs < 0)
+                    vfloor = chat_abs
+                    if vfloor < 0.0:
+                        xmax = 0.0
+                        for i in range(n):
+                            xmax = max(xmax, abs(y[i]))
+                        vfloor = np.sqrt(2.0 * abs(acc) * (atol + rtol * xmax))
+                    do_chatter = (chatter_on == 1 and acc < 0.0 and r >= 0.0 and r < 1.0
+                                  and (abs(vin) <= vfloor or r == 0.0))
+                    if (chatter_on == 1 and not do_chatter and acc < 0.0 and 0.0 <= r < 1.0
+                            and abs(vin) <= chat_rel * chain_vmax and not chat_gated):
+                        do_chatter = True
+                    elif (chatter_on == 1 and not do_chatter and acc < 0.0 and 0.0 <= r < 1.0
+                            and abs(vin) <= chat_rel * chain_vmax):
+                        # the map takes the normal acceleration as constant over the sequence:
+                        # jump only where its change over the sequence's duration moves the state
+                        # by less than the position tolerance, dt^2 |a(t + dt) - a(t)| (a table
+                        # whose acceleration varies put the accumulation point 3e-6 off when
+                        # entered at 1e-4 of the first impact's speed; below the floor the bounces
+                        # are unresolvable anyway)
+                        dtq = 2.0 * r * vin / ((1.0 - r) * acc)
+                        for i in range(n):
+                            xt[i] = y[i] + dtq * fbuf[i]
+                        acc2 = _free_normal_acc(ev, p, k, mode, nm, t + dtq, xt, n, buf, ft, w2)
+                        xmax = 0.0
+                        for i in range(n):
+                            xmax = max(xmax, abs(y[i]))
+                        do_chatter = dtq * dtq * abs(acc2 - acc) <= atol + rtol * xmax
+                    # complete-chattering map (Nordmark & Piiroinen 2009; slides):
+                    # x_out = x_in + (2 r f_in / a + W) hdot_in / (1 - r),
+                    # t_out = t_in + 2 r hdot_in / ((1 - r) a)
+                    dtc = 2.0 * r * vin / ((1.0 - r) * acc) if do_chatter else 0.0
+                    if do_chatter and not (t + dtc <= t_end):
+                        # the accumulation point lies beyond t_end: up to t_end the motion is a
+                        # finite number of ordinary impacts, so take this one (and the next ones)
+                        # as an impact and integrate on; jumping would end the run past t_end
+                        # with the state of a time not asked for
+                        do_chatter = False
+                        # ... unless the bounces are below the velocity floor: they rise less than
+                        # the position tolerance, so the event search cannot resolve them (their
+                        # crossings drown in the round-off band of the re-trigger guard and the
+                        # state would fall through the surface). Up to t_end the motion then is
+                        # the start of the chattering sequence, within the resolution of the run:
+                        # end at t_end on the chord from x_in to the accumulation state (Q(x_in)
+                        # projected onto the sticking manifold, as below) that a chattering gap
+                        # is drawn with (error O(floor) in hdot, O(tolerance) in h)
+                        chatter_tail = abs(vin) <= vfloor and dtc > 0.0
+                    if chatter_tail:
+                        for i in range(n):
+                            ytmp[i] = xs[i] + (2.0 * r * fbuf[i] / acc + w1[i]) * vin / (1.0 - r)
+                        _project_stick(ev, p, k, mode, nm, t + dtc, ytmp, n, hdx, w2, buf)
+                        th = (t_end - t) / dtc
+                        for i in range(n):
+                            y[i] = (1.0 - th) * xs[i] + th * ytmp[i]
+                        log_kind = -1
+                    elif do_chatter:
+                        for i in range(n):
+                            y[i] = xs[i] + (2.0 * r * fbuf[i] / acc + w1[i]) * vin / (1.0 - r)
+                        if nvar:
+                            _chatter_saltation(ev, p, j, k, mode, nm, t, xs, n, S, etab, stab,
+                                               slide_c)
+                        t_after = t + dtc
+                        # Q is first order in hdot; the accumulation point lies on the sticking
+                        # manifold {h = 0, hdot = 0} by definition, so we project onto it
+                        _project_stick(ev, p, k, mode, nm, t_after, y, n, hdx, w2, buf)
+                        log_kind = K_CHATTER
+                        dkind = STICK
+                        didx = j
+                        stats[4] += 1
+                        chain_event = -1
+                    else:
+                        ev(W_G, j, t, xs, p, ytmp)
+                        for i in range(n):
+                            y[i] = ytmp[i]
+                        log_kind = K_IMPACT
+                        if etab[j, 3] >= 0:
+                            mode = etab[j, 3]
                 else:
                     ev(W_G, j, t, xs, p, ytmp)
                     for i in range(n):
                         y[i] = ytmp[i]
-                    log_kind = K_IMPACT
+                    log_kind = K_TRANSITION
                     if etab[j, 3] >= 0:
                         mode = etab[j, 3]
-            else:
-                ev(W_G, j, t, xs, p, ytmp)
-                for i in range(n):
-                    y[i] = ytmp[i]
-                log_kind = K_TRANSITION
-                if etab[j, 3] >= 0:
-                    mode = etab[j, 3]
-                chain_event = -1
-            if (log_kind != K_CHATTER and not chatter_tail and n_sw > 0
-                    and (dkind == REGULAR or etab[j, 5] == 1 or etab[j, 3] >= 0)):
-                # a reset or a new mode may put the state on the other side of a switching
-                # surface, or on one (an impact that stops the relative motion): take the
-                # variant on the right side, or slide. An event without reset or target
-                # while sliding (a section, a terminal event) leaves the sliding motion alone.
-                dkind, didx, mode = _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx)
-            if (log_kind == K_IMPACT and dkind == REGULAR
-                    and _stays_in_contact(ev, p, k, mode, nm, t, y, n, buf, fbuf, hdx)):
-                # the reset left hdot at round-off (a plastic impact on an oblique or curved
-                # surface, an impact at rest) and the free motion presses into the surface:
-                # the state sticks (constrained motion along the surface, released where the
-                # constraint force vanishes), logged as a `stick` record after the impact, as
-                # after a chattering sequence. The impact's saltation matrix maps into the
-                # sticking field.
-                contact_stick = True
-                dkind = STICK
-                didx = j
-                _project_stick(ev, p, k, mode, nm, t, y, n, hdx, w2, buf)
-            if nvar and log_kind != K_CHATTER and not chatter_tail:
-                _event_saltation(ev, p, j, k, old_mode, mode, nm, t, xs, y, n, S, gx, hdx, buf,
-                                 fbuf, w1, w2, etab, stab, slide_c, old_kind, old_idx, ytmp,
-                                 dkind, didx)
-        elif act == ACT_RELEASE:
-            # the flight starts on the sticking manifold {h = 0, hdot = 0}: the sticking steps
-            # drift off it by their local error, and a drift to the far side (deeper than the
-            # re-trigger guard's round-off band) would hide a short flight's landing
-            _project_stick(ev, p, etab[old_idx, 0], mode, nm, t, y, n, hdx, w2, buf)
-            dkind = REGULAR
-            didx = -1
-            log_kind = K_RELEASE
-            if n_sw > 0:
-                # the variant on the side the released motion takes (a kink surface held at
-                # zero while sticking, e.g. the relative velocity of bilinear damping)
-                dkind, didx, mode = _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx)
-            if nvar:
-                for i in range(n):
-                    for c in range(n):
-                        S[i, c] = 1.0 if i == c else 0.0
-        elif act == ACT_SWITCH:
-            s = wref[w]
-            k = stab[s, 0]
-            a_m = stab[s, 1]
-            b_m = stab[s, 2]
-            ev(W_HD, k * nm + a_m, t, y, p, buf)
-            sa = buf[0]
-            ev(W_HD, k * nm + b_m, t, y, p, buf)
-            sb = buf[0]
-            filippov = stab.shape[1] <= 3 or stab[s, 3] == SW_FILIPPOV
-            # thesis eq. 2.6-2.8: both fields pointing into the surface (h_t + h_x f_above < 0
-            # < h_t + h_x f_below) is sliding; otherwise the flow crosses. Arriving with the
-            # own field tangent (hdot = 0) while the other one points back is a graze.
-            graze = filippov and ((old_mode == a_m and sa >= 0.0 and sb > 0.0)
-                                  or (old_mode == b_m and sb <= 0.0 and sa < 0.0))
-            if graze:
-                last_type = wtype[w]; last_idx = widx[w]; last_mode = wmode[w]
-                last_sign = new_sign
-                last_t = t
-                ikind[n_nodes - 2] = 0 if save_all else 1
-                restart = True
-                continue
-            if filippov and sa < 0.0 and sb > 0.0:
-                dkind = SLIDE
-                didx = s
-                mode = a_m
-                log_kind = K_SLIDE_START
-                _project_surface(ev, p, k, t, y, n, hdx, buf)
-            else:
-                log_kind = K_CROSSING
-                mode = b_m if old_mode == a_m else a_m
-            if nvar:
-                _switch_saltation(ev, p, dkind, didx, old_mode, mode, nm, k, t, y, n, S, hdx,
-                                  buf, fbuf, w1, w2, gx, etab, stab, slide_c, old_kind, old_idx)
-        elif act == ACT_EXIT_ABOVE or act == ACT_EXIT_BELOW:
-            s = wref[w]
-            mode = stab[s, 1] if act == ACT_EXIT_ABOVE else stab[s, 2]
-            dkind = REGULAR
-            didx = -1
-            log_kind = K_SLIDE_END
-            if nvar:
-                for i in range(n):
-                    for c in range(n):
-                        S[i, c] = 1.0 if i == c else 0.0
-        else:
-            # sliding on switch old_idx reached surface k2 = widx[w] of another switch. Across
-            # k2 the sliding pair (a, b) becomes (a2, b2): if the flow slides on the first
-            # surface there too and its sliding field carries the state away from k2, it
-            # crosses k2 while sliding; if both pairs leave the first surface to one side, the
-            # sliding ends; if the sliding field on the far side points back into k2 the motion
-            # would slide on the intersection of the two surfaces, which is not supported
-            status = ST_INTERSECTION
-            log_kind = -1
-            k1 = stab[old_idx, 0]
-            k2 = widx[w]
-            a2 = _partner(stab, k2, stab[old_idx, 1])
-            b2 = _partner(stab, k2, stab[old_idx, 2])
-            s_new = _find_switch(stab, k1, a2, b2) if a2 >= 0 and b2 >= 0 else -1
-            if s_new >= 0:
-                ev(W_HD, k1 * nm + a2, t, y, p, buf)
-                sa = buf[0]
-                ev(W_HD, k1 * nm + b2, t, y, p, buf)
-                sb = buf[0]
-                if sa < 0.0 and sb > 0.0:
-                    _field(ev, p, SLIDE, s_new, a2, nm, t, y, n, fbuf, etab, stab, slide_c, w1,
-                           w2, gx, hdx)
-                    rate = _surface_rate(ev, p, SLIDE, k2, a2, nm, t, y, fbuf, n, buf, hdx)
-                    if rate * new_sign > 0.0:
-                        dkind = SLIDE
-                        didx = s_new
-                        mode = a2
-                        log_kind = K_CROSSING
-                elif sa >= 0.0 and sb > 0.0:
-                    dkind = REGULAR
-                    didx = -1
-                    mode = a2
-                    log_kind = K_SLIDE_END
-                    log_ref = old_idx
-                elif sa < 0.0 and sb <= 0.0:
-                    dkind = REGULAR
-                    didx = -1
-                    mode = b2
-                    log_kind = K_SLIDE_END
-                    log_ref = old_idx
-            if log_kind >= 0:
-                status = ST_SUCCESS
+                    chain_event = -1
+                if (log_kind != K_CHATTER and not chatter_tail and n_sw > 0
+                        and (dkind == REGULAR or etab[j, 5] == 1 or etab[j, 3] >= 0)):
+                    # a reset or a new mode may put the state on the other side of a switching
+                    # surface, or on one (an impact that stops the relative motion): take the
+                    # variant on the right side, or slide. An event without reset or target
+                    # while sliding (a section, a terminal event) leaves the sliding motion alone.
+                    dkind, didx, mode = _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx)
+                if (log_kind == K_IMPACT and dkind == REGULAR
+                        and _stays_in_contact(ev, p, k, mode, nm, t, y, n, buf, fbuf, hdx)):
+                    # the reset left hdot at round-off (a plastic impact on an oblique or curved
+                    # surface, an impact at rest) and the free motion presses into the surface:
+                    # the state sticks (constrained motion along the surface, released where the
+                    # constraint force vanishes), logged as a `stick` record after the impact, as
+                    # after a chattering sequence. The impact's saltation matrix maps into the
+                    # sticking field.
+                    contact_stick = True
+                    dkind = STICK
+                    didx = j
+                    _project_stick(ev, p, k, mode, nm, t, y, n, hdx, w2, buf)
+                if nvar and log_kind != K_CHATTER and not chatter_tail:
+                    _event_saltation(ev, p, j, k, old_mode, mode, nm, t, xs, y, n, S, gx, hdx, buf,
+                                     fbuf, w1, w2, etab, stab, slide_c, old_kind, old_idx, ytmp,
+                                     dkind, didx)
+            elif act == ACT_RELEASE:
+                # the flight starts on the sticking manifold {h = 0, hdot = 0}: the sticking steps
+                # drift off it by their local error, and a drift to the far side (deeper than the
+                # re-trigger guard's round-off band) would hide a short flight's landing
+                _project_stick(ev, p, etab[old_idx, 0], mode, nm, t, y, n, hdx, w2, buf)
+                dkind = REGULAR
+                didx = -1
+                log_kind = K_RELEASE
+                if n_sw > 0:
+                    # the variant on the side the released motion takes (a kink surface held at
+                    # zero while sticking, e.g. the relative velocity of bilinear damping)
+                    dkind, didx, mode = _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx)
                 if nvar:
-                    _switch_saltation(ev, p, dkind, didx, old_mode, mode, nm, k2, t, y, n, S,
-                                      hdx, buf, fbuf, w1, w2, gx, etab, stab, slide_c, old_kind,
+                    for i in range(n):
+                        for c in range(n):
+                            S[i, c] = 1.0 if i == c else 0.0
+            elif act == ACT_SWITCH:
+                s = wref[w]
+                k = stab[s, 0]
+                a_m = stab[s, 1]
+                b_m = stab[s, 2]
+                ev(W_HD, k * nm + a_m, t, y, p, buf)
+                sa = buf[0]
+                ev(W_HD, k * nm + b_m, t, y, p, buf)
+                sb = buf[0]
+                filippov = stab.shape[1] <= 3 or stab[s, 3] == SW_FILIPPOV
+                # thesis eq. 2.6-2.8: both fields pointing into the surface (h_t + h_x f_above < 0
+                # < h_t + h_x f_below) is sliding; otherwise the flow crosses. Arriving with the
+                # own field tangent (hdot = 0) while the other one points back is a graze.
+                graze = filippov and ((old_mode == a_m and sa >= 0.0 and sb > 0.0)
+                                      or (old_mode == b_m and sb <= 0.0 and sa < 0.0))
+                if graze:
+                    last_type = wtype[w]; last_idx = widx[w]; last_mode = wmode[w]
+                    last_sign = new_sign
+                    last_t = t
+                    ikind[n_nodes - 2] = 0 if save_all else 1
+                    restart = True
+                    continue
+                if filippov and sa < 0.0 and sb > 0.0:
+                    dkind = SLIDE
+                    didx = s
+                    mode = a_m
+                    log_kind = K_SLIDE_START
+                    _project_surface(ev, p, k, t, y, n, hdx, buf)
+                else:
+                    log_kind = K_CROSSING
+                    mode = b_m if old_mode == a_m else a_m
+                if nvar:
+                    _switch_saltation(ev, p, dkind, didx, old_mode, mode, nm, k, t, y, n, S, hdx,
+                                      buf, fbuf, w1, w2, gx, etab, stab, slide_c, old_kind,
                                       old_idx)
+            elif act == ACT_EXIT_ABOVE or act == ACT_EXIT_BELOW:
+                s = wref[w]
+                mode = stab[s, 1] if act == ACT_EXIT_ABOVE else stab[s, 2]
+                dkind = REGULAR
+                didx = -1
+                log_kind = K_SLIDE_END
+                if nvar:
+                    for i in range(n):
+                        for c in range(n):
+                            S[i, c] = 1.0 if i == c else 0.0
+            else:
+                # sliding on switch old_idx reached surface k2 = widx[w] of another switch. Across
+                # k2 the sliding pair (a, b) becomes (a2, b2): if the flow slides on the first
+                # surface there too and its sliding field carries the state away from k2, it
+                # crosses k2 while sliding; if both pairs leave the first surface to one side, the
+                # sliding ends; if the sliding field on the far side points back into k2 the motion
+                # would slide on the intersection of the two surfaces, which is not supported
+                status = ST_INTERSECTION
+                log_kind = -1
+                k1 = stab[old_idx, 0]
+                k2 = widx[w]
+                a2 = _partner(stab, k2, stab[old_idx, 1])
+                b2 = _partner(stab, k2, stab[old_idx, 2])
+                s_new = _find_switch(stab, k1, a2, b2) if a2 >= 0 and b2 >= 0 else -1
+                if s_new >= 0:
+                    ev(W_HD, k1 * nm + a2, t, y, p, buf)
+                    sa = buf[0]
+                    ev(W_HD, k1 * nm + b2, t, y, p, buf)
+                    sb = buf[0]
+                    if sa < 0.0 and sb > 0.0:
+                        _field(ev, p, SLIDE, s_new, a2, nm, t, y, n, fbuf, etab, stab, slide_c, w1,
+                               w2, gx, hdx)
+                        rate = _surface_rate(ev, p, SLIDE, k2, a2, nm, t, y, fbuf, n, buf, hdx)
+                        if rate * new_sign > 0.0:
+                            dkind = SLIDE
+                            didx = s_new
+                            mode = a2
+                            log_kind = K_CROSSING
+                    elif sa >= 0.0 and sb > 0.0:
+                        dkind = REGULAR
+                        didx = -1
+                        mode = a2
+                        log_kind = K_SLIDE_END
+                        log_ref = old_idx
+                    elif sa < 0.0 and sb <= 0.0:
+                        dkind = REGULAR
+                        didx = -1
+                        mode = b2
+                        log_kind = K_SLIDE_END
+                        log_ref = old_idx
+                if log_kind >= 0:
+                    status = ST_SUCCESS
+                    if nvar:
+                        _switch_saltation(ev, p, dkind, didx, old_mode, mode, nm, k2, t, y, n,
+                                          S, hdx, buf, fbuf, w1, w2, gx, etab, stab, slide_c,
+                                          old_kind, old_idx)
 
-        if log_kind >= 0:
-            if nvar and seg_var:
-                # per segment: the record keeps S (the segment's Phi is in x_before)
-                for i in range(n):
-                    for c in range(n):
-                        y[n + i * n + c] = S[i, c]
-            elif nvar:
-                # Phi+ = S Phi-
-                for i in range(n):
-                    for c in range(n):
-                        Phi[i, c] = y[n + i * n + c]
-                for i in range(n):
-                    for c in range(n):
-                        acc = 0.0
-                        for m in range(n):
-                            acc += S[i, m] * Phi[m, c]
-                        y[n + i * n + c] = acc
-            rec[0] = log_kind
-            rec[1] = log_ref
-            rec[2] = old_kind
-            rec[3] = old_idx
-            rec[4] = old_mode
-            # the chatter record is the jump x_in -> Q(x_in); the change of discrete state
-            # to sticking is the `stick` record that follows it
-            rec[5] = old_kind if log_kind == K_CHATTER else (REGULAR if contact_stick else dkind)
-            rec[6] = old_idx if log_kind == K_CHATTER else (-1 if contact_stick else didx)
-            rec[7] = old_mode if log_kind == K_CHATTER else mode
-            rec[8] = n_nodes
-            ev_t, ev_t2, ev_info, ev_xb, ev_xa = _log_event(ev_t, ev_t2, ev_info, ev_xb, ev_xa,
-                                                            n_ev, t, t_after, rec, xs, y)
-            n_ev += 1
-            stats[3] += 1
-            if nvar and seg_var:
-                # the next segment's Phi starts at the identity
-                for i in range(n):
-                    for c in range(n):
-                        y[n + i * n + c] = 1.0 if i == c else 0.0
-            # jump (or chatter gap) interval to the post-event node
-            nodes_t[n_nodes] = t_after
-            nodes_y[n_nodes, :] = y
-            nodes_s[n_nodes, 0] = dkind
-            nodes_s[n_nodes, 1] = didx
-            nodes_s[n_nodes, 2] = mode
-            ikind[n_nodes - 1] = 2 if log_kind == K_CHATTER else 1
-            dense[n_nodes - 1, :, :] = 0.0
-            n_nodes += 1
-            if contact_stick:
-                # the impact left the state in contact: sticking starts here (its own record,
-                # from the mode the reset gave, as after a chattering sequence)
-                rec[0] = K_STICK
-                rec[2] = REGULAR
-                rec[3] = -1
-                rec[4] = mode
-                rec[5] = dkind
-                rec[6] = didx
-                rec[7] = mode
-                rec[8] = n_nodes - 1
-                ev_t, ev_t2, ev_info, ev_xb, ev_xa = _log_event(ev_t, ev_t2, ev_info, ev_xb,
-                                                                ev_xa, n_ev, t, t, rec, y, y)
+            if log_kind >= 0:
+                if nvar and seg_var:
+                    # per segment: the record keeps S (the segment's Phi is in x_before)
+                    for i in range(n):
+                        for c in range(n):
+                            y[n + i * n + c] = S[i, c]
+                elif nvar:
+                    # Phi+ = S Phi-
+                    for i in range(n):
+                        for c in range(n):
+                            Phi[i, c] = y[n + i * n + c]
+                    for i in range(n):
+                        for c in range(n):
+                            acc = 0.0
+                            for m in range(n):
+                                acc += S[i, m] * Phi[m, c]
+                            y[n + i * n + c] = acc
+                rec[0] = log_kind
+                rec[1] = log_ref
+                rec[2] = old_kind
+                rec[3] = old_idx
+                rec[4] = old_mode
+                # the chatter record is the jump x_in -> Q(x_in); the change of discrete state
+                # to sticking is the `stick` record that follows it
+                rec[5] = (old_kind if log_kind == K_CHATTER
+                          else (REGULAR if contact_stick else dkind))
+                rec[6] = old_idx if log_kind == K_CHATTER else (-1 if contact_stick else didx)
+                rec[7] = old_mode if log_kind == K_CHATTER else mode
+                rec[8] = n_nodes
+                _log_event(ev_t, ev_t2, ev_info, ev_xb, ev_xa,
+                                                                n_ev, t, t_after, rec, xs, y)
                 n_ev += 1
-            if log_kind == K_CHATTER:
-                # the accumulation is followed by sticking: log it as its own event
-                rec[0] = K_STICK
-                rec[5] = dkind
-                rec[6] = didx
-                rec[7] = mode
-                rec[8] = n_nodes - 1
-                ev_t, ev_t2, ev_info, ev_xb, ev_xa = _log_event(ev_t, ev_t2, ev_info, ev_xb,
-                                                                ev_xa, n_ev, t_after, t_after,
-                                                                rec, y, y)
-                n_ev += 1
-                while (sdt > 0.0 and s0 + sk * sdt < t_after and s0 + sk * sdt <= t_end
-                       and n_samp < max_samp):
+                stats[3] += 1
+                if nvar and seg_var:
+                    # the next segment's Phi starts at the identity
+                    for i in range(n):
+                        for c in range(n):
+                            y[n + i * n + c] = 1.0 if i == c else 0.0
+                # jump (or chatter gap) interval to the post-event node
+                nodes_t[n_nodes] = t_after
+                for i in range(nY):
+                    nodes_y[n_nodes, i] = y[i]
+                nodes_s[n_nodes, 0] = dkind
+                nodes_s[n_nodes, 1] = didx
+                nodes_s[n_nodes, 2] = mode
+                ikind[n_nodes - 1] = 2 if log_kind == K_CHATTER else 1
+                hstep[n_nodes - 1] = 0.0
+                if store_q:
+                    for i in range(nY):
+                        for k in range(deg):
+                            dense[n_nodes - 1, i, k] = 0.0
+                n_nodes += 1
+                if contact_stick:
+                    # the impact left the state in contact: sticking starts here (its own record,
+                    # from the mode the reset gave, as after a chattering sequence)
+                    rec[0] = K_STICK
+                    rec[2] = REGULAR
+                    rec[3] = -1
+                    rec[4] = mode
+                    rec[5] = dkind
+                    rec[6] = didx
+                    rec[7] = mode
+                    rec[8] = n_nodes - 1
+                    _log_event(ev_t, ev_t2, ev_info, ev_xb,
+                                                                    ev_xa, n_ev, t, t, rec, y, y)
+                    n_ev += 1
+                if log_kind == K_CHATTER:
+                    # the accumulation is followed by sticking: log it as its own event
+                    rec[0] = K_STICK
+                    rec[5] = dkind
+                    rec[6] = didx
+                    rec[7] = mode
+                    rec[8] = n_nodes - 1
+                    _log_event(ev_t, ev_t2, ev_info, ev_xb,
+                                                                    ev_xa, n_ev, t_after, t_after,
+                                                                    rec, y, y)
+                    n_ev += 1
+                    while (sdt > 0.0 and s0 + sk * sdt < t_after and s0 + sk * sdt <= t_end
+                           and n_samp < max_samp):
+                        ts = s0 + sk * sdt
+                        th = (ts - t) / (t_after - t)
+                        samp[n_samp, 0] = ts
+                        for i in range(n):
+                            samp[n_samp, 1 + i] = (1.0 - th) * xs[i] + th * y[i]
+                        n_samp += 1
+                        sk += 1
+                t = t_after
+            if chatter_tail:
+                # the run ends at t_end inside the unresolvable tail of a chattering sequence
+                # (see the impact above); samples on the same chord
+                while (sdt > 0.0 and s0 + sk * sdt <= t_end and n_samp < max_samp):
                     ts = s0 + sk * sdt
-                    th = (ts - t) / (t_after - t)
-                    samp = _grow2(samp, n_samp + 1)
+                    th = (ts - t) / (t_end - t) if t_end > t else 1.0
                     samp[n_samp, 0] = ts
                     for i in range(n):
                         samp[n_samp, 1 + i] = (1.0 - th) * xs[i] + th * y[i]
                     n_samp += 1
                     sk += 1
-            t = t_after
-        if chatter_tail:
-            # the run ends at t_end inside the unresolvable tail of a chattering sequence
-            # (see the impact above); samples on the same chord
-            while (sdt > 0.0 and s0 + sk * sdt <= t_end and n_samp < max_samp):
-                ts = s0 + sk * sdt
-                th = (ts - t) / (t_end - t) if t_end > t else 1.0
-                samp = _grow2(samp, n_samp + 1)
-                samp[n_samp, 0] = ts
-                for i in range(n):
-                    samp[n_samp, 1 + i] = (1.0 - th) * xs[i] + th * y[i]
-                n_samp += 1
-                sk += 1
-            t = t_end
-            break
-        if stop_mask != 0:
-            # stop at the stop_count-th logged event of the requested kinds and index
-            for r in range(n_ev0, n_ev):
-                if ((stop_mask >> ev_info[r, 0]) & 1) == 1 and (stop_ref < 0
-                                                                or ev_info[r, 1] == stop_ref):
-                    n_stop += 1
-            if n_stop >= stop_count and status == ST_SUCCESS:
+                t = t_end
+                break
+            if stop_mask != 0:
+                # stop at the stop_count-th logged event of the requested kinds and index
+                for r in range(n_ev0, n_ev):
+                    if ((stop_mask >> ev_info[r, 0]) & 1) == 1 and (stop_ref < 0
+                                                                    or ev_info[r, 1] == stop_ref):
+                        n_stop += 1
+                if n_stop >= stop_count and status == ST_SUCCESS:
+                    status = ST_TERMINAL
+                    break
+            if status != ST_SUCCESS:
+                break
+            if act == ACT_EVENT and etab[wref[w], 4] == 1:
                 status = ST_TERMINAL
                 break
-        if status != ST_SUCCESS:
-            break
-        if act == ACT_EVENT and etab[wref[w], 4] == 1:
-            status = ST_TERMINAL
-            break
-        if stats[3] >= max_events:
-            status = ST_MAX_EVENTS
-            break
-        # Zeno: events on the same function closer than the resolution of t, repeatedly
-        if (last_type == wtype[w] and last_idx == widx[w]
-                and t - last_t <= 64.0 * _ulp(t)):
-            zeno += 1
-            if zeno >= 3:
-                status = ST_ZENO
+            if stats[3] >= max_events:
+                status = ST_MAX_EVENTS
                 break
-        else:
-            zeno = 0
-        # re-trigger guard: the side of the function after the event
-        last_depth = 0.0
-        last_type = wtype[w]
-        last_idx = widx[w]
-        last_mode = wmode[w]
-        last_t = t
-        if act == ACT_EVENT:
-            # after a reset the surface value is ~0; its new side is given by hdot after reset
-            if dkind == REGULAR:
-                ev(W_HD, widx[w] * nm + mode, t, y, p, buf)
-                last_sign = 1.0 if buf[0] > 0.0 else -1.0
-                vout = buf[0]
-                if etab[wref[w], 2] == EV_IMPACT and vout != 0.0:
-                    # hdot after an impact within round-off (a plastic impact that does not
-                    # stick: the free motion leaves tangentially): its sign is noise, the
-                    # state is on the allowed side
-                    if abs(vout) <= _rate_band(ev, p, widx[w], mode, nm, t, y, n, hdx):
-                        vout = 0.0
-                if vout == 0.0:
-                    # tangent after the event: an impact leaves the state on the admissible
-                    # side, a transition has crossed into the event direction
-                    if etab[wref[w], 2] == EV_IMPACT or etab[wref[w], 1] == 0:
-                        last_sign = 1.0 if etab[wref[w], 1] <= 0 else -1.0
-                    else:
-                        last_sign = 1.0 if etab[wref[w], 1] > 0 else -1.0
+            # Zeno: events on the same function closer than the resolution of t, repeatedly
+            if (last_type == wtype[w] and last_idx == widx[w]
+                    and t - last_t <= 64.0 * _ulp(t)):
+                zeno += 1
+                if zeno >= 3:
+                    status = ST_ZENO
+                    break
             else:
-                last_sign = 1.0
-        elif act == ACT_RELEASE:
-            last_sign = 1.0
-            last_type = WF_SURFACE
-            last_idx = etab[wref[w], 0]
-        elif act == ACT_SWITCH:
-            if dkind == SLIDE:
-                last_type = -1
+                zeno = 0
+            # re-trigger guard: the side of the function after the event; the guards of
+            # functions that fired earlier at this same instant are kept
+            if abs(t - last_t) <= _COINCIDENT_ULPS * _ulp(t) and last_type >= 0:
+                if n_co < wcap:
+                    co_type[n_co] = last_type
+                    co_idx[n_co] = last_idx
+                    co_mode[n_co] = last_mode
+                    co_sign[n_co] = last_sign
+                    co_t[n_co] = last_t
+                    n_co += 1
             else:
-                last_sign = 1.0 if mode == stab[wref[w], 1] else -1.0
-        elif act == ACT_INTERSECTION:
-            # crossed surface widx[w] while sliding: we are on the new side of it
-            last_type = WF_SURFACE
+                n_co = 0
+            last_depth = 0.0
+            last_type = wtype[w]
             last_idx = widx[w]
-            last_sign = new_sign
-        else:
-            # sliding exit: we leave into the mode's side of the surface
-            last_type = WF_SURFACE
-            last_idx = stab[wref[w], 0]
-            last_sign = 1.0 if act == ACT_EXIT_ABOVE else -1.0
-        restart = True
+            last_mode = wmode[w]
+            last_t = t
+            if act == ACT_EVENT:
+                # after a reset the surface value is ~0; its new side is given by hdot after reset
+                if dkind == REGULAR:
+                    ev(W_HD, widx[w] * nm + mode, t, y, p, buf)
+                    last_sign = 1.0 if buf[0] > 0.0 else -1.0
+                    vout = buf[0]
+                    if etab[wref[w], 2] == EV_IMPACT and vout != 0.0:
+                        # hdot after an impact within round-off (a plastic impact that does not
+                        # stick: the free motion leaves tangentially): its sign is noise, the
+                        # state is on the allowed side
+                        if abs(vout) <= _rate_band(ev, p, widx[w], mode, nm, t, y, n, hdx):
+                            vout = 0.0
+                    if vout == 0.0:
+                        # tangent after the event: an impact leaves the state on the admissible
+                        # side, a transition has crossed into the event direction
+                        if etab[wref[w], 2] == EV_IMPACT or etab[wref[w], 1] == 0:
+                            last_sign = 1.0 if etab[wref[w], 1] <= 0 else -1.0
+                        else:
+                            last_sign = 1.0 if etab[wref[w], 1] > 0 else -1.0
+                else:
+                    last_sign = 1.0
+            elif act == ACT_RELEASE:
+                last_sign = 1.0
+                last_type = WF_SURFACE
+                last_idx = etab[wref[w], 0]
+            elif act == ACT_SWITCH:
+                if dkind == SLIDE:
+                    last_type = -1
+                else:
+                    last_sign = 1.0 if mode == stab[wref[w], 1] else -1.0
+            elif act == ACT_INTERSECTION:
+                # crossed surface widx[w] while sliding: we are on the new side of it
+                last_type = WF_SURFACE
+                last_idx = widx[w]
+                last_sign = new_sign
+            else:
+                # sliding exit: we leave into the mode's side of the surface
+                last_type = WF_SURFACE
+                last_idx = stab[wref[w], 0]
+                last_sign = 1.0 if act == ACT_EXIT_ABOVE else -1.0
+            restart = True
 
     # final node (when only events are saved, the end state still is)
     if nodes_t[n_nodes - 1] != t:
         nodes_t = _grow1(nodes_t, n_nodes + 1)
         nodes_y = _grow2(nodes_y, n_nodes + 1)
         nodes_s = _grow2(nodes_s, n_nodes + 1)
-        dense = _grow3(dense, n_nodes + 1)
         ikind = _grow1(ikind, n_nodes + 1)
+        hstep = _grow1(hstep, n_nodes + 1)
         ikind[n_nodes - 1] = 1
-        dense[n_nodes - 1, :, :] = 0.0
+        hstep[n_nodes - 1] = 0.0
+        if store_q:
+            dense = _grow3(dense, n_nodes + 1)
+            dense[n_nodes - 1, :, :] = 0.0
         nodes_t[n_nodes] = t
         nodes_y[n_nodes, :] = y
         nodes_s[n_nodes, 0] = dkind
         nodes_s[n_nodes, 1] = didx
         nodes_s[n_nodes, 2] = mode
         n_nodes += 1
+    # the node arrays are returned as they are (views of their first rows): a copy is another
+    # pass over memory (~10% of a run storing every step); the spare rows (the arrays grow
+    # by doubling) are at most as many as the used ones
     return (status, t, y.copy(), np.array([dkind, didx, mode], dtype=np.int64),
-            nodes_t[:n_nodes].copy(), nodes_y[:n_nodes].copy(), nodes_s[:n_nodes].copy(),
-            dense[: max(n_nodes - 1, 0)].copy(), ikind[: max(n_nodes - 1, 0)].copy(),
+            nodes_t[:n_nodes], nodes_y[:n_nodes], nodes_s[:n_nodes],
+            dense[: max(n_nodes - 1, 0) if store_q else 0],
+            ikind[: max(n_nodes - 1, 0)],
             ev_t[:n_ev].copy(), ev_t2[:n_ev].copy(), ev_info[:n_ev].copy(),
-            ev_xb[:n_ev].copy(), ev_xa[:n_ev].copy(), stats, samp[:n_samp].copy())
+            ev_xb[:n_ev].copy(), ev_xa[:n_ev].copy(), stats, samp[:n_samp].copy(),
+            hstep[: max(n_nodes - 1, 0)])

@@ -186,7 +186,9 @@ def _onto(E: _Eval, k: int, sigma: float, t, x, band: float):
         if nrm2 == 0.0 or not np.isfinite(nrm2):
             return x
         # first the plain Newton step (h = 0 exactly for a surface linear in x), then aim a
-        # growing fraction of the band in front of the surface
+        # growing fraction of the round-off band in front of the surface (not of the
+        # position tolerance: a start moving into a curved surface nudged that far reached
+        # it ~1e-11 after t0)
         target = 0.0 if it == 0 else sigma * band * 2.0 ** (it - 3)
         x = x + (target - h) * g / nrm2
     return x
@@ -232,7 +234,8 @@ def start_state(cm, etab, eact, stab, t, x, p, mode: int, *, pos_tol: float = 0.
         h = E.scalar(W_H, k, t, x)
         hx = E(W_HX, k, t, x, n)
         gmax = max(1.0, float(np.max(np.abs(hx))))
-        band = max(round_off_band(xmax, hx), gmax * pos_tol)
+        rband = round_off_band(xmax, hx)
+        band = max(rband, gmax * pos_tol)
         H = sigma * h
         if H > band or not np.isfinite(H):
             continue
@@ -252,12 +255,12 @@ def start_state(cm, etab, eact, stab, t, x, p, mode: int, *, pos_tol: float = 0.
             continue
         done.add(k)
         if sliding:
-            x = _onto(E, k, sigma, t, x, band)
+            x = _onto(E, k, sigma, t, x, rband)
             actions.append((j, "free", h))
             continue
         nm = E.nm
         if H < 0.0:
-            x = _onto(E, k, sigma, t, x, band)
+            x = _onto(E, k, sigma, t, x, rband)
         hd = E.scalar(W_HD, k * nm + mode_r, t, x)
         hdx = E(W_HDX, k * nm + mode_r, t, x, n)
         vband = max(round_off_band(xmax, hdx),

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import math
-from typing import Mapping
+import warnings
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
@@ -13,18 +14,29 @@ from ..errors import ArgumentError, SolveError, Status
 from ..model import compile_model
 from ..model.codegen import CompiledModel
 from ..model.affine import affine_structure
-from ._kernel import (IO_DIDX0, IO_DKIND0, IO_EXACT, IO_N, IO_STOP_COUNT, IO_STOP_MASK,
-                      IO_STOP_REF, VAR_NONE, VAR_SEGMENTS, run_kernel)
+from ..model.spec import run_defaults
+from ._load import kernel
 from ._start import ADMIT_BEHIND, STICK, start_state
 from ._variational import assemble_segments
 from .tableaus import METHODS
-from .trajectory import EventLog, Trajectory
+from .trajectory import EventLog, LazyDense, Trajectory
+
+if TYPE_CHECKING:
+    from .._typing import ModelLike, StateLike
 
 #: Default options of :func:`simulate` (each documented there).
-DEFAULTS = dict(method="RK45", exact=False, rtol=1e-10, atol=1e-12, first_step=None,
+DEFAULTS = dict(method="auto", exact="auto", rtol=1e-10, atol=1e-12, first_step=None,
                 max_step=math.inf, max_steps=1_000_000, max_events=100_000, chatter=True,
-                chatter_ratio=1e-4, chatter_velocity=None, sliding="convex", sliding_gain=0.0,
+                chatter_ratio=None, chatter_velocity=None, sliding="convex", sliding_gain=0.0,
                 variational=False, dense=True, mode=None, throw=True)
+
+#: Ratio of the impact speed to the largest of its sequence below which the chattering map
+#: applies by default, where it is accurate (option ``chatter_ratio``).
+DEFAULT_CHATTER_RATIO = 1e-4
+
+#: ``method="auto"`` takes the 8th-order pair below this relative tolerance, RK45 from it on
+#: (measured: ``benchmarks/bench_defaults.py``).
+AUTO_DOP853_BELOW = 1e-7
 
 #: Sliding methods (option ``sliding``) and their kernel codes.
 SLIDING_METHODS = {"convex": 0, "utkin": 1}
@@ -80,32 +92,41 @@ def _state_name(model, kind: int, idx: int, mode: int) -> str:
     return f"slide:{model.switches[idx].name}"
 
 
-def simulate(model, x0, t_span, params: Mapping[str, float] | None = None, **options
-             ) -> Trajectory:
+def simulate(model: ModelLike, x0: StateLike | Trajectory | None = None,
+             t_span: float | tuple[float, float] | Sequence[float] | None = None,
+             params: Mapping[str, float] | None = None, **options: Any) -> Trajectory:
     """Simulate a piecewise-smooth model with events located to near machine precision.
 
     Parameters
     ----------
     model : Model, str, path or dict
         A model or anything :func:`pwsdyn.load_model` accepts.
-    x0 : sequence, dict or Trajectory
-        Initial state, in state order or by state name. A state on an impact constraint (see
-        "Starts on a constraint" below) starts sticking, with an impact at ``t0``, or in free
-        motion, as the constraint requires. A :class:`Trajectory` of the same model is
-        *continued*: the run starts from its ``x_final`` in its final discrete state
-        (``final_discrete_state``: sticking, sliding or a mode) with its parameters (``params``
-        overrides some), exactly where it stopped; ``mode`` must then be None.
-    t_span : (float, float) or float
-        ``(t0, t_end)``, or ``t_end`` with ``t0 = 0`` (``t0 = traj.t_final`` when ``x0`` is a
-        trajectory ``traj``): finite, ``t_end > t0``, and at least 1024 units of the time
-        resolution ``eps * max(1, |t|)`` long (``(1e16, 1e16 + 2)`` is refused: doubles are 2
-        apart there; see :mod:`pwsdyn._validate`). A trajectory continued from another time
-        than its ``t_final`` starts from ``x_final`` by the rule for plain states.
+    x0 : sequence, dict or Trajectory, optional
+        Initial state, in state order or by state name. Default: the model's ``[defaults]
+        x0``, else the zero state (with a warning), as on the command line. A state on an
+        impact constraint (see "Starts on a constraint" below) starts sticking, with an impact
+        at ``t0``, or in free motion, as the constraint requires. A :class:`Trajectory` of
+        the same model is *continued*: the run starts from its ``x_final`` in its final
+        discrete state (``final_discrete_state``: sticking, sliding or a mode) with its
+        parameters (``params`` overrides some), exactly where it stopped; ``mode`` must then
+        be None.
+    t_span : (float, float) or float, optional
+        ``(t0, t_end)``, or ``t_end`` from the model's ``[defaults] t0`` (else 0;
+        ``t0 = traj.t_final`` when ``x0`` is a trajectory ``traj``). Default: the model's
+        ``[defaults] t_end``, else ``t0 + 10`` (with a warning). Finite, ``t_end > t0``, and
+        at least 1024 units of the time resolution ``eps * max(1, |t|)`` long
+        (``(1e16, 1e16 + 2)`` is refused: doubles are 2 apart there; see
+        :mod:`pwsdyn._validate`). A trajectory continued from another time than its
+        ``t_final`` starts from ``x_final`` by the rule for plain states.
     params : dict, optional
-        Parameter values overriding the model defaults, by name.
-    method : {'RK45', 'DOP853'}
-        Dormand-Prince 5(4) (default) or the 8th-order Dormand-Prince pair.
-    exact : bool
+        Parameter values by name, over the model's defaults (``model.parameters``: the
+        ``[parameters]`` table with ``[defaults] params`` over it, as on the command line).
+    method : {'auto', 'RK45', 'DOP853'}
+        The Runge-Kutta pair: Dormand-Prince 5(4) or the 8th-order Dormand-Prince pair.
+        Default ``'auto'``: DOP853 for ``rtol`` below 1e-7 (the default tolerances included),
+        RK45 from 1e-7 on, where each is the faster one (``benchmarks/bench_defaults.py``).
+        The pair that ran is recorded in ``traj.options["method"]``.
+    exact : {'auto', True, False}
         Propagate the modes that are affine in the state with harmonic forcing,
         ``x' = A x + b + sum_j c_j cos(w_j t) + d_j sin(w_j t)`` (impact and friction
         oscillators with linear springs, a ball in flight, relay feedback of a linear plant),
@@ -113,7 +134,13 @@ def simulate(model, x0, t_span, params: Mapping[str, float] | None = None, **opt
         1978; :mod:`pwsdyn.model.affine`) instead of ``method``: the solution, its dense
         output and the events on it are then exact to rounding, whatever ``rtol``. ``method``
         still integrates the other modes, sticking, sliding and the variational equations.
-        Default False. A ``ValueError`` names the reason of each mode if none is affine.
+        Default ``'auto'``: every affine mode is propagated exactly and the others are
+        integrated, so a model without any runs on ``method`` alone. ``True`` does the same
+        but raises a ``ValueError`` naming the reason of each mode if none is affine;
+        ``False`` integrates every mode with ``method``. Exact steps are limited to
+        ``||h D^-1 M D|| <= 1`` (``D`` a balancing scaling: a stiff spring's steps follow its
+        frequency), so they cost about what an explicit method's stability would allow,
+        with no error.
     rtol, atol : float
         Local error tolerances (defaults 1e-10, 1e-12).
     first_step, max_step : float
@@ -128,12 +155,18 @@ def simulate(model, x0, t_span, params: Mapping[str, float] | None = None, **opt
         complete-chattering map (default True); without it a Zeno sequence exhausts
         ``max_events``.
     chatter_ratio, chatter_velocity : float
-        Apply the chattering map once the impact velocity falls below ``chatter_ratio`` times
-        the largest one of the current sequence of impacts, or below ``chatter_velocity``.
-        The default ``chatter_velocity`` is ``sqrt(2 |a| (atol + rtol |x|))`` with ``a`` the
-        normal acceleration: a bounce that rises less than the position tolerance cannot be
-        told from sticking. The map is first order in the impact velocity (Nordmark &
-        Piiroinen 2009), so its error is of the order of the square of that velocity.
+        Apply the chattering map once the impact velocity falls below ``chatter_velocity``,
+        or below ``chatter_ratio`` times the largest one of the current sequence of impacts.
+        By default (``chatter_ratio=None``) that ratio is 1e-4 and applies only where the map
+        is accurate (below); a ratio given is applied as given (``1`` jumps at the first
+        impact that can chatter). The default ``chatter_velocity`` is
+        ``sqrt(2 |a| (atol + rtol |x|))`` with ``a`` the normal acceleration: a bounce that
+        rises less than the position tolerance cannot be told from sticking. The map takes
+        ``a`` as constant over the sequence (Nordmark & Piiroinen 2009); above the floor it is
+        applied only where the change of ``a`` over the sequence's duration ``dt`` moves the
+        state by less than the position tolerance (``dt^2 |a(t + dt) - a(t)| <= atol + rtol
+        |x|``), so the accumulation point does not depend on where the sequence began (a run
+        restarted inside it gives the same one).
     sliding : {'convex', 'utkin'}
         The vector field on a Filippov sliding surface: Filippov's convex combination of the
         fields on either side (thesis eq. 2.7-2.8; default) or Utkin's equivalent control
@@ -159,8 +192,11 @@ def simulate(model, x0, t_span, params: Mapping[str, float] | None = None, **opt
         makes it NaN, so that event's transfer matrix and ``jacobian`` are NaN (marked
         singular; :func:`pwsdyn.saltation_matrix` raises there).
     dense : bool
-        Store every step with its dense output (default). ``False`` keeps only the event log
-        and the end state (for sweeps).
+        Store every step with its dense output (default; ``traj(t)`` evaluates it). Only the
+        steps' nodes and lengths are stored during the run; the interpolant of a step is
+        rebuilt from its start node when it is first evaluated (the same coefficients: the
+        step is taken again), so the default costs about what ``dense=False`` does.
+        ``False`` keeps only the event log and the end state (for sweeps).
     mode : str, optional
         Initial mode (default: the model's ``initial_mode``). Where modes are joined by
         switching surfaces the side of each surface decides: the mode is replaced by the one
@@ -220,11 +256,24 @@ def simulate(model, x0, t_span, params: Mapping[str, float] | None = None, **opt
     if cont is not None:
         params = _continued_params(model, cont, opts, params)
         x0 = cont.x_final
+    if cont is None:
+        t_end = t_span if t_span is None or V.is_real(t_span) else 0.0
+        run = run_defaults(model, x0=x0, t_end=t_end)
+        for note in run.note(model):
+            warnings.warn(note, stacklevel=2)
+        x0, t0_default = run.x0, run.t0
+        if t_span is None:
+            t_span = (run.t0, run.t_end)
+    else:
+        t0_default = cont.t_final
+        if t_span is None:
+            raise ArgumentError("`t_span` is required to continue a trajectory: give t_end "
+                                "or (t0, t_end)")
     p = model.parameter_vector(params)
     x = state_vector(model, x0)
-    t0, t_end = _time_span(t_span, t0=None if cont is None else cont.t_final)
+    t0, t_end = _time_span(t_span, t0=t0_default)
     check_mode(model, opts)
-    if opts["exact"]:
+    if not isinstance(opts["exact"], str) and opts["exact"]:
         _check_exact(model)
     cm = compile_model(model)
     state = None if cont is None else cont.final_discrete_state
@@ -233,6 +282,20 @@ def simulate(model, x0, t_span, params: Mapping[str, float] | None = None, **opt
         return _simulate_compiled(cm, x, t0, t_end, p, opts, mode0=mode0, dkind0=kind,
                                   didx0=idx, refuse=True)
     return _simulate_compiled(cm, x, t0, t_end, p, opts, refuse=True)
+
+
+def _lazy_dense(cm, p, etab, stab, iopt, fopt, tab, t0, x0, nodes_t, nodes_y, nodes_s, hstep,
+                deg) -> LazyDense:
+    """The dense output of a ``SAVE_NODES`` run, rebuilt from its nodes when it is read
+    (:func:`pwsdyn.integrate._kernel.dense_coefficients`)."""
+    ev = cm.evaluate
+
+    def rebuild(which):
+        return kernel().dense_coefficients(ev, p, etab, stab, iopt, fopt, tab.A, tab.C, tab.P,
+                                  tab.n_stages, t0, x0, nodes_t, nodes_y, nodes_s, hstep,
+                                  np.ascontiguousarray(which, dtype=np.int64), deg)
+
+    return LazyDense((len(hstep), nodes_y.shape[1], deg), rebuild)
 
 
 def _continued_params(model, traj, opts, params):
@@ -281,9 +344,13 @@ MAX_BUDGET = V.MAX_COUNT
 def check_options(opts) -> None:
     """Check every integrator option of a merged option dict (types, ranges, finiteness),
     raising :class:`~pwsdyn.errors.ArgumentError` naming the option."""
-    if not isinstance(opts["method"], str) or opts["method"] not in METHODS:
-        raise V.fail("method", f"one of {sorted(METHODS)}", opts["method"])
-    for k in ("exact", "chatter", "variational", "dense", "throw"):
+    if not isinstance(opts["method"], str) or (opts["method"] not in METHODS
+                                                and opts["method"] != "auto"):
+        raise V.fail("method", f"'auto' or one of {sorted(METHODS)}", opts["method"])
+    if "exact" in opts and not (isinstance(opts["exact"], str) and opts["exact"] == "auto"):
+        if not isinstance(opts["exact"], (bool, np.bool_)):
+            raise V.fail("exact", "'auto', True or False", opts["exact"])
+    for k in ("chatter", "variational", "dense", "throw"):
         if k in opts:
             V.flag(k, opts[k])
     for k in ("rtol", "atol"):
@@ -298,7 +365,7 @@ def check_options(opts) -> None:
     V.positive("first_step", opts["first_step"], allow_none=True)
     V.positive("max_step", opts["max_step"], allow_inf=True)
     # >= 1: the chattering map applies at the first impact (ratio to the largest impact speed)
-    V.positive("chatter_ratio", opts["chatter_ratio"])
+    V.positive("chatter_ratio", opts["chatter_ratio"], allow_none=True)
     V.nonnegative("chatter_velocity", opts["chatter_velocity"], allow_none=True)
     if not isinstance(opts.get("sliding", "convex"), str) \
             or opts.get("sliding", "convex") not in SLIDING_METHODS:
@@ -311,6 +378,27 @@ def check_options(opts) -> None:
 
 def _check_options(opts):
     check_options(opts)
+
+
+def resolve_method(opts) -> str:
+    """The Runge-Kutta pair that runs: ``method``, or for ``'auto'`` DOP853 below
+    ``rtol = AUTO_DOP853_BELOW`` and RK45 from it on."""
+    method = opts["method"]
+    if method != "auto":
+        return method
+    return "DOP853" if opts["rtol"] < AUTO_DOP853_BELOW else "RK45"
+
+
+def _exact_code(model, exact) -> int:
+    """``iopt[IO_EXACT]``: 1 (the affine modes propagated exactly) for ``exact=True``, after
+    checking that the model has one, and for ``'auto'`` (the kernel finds the affine modes;
+    a model without any runs on the Runge-Kutta pair alone); 0 for False."""
+    if isinstance(exact, str):
+        return 1
+    if exact:
+        _check_exact(model)
+        return 1
+    return 0
 
 
 def _max_step(model, p, max_step) -> float:
@@ -372,7 +460,8 @@ def _build_kernel_tables(cm: CompiledModel, sliding: str):
 
 
 def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dkind0=None,
-                       didx0=None, stop=None, sample=None, admit=True, refuse=False):
+                       didx0=None, stop=None, sample=None, admit=True, refuse=False,
+                       store_dense=False):
     """The kernel run behind :func:`simulate`, without re-validating model, state, params.
 
     ``dkind0``, ``didx0``: initial discrete state (0 mode, 1 sticking on event ``didx0``, 2
@@ -389,11 +478,13 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
     ``ref`` (-1: any), so Poincaré maps on event sections run in one kernel call.
     ``sample = (t_first, dt)`` records the state at ``t_first + k dt`` (``k >= 0``, within the
     run) from the dense output, without events or landing steps: stroboscopic sections
-    (``traj.samples``).
+    (``traj.samples``). ``store_dense`` stores the dense output of every step as the run
+    goes (as variational runs do) instead of rebuilding it from the nodes when it is read.
     """
     _check_options(opts)
     model = cm.model
-    tab = METHODS[opts["method"]]
+    method = resolve_method(opts)
+    tab = METHODS[method]
     etab, eact, stab = kernel_tables(cm, opts.get("sliding", "convex"))
     if mode0 is None:
         mode0 = model.initial_mode if opts["mode"] is None else model.mode_index(opts["mode"])
@@ -406,29 +497,38 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
         x = st.x
         if st.kind == STICK:
             mode0, dkind0, didx0 = st.mode, st.kind, st.index
-    iopt = np.zeros(IO_N, dtype=np.int64)
+    K = kernel()  # compiled on the first run in this process (see integrate._load)
+    # dense output: rebuilt on demand from the nodes and step lengths (SAVE_NODES), except
+    # with the variational equations, whose nodes are transformed after the run
+    save = (K.SAVE_EVENTS if not opts["dense"] else
+            K.SAVE_DENSE if opts["variational"] or store_dense else K.SAVE_NODES)
+    iopt = np.zeros(K.IO_N, dtype=np.int64)
     iopt[:8] = [mode0, len(model.modes), opts["max_steps"], opts["max_events"], tab.code,
-                VAR_SEGMENTS if opts["variational"] else VAR_NONE, 1 if opts["chatter"] else 0,
-                1 if opts["dense"] else 0]
+                K.VAR_SEGMENTS if opts["variational"] else K.VAR_NONE, 1 if opts["chatter"] else 0,
+                save]
     if stop is not None:
-        iopt[IO_STOP_MASK], iopt[IO_STOP_REF], iopt[IO_STOP_COUNT] = stop
-    iopt[IO_DKIND0] = 0 if dkind0 is None else dkind0
-    iopt[IO_DIDX0] = -1 if didx0 is None else didx0
-    if opts["exact"]:
-        _check_exact(model)
-        iopt[IO_EXACT] = 1
+        iopt[K.IO_STOP_MASK], iopt[K.IO_STOP_REF], iopt[K.IO_STOP_COUNT] = stop
+    iopt[K.IO_DKIND0] = 0 if dkind0 is None else dkind0
+    iopt[K.IO_DIDX0] = -1 if didx0 is None else didx0
+    iopt[K.IO_EXACT] = _exact_code(model, opts["exact"])
     fopt = np.array([opts["rtol"], opts["atol"], opts["first_step"] or 0.0,
-                     _max_step(model, p, opts["max_step"]), opts["chatter_ratio"],
+                     _max_step(model, p, opts["max_step"]),
+                     # negative: the default ratio, applied where the map is accurate
+                     (-DEFAULT_CHATTER_RATIO if opts["chatter_ratio"] is None
+                      else opts["chatter_ratio"]),
                      -1.0 if opts["chatter_velocity"] is None else opts["chatter_velocity"],
                      opts["sliding_gain"],
                      sample[0] if sample is not None else 0.0,
                      sample[1] if sample is not None else 0.0], dtype=float)
-    pv = p if p.size else np.zeros(1)
-    res = run_kernel(cm.evaluate, float(t0), float(t_end), np.ascontiguousarray(x, dtype=float),
-                     np.ascontiguousarray(pv, dtype=float), etab, eact, stab, iopt, fopt,
+    pv = np.ascontiguousarray(p if p.size else np.zeros(1), dtype=float)
+    x = np.array(x, dtype=float)
+    res = K.run_kernel(cm.evaluate, float(t0), float(t_end), x, pv, etab, eact, stab, iopt, fopt,
                      tab.A, tab.C, tab.E, tab.P, tab.n_stages)
     (status, t_fin, y_fin, dstate, nodes_t, nodes_y, nodes_s, dense, ikind, ev_t, ev_t2, ev_info,
-     ev_xb, ev_xa, stats, samples) = res
+     ev_xb, ev_xa, stats, samples, hstep) = res
+    if save == K.SAVE_NODES:
+        dense = _lazy_dense(cm, pv, etab, stab, iopt, fopt, tab, float(t0), x, nodes_t, nodes_y,
+                            nodes_s, hstep, dense.shape[2])
     n = model.n_states
     jac = transfer = None
     if opts["variational"]:
@@ -437,14 +537,16 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
     status = Status(int(status))
     # discrete state per node, mapped through the few distinct codes (vectorised: runs can
     # have millions of nodes)
-    key = (nodes_s[:, 0] << 40) + ((nodes_s[:, 1] + 1) << 20) + nodes_s[:, 2]
-    starts = np.concatenate(([0], np.flatnonzero(np.diff(key)) + 1)) if len(key) else key
-    label = {}
-    for i in starts:
-        if key[i] not in label:
-            label[key[i]] = _state_name(model, *nodes_s[i])
-    run_names = np.array([label[key[i]] for i in starts], dtype=str)
-    states = np.repeat(run_names, np.diff(np.append(starts, len(key))))
+    N = len(nodes_s)
+    d = nodes_s[1:] != nodes_s[:-1]
+    starts = np.concatenate(([0], np.flatnonzero(d[:, 0] | d[:, 1] | d[:, 2]) + 1))[:N]
+    label: dict = {}
+    for code in map(tuple, nodes_s[starts].tolist()):
+        if code not in label:
+            label[code] = _state_name(model, *code)
+    run_names = np.array([label[c] for c in map(tuple, nodes_s[starts].tolist())], dtype=str)
+    states = (np.full(N, run_names[0]) if len(starts) == 1 else
+              np.repeat(run_names, np.diff(np.append(starts, N))))
     # the event log as arrays; its records are made when it is read (sweeps read columns)
     events = EventLog(model, ev_t, ev_t2, ev_info, ev_xb[:, :n].copy(), ev_xa[:, :n].copy(),
                       _state_name)
@@ -454,7 +556,8 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
     traj = Trajectory(
         t=nodes_t, x=nodes_y[:, :n].copy(), state=states, events=events, status=status,
         message=status.message, stats=stat, model=model, params=params,
-        options={k: v for k, v in opts.items() if k != "throw"}, t0=t0, t_end=t_end,
+        options={**{k: v for k, v in opts.items() if k != "throw"}, "method": method},
+        t0=t0, t_end=t_end,
         jacobian=jac, transfer_matrices=transfer,
         final_discrete_state=tuple(int(v) for v in dstate),
         samples=(samples[:, 0].copy(), samples[:, 1:].copy()) if sample is not None else None,

@@ -3,11 +3,20 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..errors import Status
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+    import xarray as xr
+    from numpy.typing import ArrayLike
+
+    from .._typing import PathLike
 
 #: Event kinds of the log, indexed by the kernel's codes.
 EVENT_KINDS = ("impact", "transition", "chatter", "stick", "release", "crossing", "slide_start",
@@ -137,6 +146,69 @@ class EventLog(Sequence):
         return f"EventLog({len(self)} events)"
 
 
+class LazyDense:
+    """Dense output rebuilt on demand: the power-form coefficients of every interval,
+    ``(n_intervals, n_y, degree)``, as a run with stored dense output has them, computed from
+    the run's nodes and step lengths when they are read (``simulate``'s default: storing them
+    per step doubled the cost of a run).
+
+    ``rebuild(indices)`` returns the coefficients of the given intervals. Indexing with an
+    integer array rebuilds those intervals only; ``numpy.asarray`` (or any other use as an
+    array: saving, concatenating, pickling) builds and keeps the whole array."""
+
+    __slots__ = ("shape", "_rebuild", "_full")
+
+    #: Above this fraction of the intervals, an index rebuilds (and keeps) the whole array.
+    FULL_FRACTION = 0.25
+
+    def __init__(self, shape, rebuild):
+        self.shape = tuple(int(v) for v in shape)
+        self._rebuild = rebuild
+        self._full = None
+
+    ndim = 3
+    dtype = np.dtype(float)
+
+    def __len__(self):
+        return self.shape[0]
+
+    def materialize(self) -> np.ndarray:
+        """The whole array (built once, then kept)."""
+        if self._full is None:
+            self._full = self._rebuild(np.arange(self.shape[0], dtype=np.int64))
+        return self._full
+
+    def __array__(self, dtype=None, copy=None):
+        a = self.materialize()
+        if dtype is not None and np.dtype(dtype) != a.dtype:
+            return a.astype(dtype)
+        return a.copy() if copy else a
+
+    def __getitem__(self, index):
+        if self._full is not None:
+            return self._full[index]
+        idx = np.asarray(index)
+        if idx.dtype.kind not in "iu" or idx.ndim > 1:
+            return self.materialize()[index]
+        flat = np.atleast_1d(idx).astype(np.int64)
+        flat = np.where(flat < 0, flat + self.shape[0], flat)
+        if np.any((flat < 0) | (flat >= self.shape[0])):
+            raise IndexError(f"interval index out of range for {self.shape[0]} intervals")
+        uniq, inv = np.unique(flat, return_inverse=True)
+        if len(uniq) > self.FULL_FRACTION * self.shape[0]:
+            return self.materialize()[index]
+        rows = self._rebuild(uniq)[inv]
+        return rows[0] if idx.ndim == 0 else rows
+
+    def __reduce__(self):
+        # pickles (and deep copies) as the plain array
+        return (np.asarray, (self.materialize(),))
+
+    def __repr__(self):
+        state = "built" if self._full is not None else "on demand"
+        return f"LazyDense(shape={self.shape}, {state})"
+
+
 @dataclass(eq=False)
 class Trajectory:
     """A simulated hybrid trajectory.
@@ -196,8 +268,9 @@ class Trajectory:
     transfer_matrices: list | None = field(default=None, repr=False)
     final_discrete_state: tuple | None = field(default=None, repr=False)
     samples: tuple | None = field(default=None, repr=False)
-    # dense output: per interval between consecutive nodes
-    _dense: np.ndarray | None = field(default=None, repr=False)
+    # dense output: per interval between consecutive nodes (an array, or a LazyDense that
+    # rebuilds it on demand)
+    _dense: np.ndarray | LazyDense | None = field(default=None, repr=False)
     _ikind: np.ndarray | None = field(default=None, repr=False)
     _y: np.ndarray | None = field(default=None, repr=False)  # full nodes incl. variational part
     provenance: dict = field(default_factory=dict)
@@ -274,7 +347,8 @@ class Trajectory:
         return out
 
     # ------------------------------------------------------------------------------------
-    def __call__(self, t, side: str = "left", variational: bool = False):
+    def __call__(self, t: ArrayLike, side: str = "left",
+                 variational: bool = False) -> np.ndarray:
         """Evaluate the dense output at time(s) ``t``.
 
         Parameters
@@ -332,7 +406,7 @@ class Trajectory:
         out = out[:, :nout]
         return out[0] if np.ndim(t) == 0 else out
 
-    def sample(self, num: int = 2000):
+    def sample(self, num: int = 2000) -> tuple[np.ndarray, np.ndarray]:
         """Times and states on a uniform grid plus both sides of every event (for plots)."""
         if self._dense is None:
             return self.t, self.x
@@ -349,7 +423,7 @@ class Trajectory:
         return T, X
 
     # ------------------------------------------------------------------------------------
-    def to_dataset(self):
+    def to_dataset(self) -> xr.Dataset:
         """The trajectory as an :class:`xarray.Dataset` (nodes, events, dense output,
         provenance in attributes). Inverse: :meth:`from_dataset`."""
         from ..io import trajectory_to_dataset
@@ -357,12 +431,12 @@ class Trajectory:
         return trajectory_to_dataset(self)
 
     @classmethod
-    def from_dataset(cls, ds):
+    def from_dataset(cls, ds: xr.Dataset) -> Trajectory:
         from ..io import trajectory_from_dataset
 
         return trajectory_from_dataset(ds)
 
-    def save(self, path, overwrite: bool = False):
+    def save(self, path: PathLike, overwrite: bool = False) -> Path:
         """Write the trajectory to a NetCDF file (atomically); returns the path.
 
         An existing file is refused with :class:`~pwsdyn.OutputExistsError` (nothing is

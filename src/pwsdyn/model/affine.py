@@ -13,8 +13,7 @@ state, ``z = (x, 1, cos(w_1 t), sin(w_1 t), ...)``, makes the flow autonomous an
 
 so ``z(t + h) = exp(M h) z(t)`` exactly (the augmentation of Van Loan, IEEE TAC 23 (1978),
 which also covers singular ``A``, as for a ball in flight, and resonant forcing, where the
-particular solution of the textbook method does not exist). DESIGN.md lists this on the
-roadmap as "exact propagation of piecewise-linear modes".
+particular solution of the textbook method does not exist).
 
 :func:`affine_structure` recognises such modes symbolically and builds ``M`` for each, over
 one set of frequencies shared by all modes of the model (so that ``z`` has the same layout in

@@ -44,6 +44,7 @@ from ..errors import ModelError
 #: What CPython looks for on the first two lines of a source file (PEP 263)
 _CODING = re.compile(r"coding[:=]")
 _LOCK = threading.Lock()
+_LOAD_LOCK = threading.RLock()
 _FALLBACK: Path | None = None
 _WARNED: set = set()
 
@@ -214,8 +215,17 @@ def load_module(kind: str, version: str, model_digest: str, generate, *, model_n
 
     ``generate()`` returns the module's text after the header (called only when the module
     must be written); ``model_digest`` is the model's full SHA-256. A failure to import or
-    compile removes the module and raises :class:`ModelError`.
+    compile removes the module and raises :class:`ModelError`. One thread at a time: a module
+    is in ``sys.modules`` before its code has run, so a second thread must not find it there
+    half made (sweeps run their chunks on threads).
     """
+    with _LOAD_LOCK:
+        return _load_module(kind, version, model_digest, generate, model_name=model_name,
+                            attribute=attribute, warm_up=warm_up)
+
+
+def _load_module(kind: str, version: str, model_digest: str, generate, *, model_name: str,
+                 attribute: str, warm_up):
     prefix_line = _header_prefix(kind, version, model_digest)
     directory = cache_dir()
     prefix = "m" if kind == "model" else kind

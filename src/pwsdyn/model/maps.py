@@ -18,21 +18,24 @@ on disk by the model hash, as for flows (:mod:`pwsdyn.model.codegen`)::
 
     step(x, p, out, jac, want_jac) -> piece index (or -1 if no piece applies)
 
-The iteration loops below (:func:`orbit_kernel`, :func:`lyapunov_kernel`) take that function as
-a first-class numba function of one fixed signature, so they are compiled once for all maps.
+The iteration loops (:func:`orbit_kernel`, :func:`lyapunov_kernel`, in
+:mod:`pwsdyn.model._map_kernels`, loaded on first use) take that function as a first-class
+numba function of one fixed signature, so they are compiled once for all maps.
 """
 
 from __future__ import annotations
 
 import functools
 import hashlib
+import math
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
 import sympy as sp
-from numba import njit, types
+from numba import types
 
 from ..errors import ModelError
 from .cache import header, load_module
@@ -48,7 +51,7 @@ MAP_STEP_TYPE = types.FunctionType(MAP_STEP_SIGNATURE)
 _MAP_CODEGEN_VERSION = "2"
 _NAME_OK = "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ_0123456789"
 _TOP_KEYS = {"name", "kind", "description", "source", "reference", "states", "parameters",
-             "definitions", "map", "pieces", "defaults", "notes"}
+             "definitions", "map", "pieces", "defaults", "notes", "units", "descriptions"}
 _PIECE_KEYS = {"name", "condition", "map", "description"}
 _DEFAULT_KEYS = {"x0", "t_end", "params"}
 
@@ -85,6 +88,9 @@ class MapModel(SymbolicSystem):
     definitions: dict = field(default_factory=dict)
     origin: str = "<dict>"
     spec: dict = field(default_factory=dict, repr=False)
+    units: dict = field(default_factory=dict, repr=False)
+    descriptions: dict = field(default_factory=dict, repr=False)
+    text: str = field(default="", repr=False)
 
     kind = "map"
     is_map = True
@@ -134,7 +140,8 @@ def map_model_from_dict(data: dict, origin: str = "<dict>", text: str | None = N
     ModelError
         A malformed map model; the message names the source and the field.
     """
-    from .spec import _RESERVED, _Where, _is_name, check_model_name, states_and_parameters
+    from .spec import (_RESERVED, _Where, _is_name, check_annotations, check_model_name,
+                       default_parameters, states_and_parameters)
 
     W = _Where(origin, text)
     unknown = sorted(set(data) - _TOP_KEYS)
@@ -218,17 +225,27 @@ def map_model_from_dict(data: dict, origin: str = "<dict>", text: str | None = N
         if bad:
             raise W.error(f"unknown key(s) {bad} in `defaults`; allowed keys are "
                           f"{sorted(_DEFAULT_KEYS)}", f"defaults.{bad[0]}")
-        for k in d.get("params", {}) or {}:
+        ps = d.get("params", {}) or {}
+        if not isinstance(ps, dict):
+            raise W.error("`defaults.params` must be a table of parameter = value",
+                          "defaults.params")
+        for k, v in ps.items():
             if k not in parameters:
                 raise W.error(f"`defaults.params` sets unknown parameter {k!r}",
                               "defaults.params", k)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise W.error(f"`defaults.params.{k}` must be a finite number, got {v!r}",
+                              "defaults.params", k)
+    units, descriptions = check_annotations(data, states, parameters, W, time=False)
     desc = data.get("description", "")
     ref = data.get("reference", data.get("source", ""))
     if not isinstance(desc, str) or not isinstance(ref, str):
         raise W.error("`description` and `reference` must be strings", "description")
+    # the values runs use: [parameters] with [defaults] params over them
+    parameters = default_parameters(parameters, d)
     return MapModel(name=name, states=tuple(states), parameters=parameters, pieces=tuple(pieces),
                     description=desc, reference=ref, definitions=definitions, origin=origin,
-                    spec=data)
+                    spec=data, units=units, descriptions=descriptions, text=text or "")
 
 
 # ======================================================================================
@@ -316,114 +333,34 @@ def compile_map(model: MapModel) -> CompiledMap:
 
 
 # ======================================================================================
-# iteration kernels (compiled once for all maps)
+# iteration kernels (compiled once for all maps, in pwsdyn.model._map_kernels)
 # ======================================================================================
 
-_f1 = types.float64[::1]
-_f2 = types.float64[:, ::1]
-_i1 = types.int64[::1]
+_MAP_KERNELS = ("orbit_kernel", "lyapunov_kernel")
+_KERNELS_LOCK = threading.Lock()
+_LOADED = None
 
 
-@njit(types.Tuple((types.int64, _f2, _i1, _f1, types.int64))(
-    MAP_STEP_TYPE, _f1, _f1, types.int64, types.int64, types.float64), cache=True)
-def orbit_kernel(step, x0, p, n_transient, n_samples, bound):
-    """Iterate ``n_transient`` times, then record ``n_samples`` iterates.
+def _map_kernel(name: str):
+    """The compiled iteration loop ``name``, loaded (or compiled, a few seconds, with a
+    message) on first use only."""
+    global _LOADED
+    if _LOADED is None:
+        with _KERNELS_LOCK:
+            if _LOADED is None:
+                from .._compiling import compile_notice
 
-    Returns (status, states (n_samples, n), piece applied to each recorded state, final
-    state, iterations done). A state with a component beyond ``bound`` in magnitude ends the
-    run with ``MAP_DIVERGED``; a state no piece claims with ``MAP_NO_PIECE``.
-    """
-    n = x0.shape[0]
-    x = x0.copy()
-    y = np.zeros(n)
-    jac = np.zeros(n * n)
-    xs = np.full((n_samples, n), np.nan)
-    pieces = np.full(n_samples, -1, dtype=np.int64)
-    status = MAP_OK
-    total = n_transient + n_samples
-    k = 0
-    while k < total:
-        pc = step(x, p, y, jac, 0)
-        if k >= n_transient:
-            for i in range(n):
-                xs[k - n_transient, i] = x[i]
-            pieces[k - n_transient] = pc
-        if pc < 0:
-            status = MAP_NO_PIECE
-            break
-        for i in range(n):
-            if not np.isfinite(y[i]):
-                status = MAP_NONFINITE
-            elif abs(y[i]) > bound:
-                status = MAP_DIVERGED
-        if status != MAP_OK:
-            break
-        for i in range(n):
-            x[i] = y[i]
-        k += 1
-    return status, xs, pieces, x, k
+                with compile_notice("the map iteration", __package__ + "._map_kernels",
+                                    expected="a few seconds"):
+                    from . import _map_kernels
+                _LOADED = _map_kernels
+    return getattr(_LOADED, name)
 
 
-@njit(types.Tuple((types.int64, _f1, _f1, types.int64))(
-    MAP_STEP_TYPE, _f1, _f1, types.int64, types.int64, types.float64), cache=True)
-def lyapunov_kernel(step, x0, p, n_transient, n_iter, bound):
-    """Lyapunov spectrum of a map by QR (modified Gram-Schmidt) re-orthonormalisation of the
-    tangent vectors after every iterate: ``lambda_i = (1/N) sum log |R_ii|``.
-
-    Returns (status, exponents in Gram-Schmidt order, final state, iterations averaged).
-    """
-    n = x0.shape[0]
-    x = x0.copy()
-    y = np.zeros(n)
-    jac = np.zeros(n * n)
-    Q = np.eye(n)
-    V = np.zeros((n, n))
-    sums = np.zeros(n)
-    status = MAP_OK
-    k = 0
-    while k < n_transient + n_iter:
-        pc = step(x, p, y, jac, 1)
-        if pc < 0:
-            status = MAP_NO_PIECE
-            break
-        for i in range(n):
-            if not np.isfinite(y[i]):
-                status = MAP_NONFINITE
-            elif abs(y[i]) > bound:
-                status = MAP_DIVERGED
-        if status != MAP_OK:
-            break
-        if k >= n_transient:
-            # V = J Q, then Gram-Schmidt: V = Q' R
-            for i in range(n):
-                for c in range(n):
-                    s = 0.0
-                    for m in range(n):
-                        s += jac[i * n + m] * Q[m, c]
-                    V[i, c] = s
-            for c in range(n):
-                for c2 in range(c):
-                    d = 0.0
-                    for i in range(n):
-                        d += Q[i, c2] * V[i, c]
-                    for i in range(n):
-                        V[i, c] -= d * Q[i, c2]
-                nrm = 0.0
-                for i in range(n):
-                    nrm += V[i, c] * V[i, c]
-                nrm = np.sqrt(nrm)
-                sums[c] += np.log(nrm)
-                for i in range(n):
-                    Q[i, c] = V[i, c] / nrm if nrm > 0.0 else (1.0 if i == c else 0.0)
-        for i in range(n):
-            x[i] = y[i]
-        k += 1
-    done = max(k - n_transient, 0)
-    ex = np.full(n, np.nan)
-    if done > 0:
-        for i in range(n):
-            ex[i] = sums[i] / done
-    return status, ex, x, done
+def __getattr__(name: str):
+    if name in _MAP_KERNELS:
+        return _map_kernel(name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def iterate(model, x0, n: int, params: Mapping[str, float] | None = None, transient: int = 0,
@@ -469,6 +406,7 @@ def iterate(model, x0, n: int, params: Mapping[str, float] | None = None, transi
     x = state_vector(model, x0)
     V.memory(f"iterate() with n={n}", 8.0 * n * (model.n_states + 1))
     cm = compile_map(model)
+    orbit_kernel = _map_kernel("orbit_kernel")
     _, xs, pieces, _, _ = orbit_kernel(cm.step, x, p if p.size else np.zeros(1),
                                        int(transient), int(n), float(bound))
     return xs, pieces

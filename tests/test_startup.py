@@ -1,0 +1,317 @@
+"""Start-up: ``import pwsdyn``, ``pwsdyn --help``, ``pwsdyn models`` and argument errors never
+load (or compile) the integrator; a real compilation is announced on stderr, a load from
+numba's cache is silent; sweeps run on threads by default.
+
+What is loaded is checked in a fresh interpreter (``sys.modules``), never by timing.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import os
+import subprocess
+import sys
+import textwrap
+import threading
+from pathlib import Path
+
+import pytest
+
+import pwsdyn
+
+SRC = Path(pwsdyn.__file__).resolve().parent
+KERNEL = "pwsdyn.integrate._kernel"
+MAP_KERNELS = "pwsdyn.model._map_kernels"
+
+
+def _env(**extra) -> dict:
+    env = dict(os.environ)
+    # the subprocess imports the same pwsdyn as this process
+    env["PYTHONPATH"] = os.pathsep.join([str(SRC.parent)] + [p for p in env.get(
+        "PYTHONPATH", "").split(os.pathsep) if p])
+    env.update(extra)
+    return env
+
+
+def _run(code: str, cwd=None, **env) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True,
+                          text=True, cwd=cwd, env=_env(**env))
+
+
+def _json_tail(proc) -> dict:
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def test_import_pwsdyn_is_cheap_and_complete():
+    """``import pwsdyn`` imports neither numba, SymPy nor the kernel; every public name is
+    listed by ``dir`` and ``__all__`` and resolves on access (``from pwsdyn import ...``)."""
+    out = _json_tail(_run("""
+        import json, sys
+        import pwsdyn
+        loaded = [m for m in ("numba", "sympy", "xarray", "dask", "pwsdyn.integrate",
+                              "pwsdyn.integrate._kernel") if m in sys.modules]
+        missing = sorted(set(pwsdyn.__all__) - set(dir(pwsdyn)))
+        from pwsdyn import simulate, sweep, basins, PeriodicOrbit, saltation_matrix, Model
+        ns = {}
+        exec("from pwsdyn import *", ns)
+        print(json.dumps({"loaded": loaded, "missing": missing,
+                          "star": sorted(set(pwsdyn.__all__) - set(ns)),
+                          "kernel": "pwsdyn.integrate._kernel" in sys.modules}))
+    """))
+    assert out == {"loaded": [], "missing": [], "star": [], "kernel": False}
+
+
+def test_public_names_are_the_subpackages_objects():
+    import pwsdyn.explore
+    import pwsdyn.integrate
+    import pwsdyn.model
+    import pwsdyn.orbits
+    import pwsdyn.stability
+
+    for name in pwsdyn.__all__:
+        obj = getattr(pwsdyn, name)
+        home = getattr(pwsdyn, pwsdyn._LAZY[name]) if name in pwsdyn._LAZY else pwsdyn.errors
+        assert getattr(home, name) is obj, name
+    assert {"simulate", "sweep", "basins", "lyapunov_spectrum", "load_model", "Trajectory",
+            "PwsdynError", "ArgumentError"} <= set(pwsdyn.__all__)
+    with pytest.raises(AttributeError, match="no attribute 'no_such_name'"):
+        pwsdyn.no_such_name
+
+
+_CLI_CASES = [
+    ["--help"], ["models"], ["simulate", "--help"], ["sweep", "--help"], ["basins", "--help"],
+    ["orbit", "--help"],
+    # click's own argument errors
+    ["simulate", "bouncing-ball", "--rtol", "abc"], ["sweep", "bouncing-ball"],
+    ["no-such-command"],
+    # the commands' checks against the model
+    ["simulate", "bouncing-ball", "-p", "nosuch=1"], ["simulate", "no-such-model"],
+    ["sweep", "bouncing-ball", "--param", "nosuch", "--from", "0", "--to", "1", "--num", "3"],
+    # checks made by the API before any run
+    ["simulate", "bouncing-ball", "--rtol", "-1"],
+    ["sweep", "bouncing-ball", "--param", "A", "--from", "0", "--to", "1", "--num", "3",
+     "--transient", "-1"],
+    ["basins", "bouncing-ball", "--x", "y", "--x-from", "0", "--x-to", "1", "--x-num", "2",
+     "--y", "v", "--y-from", "0", "--y-to", "1", "--y-num", "2", "--samples", "0"],
+]
+
+
+def test_cli_help_models_and_argument_errors_never_load_the_kernel():
+    out = _json_tail(_run(f"""
+        import json, sys
+        from click.testing import CliRunner
+        from pwsdyn.cli import main
+        res = []
+        for args in {_CLI_CASES!r}:
+            r = CliRunner().invoke(main, args)
+            res.append([args, r.exit_code, type(r.exception).__name__
+                        if r.exception and not isinstance(r.exception, SystemExit) else None,
+                        [m for m in ("{KERNEL}", "{MAP_KERNELS}") if m in sys.modules]])
+        print(json.dumps(res))
+    """))
+    for args, code, exc, loaded in out:
+        assert exc is None, (args, exc)
+        assert loaded == [], (args, loaded)
+        # help and listings succeed; every other case is an error (2: usage, 1: model/run)
+        ok = args[-1] in ("--help", "--version") or args == ["models"]
+        assert (code == 0) == ok, (args, code)
+
+
+def test_cli_runs_without_a_figure_do_not_import_matplotlib():
+    out = _json_tail(_run("""
+        import json, sys
+        from click.testing import CliRunner
+        from pwsdyn.cli import main
+        codes = [CliRunner().invoke(main, args).exit_code for args in (
+            ["simulate", "bouncing-ball", "--t-end", "1"],
+            ["sweep", "sqrt-map", "--param", "mu", "--from", "0.01", "--to", "0.05",
+             "--num", "4", "--set", "lam=0.8", "--transient", "10", "--samples", "8",
+             "--no-progress"])]
+        print(json.dumps({"codes": codes, "mpl": "matplotlib" in sys.modules}))
+    """))
+    assert out == {"codes": [0, 0], "mpl": False}
+
+
+def test_api_argument_errors_come_before_the_kernel():
+    """``simulate``, ``sweep`` and ``basins`` check their arguments before they load the
+    integrator: on a machine without numba's cache a wrong argument is reported at once."""
+    out = _json_tail(_run(f"""
+        import json, sys
+        import numpy as np
+        import pwsdyn
+        calls = [
+            lambda: pwsdyn.simulate("bouncing-ball", {{"y": 1, "v": 0}}, (0, 1), rtol=-1),
+            lambda: pwsdyn.simulate("bouncing-ball", {{"y": 1}}, (0, 1)),
+            lambda: pwsdyn.simulate("bouncing-ball", {{"y": 1, "v": 0}}, (0, 1), method="X"),
+            lambda: pwsdyn.sweep("bouncing-ball", "A", [0.1, 0.2], {{"y": 1, "v": 0}},
+                                 transient=-1),
+            lambda: pwsdyn.basins("bouncing-ball", {{"y": [0.1, 0.2]}}, workers=0),
+            lambda: pwsdyn.lyapunov_spectrum("bouncing-ball", {{"y": 1, "v": 0}}, duration=0),
+        ]
+        res = []
+        for f in calls:
+            try:
+                f()
+                res.append("accepted")
+            except pwsdyn.ArgumentError:
+                res.append("ArgumentError")
+        print(json.dumps({{"res": res, "kernel": "{KERNEL}" in sys.modules}}))
+    """))
+    assert out == {"res": ["ArgumentError"] * 6, "kernel": False}
+
+
+def test_only_the_loader_imports_the_kernel():
+    """Every use of the integrator goes through ``pwsdyn.integrate._load.kernel()`` (which
+    announces a compilation), and of the map loops through ``pwsdyn.model.maps``: no other
+    module imports them, at module level or inside a function."""
+    allowed = {KERNEL: {"pwsdyn.integrate._load"}, MAP_KERNELS: {"pwsdyn.model.maps"}}
+    found = []
+    for path in SRC.rglob("*.py"):
+        mod = ".".join(("pwsdyn",) + path.relative_to(SRC).with_suffix("").parts)
+        mod = mod.removesuffix(".__init__")
+        pkg = mod if path.name == "__init__.py" else mod.rpartition(".")[0]
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            names = []
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    parts = pkg.split(".")
+                    parts = parts[:len(parts) - node.level + 1]
+                    base = ".".join(parts + ([base] if base else []))
+                names = [base] + [f"{base}.{a.name}" for a in node.names]
+            for name in names:
+                for target, ok in allowed.items():
+                    if name == target and mod not in ok:
+                        found.append((mod, name))
+    assert found == []
+
+
+def test_kernels_release_the_gil():
+    """The threaded default relies on it: the integrator and the map loops run with the GIL
+    released (numba ``nogil``)."""
+    from pwsdyn.integrate._load import kernel
+    from pwsdyn.model import maps
+
+    assert kernel().run_kernel.targetoptions.get("nogil") is True
+    for name in ("orbit_kernel", "lyapunov_kernel"):
+        assert getattr(maps, name).targetoptions.get("nogil") is True, name
+
+
+# ======================================================================================
+# the compile message
+# ======================================================================================
+
+_JIT_MODULE = """
+from numba import njit, types
+
+@njit(types.float64(types.float64), cache=True)
+def twice(x):
+    return 2.0 * x
+"""
+
+_NOTICE_SCRIPT = """
+import sys
+sys.path.insert(0, sys.argv[1])
+from pwsdyn._compiling import compile_notice
+with compile_notice("the test function", sys.argv[2]):
+    import jitmod_{tag}
+assert jitmod_{tag}.twice(2.0) == 4.0
+"""
+
+
+def _notice(tmp_path, tag: str, watched: str | None = None, **env):
+    (tmp_path / f"jitmod_{tag}.py").write_text(_JIT_MODULE)
+    script = tmp_path / f"notice_{tag}.py"
+    script.write_text(_NOTICE_SCRIPT.format(tag=tag))
+    proc = subprocess.run([sys.executable, str(script), str(tmp_path),
+                           watched or f"jitmod_{tag}"], capture_output=True, text=True,
+                          env=_env(**env))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return proc.stderr
+
+
+def test_compile_message_only_when_numba_really_compiles(tmp_path):
+    """The first import compiles (no cache next to the module): the message and the time;
+    the second loads from numba's cache: nothing."""
+    first = _notice(tmp_path, "a", PWSDYN_QUIET="")
+    assert "pwsdyn: compiling the test function (first run only, about a minute)..." in first
+    assert "pwsdyn: compiled the test function in " in first
+    assert list((tmp_path / "__pycache__").glob("jitmod_a.twice-*.nbi"))
+    assert _notice(tmp_path, "a", PWSDYN_QUIET="") == ""
+
+
+def test_compile_message_can_be_silenced_and_is_scoped(tmp_path):
+    assert _notice(tmp_path, "b", PWSDYN_QUIET="1") == ""
+    # a compilation of a function outside the modules watched is not announced
+    assert _notice(tmp_path, "c", watched="pwsdyn.no_such_module", PWSDYN_QUIET="") == ""
+
+
+# ======================================================================================
+# where the chunks run
+# ======================================================================================
+
+def _where(task):
+    return task, threading.current_thread().name
+
+
+def _run_chunks(n_tasks: int, **kw):
+    from pwsdyn.explore._executor import run_chunks
+
+    got = {}
+    run_chunks(_where, list(range(n_tasks)), list(range(n_tasks)),
+               lambda i, res: got.__setitem__(i, res), progress=False, **kw)
+    assert sorted(got) == list(range(n_tasks))
+    assert all(got[i][0] == i for i in got)
+    return {name for _, name in got.values()}
+
+
+def test_chunks_run_on_threads_by_default():
+    main = threading.current_thread().name
+    names = _run_chunks(8, workers=3)
+    assert main not in names and all(n.startswith("pwsdyn") for n in names)
+    assert len(names) <= 3
+    # one worker, one chunk or the synchronous scheduler: here, one after the other
+    assert _run_chunks(4, workers=1) == {main}
+    assert _run_chunks(1) == {main}
+    assert _run_chunks(4, workers=2, scheduler="synchronous") == {main}
+
+
+def _fail_on_two(task):
+    if task == 2:
+        raise ValueError("chunk 2 failed")
+    return task
+
+
+def test_a_failing_chunk_stops_the_threaded_run():
+    from pwsdyn.explore._executor import run_chunks
+
+    with pytest.raises(ValueError, match="chunk 2 failed"):
+        run_chunks(_fail_on_two, list(range(40)), list(range(40)), lambda i, r: None,
+                   workers=2, progress=False)
+    assert not [t for t in threading.enumerate() if t.name.startswith("pwsdyn_")]
+
+
+_NO_GUARD_SCRIPT = """
+import numpy as np
+import pwsdyn
+
+ds = pwsdyn.sweep("sqrt-map", "mu", np.linspace(0.001, 0.05, 12), [0.1],
+                  params={"lam": 0.8}, chunk_size=2, workers=2, progress=False,
+                  transient=50, samples=20)
+print(int(ds.period.size))   # 12 values, swept up and down (the default direction)
+"""
+
+
+def test_a_sweep_in_a_script_without_main_guard_runs(tmp_path):
+    """The default (threads) starts no process, so a script needs no ``__main__`` guard."""
+    script = tmp_path / "sweep_script.py"
+    script.write_text(_NO_GUARD_SCRIPT)
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                          cwd=tmp_path, env=_env())
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert proc.stdout.strip() == "24"
+    assert "Traceback" not in proc.stderr
