@@ -320,7 +320,7 @@ def test_plot_draws_the_moving_table_and_the_fixed_floor(tmp_path):
     for text in ("impact", "sticking", "chattering sequence", "stick"):
         assert text in legend
 
-    floor = pwsdyn.simulate("bouncing-ball", {"y": 1.0, "v": 0.0}, (0, 5))
+    floor = pwsdyn.simulate("bouncing-ball", {"y": 1.0, "v": 0.0}, (0, 5), {"A": 0.0})
     fig = plot_trajectory(floor)
     ax_y, ax_v, ax_phase = fig.axes
     np.testing.assert_array_equal(_dashed(ax_y)[0].get_ydata(), 0.0)
@@ -334,7 +334,8 @@ def test_plot_draws_the_moving_table_and_the_fixed_floor(tmp_path):
 def test_plot_marks_each_event_and_breaks_lines_at_jumps():
     from pwsdyn.plot import plot_trajectory
 
-    traj = pwsdyn.simulate("bouncing-ball", {"y": 1.0, "v": 0.0}, (0, 2), params={"e": 0.8})
+    traj = pwsdyn.simulate("bouncing-ball", {"y": 1.0, "v": 0.0}, (0, 2),
+                           params={"e": 0.8, "A": 0.0})
     fig = plot_trajectory(traj, states=["v"], phase=("v", "y"))
     ax_v, ax_phase = fig.axes
     assert ax_v.get_ylabel() == "$v$" and ax_phase.get_xlabel() == "$v$"

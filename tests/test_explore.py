@@ -258,7 +258,8 @@ def test_sqrt_map_periodic_for_small_lambda_chaotic_for_large():
     """lam = 0.1: a periodic attractor (negative exponent, period found) at every mu of a
     sweep of (0, 0.05]; lam = 0.8 > 2/3: robust chaos, a positive exponent at every value."""
     mus = np.linspace(0.0005, 0.05, 100)
-    common = dict(transient=2000, samples=20000, lyapunov=True, workers=1, progress=False)
+    common = dict(transient=2000, samples=20000, lyapunov=True, direction="up", workers=1,
+                  progress=False)
     small = pwsdyn.sweep("sqrt-map", "mu", mus, [0.0], params={"lam": 0.1}, **common)
     assert np.all(small.lyapunov.values < -0.05)
     assert np.all(small.period.values >= 1)
@@ -351,15 +352,19 @@ BALL_SWEEP = dict(params={"omega": OMEGA, "e": E}, transient=100, samples=24, ch
 
 
 def test_serial_and_parallel_give_identical_datasets(tmp_path):
-    """Same chunking, 1 worker (in-process) vs a LocalCluster of 2 worker processes (started
-    by ``workers=2``, or the user's, reached by ``client=`` or ``scheduler=``): the datasets
-    are identical, sweeps and basins alike."""
+    """Same chunking, 1 worker (in-process) vs 2 threads (the default, ``workers=2``) vs a
+    LocalCluster of 2 worker processes (``scheduler="processes"``, or the user's, reached by
+    ``client=`` or a scheduler address): the datasets are identical, sweeps and basins
+    alike."""
     vals = ball_A(np.linspace(0.9, 1.2, 20))
     a = pwsdyn.sweep("bouncing-ball", "A", vals, [1.5, 0.0], workers=1, progress=False,
                      **BALL_SWEEP)
     b = pwsdyn.sweep("bouncing-ball", "A", vals, [1.5, 0.0], workers=2, progress=False,
                      out=tmp_path / "b.nc", **BALL_SWEEP)
     xr.testing.assert_identical(a, b)
+    d = pwsdyn.sweep("bouncing-ball", "A", vals, [1.5, 0.0], workers=2, progress=False,
+                     scheduler="processes", **BALL_SWEEP)
+    xr.testing.assert_identical(a, d)
     with xr.open_dataset(tmp_path / "b.nc", engine="h5netcdf") as f:
         xr.testing.assert_equal(a.drop_vars("chunk_start"), f.load().drop_vars("chunk_start"))
     assert a.attrs["model_hash"] == pwsdyn.load_model("bouncing-ball").hash
@@ -399,8 +404,8 @@ _KILL_SCRIPT = textwrap.dedent("""
 
     def main():
         pwsdyn.sweep("impact-oscillator", "omega", np.linspace(2.3, 3.1, {n}), [-0.5, 0.0],
-                     transient={tr}, samples=50, chunk_size=2, warmup=1, workers=1,
-                     progress=False, store=sys.argv[1])
+                     transient={tr}, samples=50, chunk_size=2, warmup=1, direction="up",
+                     workers=1, progress=False, store=sys.argv[1])
 
     if __name__ == "__main__":
         main()
@@ -430,7 +435,8 @@ def test_killed_run_resumes_to_identical_dataset(tmp_path):
     done = sorted(store.glob("chunk-*.nc"))
     assert 3 <= len(done) < n // 2, len(done)
     stamps = {p.name: p.stat().st_mtime_ns for p in done}
-    kw = dict(transient=tr, samples=50, chunk_size=2, warmup=1, workers=1, progress=False)
+    kw = dict(transient=tr, samples=50, chunk_size=2, warmup=1, direction="up", workers=1,
+              progress=False)
     values = np.linspace(2.3, 3.1, n)
     resumed = pwsdyn.sweep("impact-oscillator", "omega", values, [-0.5, 0.0], store=store,
                            **kw)
@@ -447,9 +453,9 @@ def test_chunk_borders_warmup_and_one_chunk():
     recorded."""
     vals = np.linspace(0.01, 0.05, 9)
     one = pwsdyn.sweep("sqrt-map", "mu", vals, [0.0], params={"lam": 0.1}, chunk_size=9,
-                       workers=1, progress=False, transient=500, samples=40)
+                       workers=1, progress=False, transient=500, samples=40, direction="up")
     many = pwsdyn.sweep("sqrt-map", "mu", vals, [0.0], params={"lam": 0.1}, chunk_size=2,
-                        workers=1, progress=False, transient=500, samples=40)
+                        workers=1, progress=False, transient=500, samples=40, direction="up")
     np.testing.assert_allclose(one.section.values, many.section.values, atol=1e-12)
     assert one.chunk_start.values.sum() == 1 and many.chunk_start.values.sum() == 5
 
@@ -460,8 +466,8 @@ def test_coexisting_attractors_make_chunk_borders_visible():
     way; with chunks of 4 values each chunk restarts from x0 after its warm-up and may land
     on period 3 -- the documented way chunk borders show where attractors coexist."""
     gam = np.linspace(0.9, 1.05, 16)
-    kw = dict(params={"omega": OMEGA, "e": E}, transient=300, samples=32, workers=1,
-              progress=False)
+    kw = dict(params={"omega": OMEGA, "e": E}, transient=300, samples=32, direction="up",
+              workers=1, progress=False)
     one = pwsdyn.sweep("bouncing-ball", "A", ball_A(gam), [1.5, 0.0], chunk_size=16, **kw)
     assert np.all(one.period.values == 1)
     many = pwsdyn.sweep("bouncing-ball", "A", ball_A(gam), [1.5, 0.0], chunk_size=4, **kw)
@@ -560,6 +566,26 @@ def test_cli_sweep_and_basins_write_data_and_figures(tmp_path, monkeypatch):
     _png(tmp_path / "b.png")
 
 
+@pytest.mark.parametrize("lyapunov, samples", [(False, 100), (True, 300)])
+def test_sweep_window_defaults_are_the_same_in_the_api_and_the_cli(lyapunov, samples, tmp_path,
+                                                                   monkeypatch):
+    """The recording window defaults to 100 periods, 300 with Lyapunov exponents (over 100
+    the finite-time exponents scatter visibly between neighbouring values); one default in
+    pwsdyn.sweep, which the CLI does not override."""
+    monkeypatch.chdir(tmp_path)
+    values = np.linspace(0.005, 0.05, 3)
+    ds = pwsdyn.sweep("sqrt-map", "mu", values, [0.0], params={"lam": 0.8},
+                      lyapunov=lyapunov, workers=1, progress=False)
+    assert json.loads(ds.attrs["settings"])["samples"] == samples
+    res = _cli(["sweep", "sqrt-map", "--param", "mu", "--from", "0.005", "--to", "0.05",
+                "--num", "3", "--set", "lam=0.8", "--workers", "1", "--no-progress",
+                "--out", "d.nc"] + (["--lyapunov"] if lyapunov else []))
+    assert res.exit_code == 0, res.output
+    with xr.open_dataset(tmp_path / "d.nc", engine="h5netcdf") as cli:
+        assert json.loads(cli.attrs["settings"])["samples"] == samples
+    assert pwsdyn.explore._sweep.LYAPUNOV_SAMPLES == 300
+
+
 @pytest.mark.parametrize("args, words", [
     (["--param", "nosuch"], ["--param", "nosuch"]),
     (["--param", "A", "--set", "zz=1"], ["--set", "zz"]),
@@ -623,6 +649,19 @@ def test_lyapunov_of_a_ball_stuck_on_its_table_is_superstable():
     assert 0.2 * w * w < 9.81
     assert np.all(np.isneginf(lyap.exponents))
     assert lyap.events.get("chatter", 0) <= 1   # not one per segment
+
+
+def test_lyapunov_sweep_of_a_ball_stuck_after_the_transient():
+    # A w^2 < g: the transient ends with the ball stuck on its table, so every value's window
+    # starts sticking (a contact episode from its start). That start used to raise
+    # AttributeError; both exponents are -inf as for lyapunov_spectrum above.
+    w = 2 * np.pi
+    ds = pwsdyn.sweep("bouncing-ball", "A", [0.05, 0.06], {"y": 0.5, "v": 0.0},
+                      params={"omega": w}, lyapunov=True, transient=20, samples=5, workers=1,
+                      progress=False)
+    assert 0.06 * w * w < 9.81
+    assert int((ds.status != 0).sum()) == 0
+    assert np.all(np.isneginf(ds.lyapunov.values))
 
 
 def test_state_times_from_event_columns():

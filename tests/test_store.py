@@ -44,8 +44,8 @@ from pwsdyn.explore import StoreMismatchError
 from pwsdyn.explore._store import ChunkStore
 
 VALUES = np.linspace(0.01, 0.05, 8).tolist()
-KW = dict(params={"lam": 0.1}, transient=50, samples=8, chunk_size=2, workers=1,
-          progress=False)                                   # 4 chunks
+KW = dict(params={"lam": 0.1}, transient=50, samples=8, chunk_size=2, direction="up",
+          workers=1, progress=False)                        # 4 chunks
 N_CHUNKS = 4
 BASIN_GRID = {"x": np.linspace(-0.5, 0.5, 9).tolist()}
 BASIN_KW = dict(params={"mu": 0.1, "lam": 0.1}, transient=50, samples=8, chunk_size=3,
@@ -313,8 +313,8 @@ _KILL_SCRIPT = textwrap.dedent("""
     import pwsdyn
 
     pwsdyn.sweep("impact-oscillator", "omega", np.linspace(2.3, 3.1, 24), [-0.5, 0.0],
-                 transient=300, samples=50, chunk_size=2, warmup=1, workers=1,
-                 progress=False, store=sys.argv[1])
+                 transient=300, samples=50, chunk_size=2, warmup=1, direction="up",
+                 workers=1, progress=False, store=sys.argv[1])
 """)
 
 
@@ -322,7 +322,8 @@ _KILL_SCRIPT = textwrap.dedent("""
 def test_killed_at_random_moments_resumes_exactly(tmp_path):
     """SIGKILL at random moments after the first chunk file appears (kill, resume, kill
     again ...): each resumed store gives the dataset of an uninterrupted run."""
-    kw = dict(transient=300, samples=50, chunk_size=2, warmup=1, workers=1, progress=False)
+    kw = dict(transient=300, samples=50, chunk_size=2, warmup=1, direction="up", workers=1,
+              progress=False)
     values = np.linspace(2.3, 3.1, 24)
     full = pwsdyn.sweep("impact-oscillator", "omega", values, [-0.5, 0.0], **kw)
     script = tmp_path / "run.py"

@@ -2,7 +2,17 @@
 
 Impacts, dry friction, Filippov sliding, chattering and grazing: models as data, compiled
 event-driven simulation, stability, periodic orbits and global analysis.
+
+``import pwsdyn`` is cheap: the public names below are imported from their subpackages on
+first use (``pwsdyn.simulate``, ``from pwsdyn import sweep``), and the compiled integrator is
+loaded only when a run needs it (compiled once per machine, with a message on stderr; see
+:mod:`pwsdyn._compiling`).
 """
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
 
 __version__ = "0.1.0"
 
@@ -11,14 +21,38 @@ from .errors import (ArgumentError as ArgumentError, ExpressionError as Expressi
                      PwsdynError as PwsdynError,
                      StoreError as StoreError,
                      SolveError as SolveError, Status as Status)
-from .integrate import EventRecord as EventRecord, Trajectory as Trajectory, simulate as simulate
-from .model import Model as Model, compile_model as compile_model, load_model as load_model
-from .model import zoo_names as zoo_names
-from .orbits import (OrbitError as OrbitError, PeriodicOrbit as PeriodicOrbit,
-                     RecurrenceWarning as RecurrenceWarning,
-                     find_periodic_orbit as find_periodic_orbit)
-from .stability import (SectionNotReachedError as SectionNotReachedError,
-                        floquet_multipliers as floquet_multipliers, monodromy as monodromy,
-                        poincare_map as poincare_map, saltation_matrix as saltation_matrix)
-from .explore import (basins as basins, lyapunov_spectrum as lyapunov_spectrum,
-                      sweep as sweep)
+
+#: Public names imported on first access, by the subpackage that defines them.
+_LAZY = {
+    "EventRecord": "integrate", "Trajectory": "integrate", "simulate": "integrate",
+    "Model": "model", "compile_model": "model", "load_model": "model", "zoo_names": "model",
+    "OrbitError": "orbits", "PeriodicOrbit": "orbits", "RecurrenceWarning": "orbits",
+    "find_periodic_orbit": "orbits",
+    "SectionNotReachedError": "stability", "floquet_multipliers": "stability",
+    "monodromy": "stability", "poincare_map": "stability", "saltation_matrix": "stability",
+    "basins": "explore", "lyapunov_spectrum": "explore", "sweep": "explore",
+}
+
+__all__ = ["ArgumentError", "ExpressionError", "ModelError", "OutputExistsError", "PwsdynError",
+           "StoreError", "SolveError", "Status", *_LAZY]
+
+if TYPE_CHECKING:  # what static checkers and IDEs see; at run time see __getattr__
+    from .explore import basins, lyapunov_spectrum, sweep
+    from .integrate import EventRecord, Trajectory, simulate
+    from .model import Model, compile_model, load_model, zoo_names
+    from .orbits import OrbitError, PeriodicOrbit, RecurrenceWarning, find_periodic_orbit
+    from .stability import (SectionNotReachedError, floquet_multipliers, monodromy,
+                            poincare_map, saltation_matrix)
+
+
+def __getattr__(name: str):
+    sub = _LAZY.get(name)
+    if sub is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{sub}", __name__), name)
+    globals()[name] = value   # later accesses are plain attribute lookups
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

@@ -2,9 +2,33 @@
 
 ``pwsdyn models`` lists the built-in models; ``pwsdyn simulate MODEL`` simulates a built-in
 model or a model file and writes the trajectory (NetCDF) and a figure (PNG); ``pwsdyn sweep``
-and ``pwsdyn basins`` compute bifurcation diagrams and basins of attraction (parallel on Dask,
-resumable) and write their datasets and figures; ``pwsdyn orbit MODEL`` finds a periodic
-orbit by Newton shooting and prints its period, signature and Floquet multipliers.
+and ``pwsdyn basins`` compute bifurcation diagrams and basins of attraction (parallel on
+threads or Dask, resumable) and write their datasets and figures; ``pwsdyn orbit MODEL``
+finds a periodic orbit by Newton shooting and prints its period, signature and Floquet
+multipliers.
+
+One name for one thing in every command:
+
+* ``-p/--param NAME=VALUE`` sets a parameter (repeatable) in ``simulate``, ``orbit``, ``sweep``
+  and ``basins``; ``-s/--set NAME=VALUE`` is a synonym (hidden; ``sweep`` and ``basins`` used
+  it first). In ``sweep`` the swept parameter is ``--sweep NAME``; ``--param NAME`` without
+  ``=VALUE`` still names it (the spelling before ``--sweep``): an argument with ``=`` sets a
+  value, one without names the swept parameter.
+* ``--x0``, ``--rtol``, ``--atol``, ``--method``, ``--sliding``, ``--out``, ``--plot`` and
+  ``--force`` mean the same wherever they appear (``--exact`` in the commands that integrate
+  affine modes exactly: simulate, sweep, basins).
+
+Defaults are the library's: a model's ``[defaults]`` table (``params``, ``x0``, ``t0``,
+``t_end``) is applied by :func:`pwsdyn.simulate`, :func:`pwsdyn.sweep`, :func:`pwsdyn.basins`,
+:func:`pwsdyn.lyapunov_spectrum` and :func:`pwsdyn.find_periodic_orbit` exactly as here
+(:func:`pwsdyn.model.spec.run_defaults`; the parameters through ``model.parameters``), and the
+option defaults equal the API's (``sweep --direction both`` as ``pwsdyn.sweep(direction=
+"both")``, ``--transient``, ``--samples``, tolerances, methods; tests/test_defaults.py keeps
+them equal).
+
+Every file a command writes is listed on stdout (``wrote PATH``; a kept ``--store`` as
+``store PATH``), the second figure ``<plot>-lyapunov.<ext>`` of ``sweep --lyapunov --plot``
+included.
 
 Errors in the arguments or the model, and failed simulations, are reported as one line
 ``Error: ...`` without a traceback: exit code 2 for a bad argument (click's convention for
@@ -37,7 +61,8 @@ from pathlib import Path
 
 import click
 
-#: End time used when neither ``--t-end`` nor the model's ``[defaults]`` give one.
+#: End time used when neither ``--t-end`` nor the model's ``[defaults]`` give one (the
+#: library's :data:`pwsdyn.model.spec.FALLBACK_T_END`; a test keeps them equal).
 FALLBACK_T_END = 10.0
 
 
@@ -115,20 +140,34 @@ def _number(text: str, what: str) -> float:
     return val
 
 
-def _parse_params(values) -> dict:
-    """``--param NAME=VALUE`` options as a dict (names are checked against the model later)."""
+def _parse_params(values, hint: str = "--param") -> dict:
+    """``--param NAME=VALUE`` options as a dict (names are checked against the model later);
+    ``hint`` is the option named in errors."""
     out = {}
     for item in values:
         name, sep, text = item.partition("=")
         name = name.strip()
         if not sep or not name:
-            raise click.BadParameter(f"expected NAME=VALUE, got {item!r}", param_hint="--param")
+            raise click.BadParameter(f"expected NAME=VALUE, got {item!r}", param_hint=hint)
         try:
             out[name] = _number(text.strip(), f"parameter {name!r}")
         except click.BadParameter as exc:
-            exc.param_hint = "--param"
+            exc.param_hint = hint
             raise
     return out
+
+
+def _all_params(params, sets) -> tuple[dict, dict]:
+    """The parameter values of ``-p/--param`` and of its synonym ``-s/--set``, parsed, and
+    the option that set each name (for error messages). A name set by both to different
+    values is an error."""
+    a, b = _parse_params(params, "--param"), _parse_params(sets, "--set")
+    clash = [k for k in a if k in b and a[k] != b[k]]
+    if clash:
+        raise click.BadParameter(f"parameter {clash[0]!r} is given different values by "
+                                 f"--param and --set", param_hint="--param")
+    hints = {**{k: "--set" for k in b}, **{k: "--param" for k in a}}
+    return {**b, **a}, hints
 
 
 def _parse_x0(values):
@@ -188,46 +227,26 @@ def _check_x0(model, x0):
                                  f"{len(x0)} value(s)", param_hint="--x0")
 
 
-def _check_params(model, params):
+def _check_params(model, params, hints=None):
     unknown = [k for k in params if k not in model.parameters]
     if unknown:
         raise click.BadParameter(f"unknown parameter(s) {unknown} for model {model.name!r}; "
                                  f"parameters are {list(model.parameters)}",
-                                 param_hint="--param")
+                                 param_hint=(hints or {}).get(unknown[0], "--param"))
 
 
-def _model_defaults(model) -> dict:
-    """The model's optional ``[defaults]`` table (``x0``, ``t0``, ``t_end``, ``params``)."""
-    from .errors import ModelError
+def _run_defaults(model, x0, t0, t_end):
+    """Command-line values first, then the model's ``[defaults]``, then zero / fallbacks: the
+    library's rule (:func:`pwsdyn.model.spec.run_defaults`, the one :func:`pwsdyn.simulate`
+    applies), with a note on stderr for each fallback. Parameters need nothing: the
+    model's ``[defaults] params`` are in ``model.parameters`` for the API and the CLI
+    alike."""
+    from .model.spec import run_defaults
 
-    defaults = model.spec.get("defaults", {}) or {}
-    if not isinstance(defaults, dict):
-        raise ModelError("`defaults` must be a table", source=model.origin, field="defaults")
-    return defaults
-
-
-def _resolve_defaults(model, defaults, x0, t0, t_end, params):
-    """Command-line values first, then the model's ``[defaults]``, then zero / fallbacks."""
-    all_params = dict(defaults.get("params", {}) or {})
-    all_params.update(params)
-    if x0 is None:
-        if defaults.get("x0") is not None:
-            x0 = defaults["x0"]
-        else:
-            x0 = [0.0] * model.n_states
-            _echo(f"note: no --x0 given and model {model.name!r} has no defaults.x0; "
-                       f"starting from zero ({', '.join(f'{s}=0' for s in model.states)})",
-                       err=True)
-    if t_end is None:
-        if defaults.get("t_end") is not None:
-            t_end = float(defaults["t_end"])
-        else:
-            t_end = FALLBACK_T_END
-            _echo(f"note: no --t-end given and model {model.name!r} has no "
-                       f"defaults.t_end; using t_end = {FALLBACK_T_END:g}", err=True)
-    if t0 is None:
-        t0 = float(defaults.get("t0", 0.0))
-    return x0, t0, t_end, all_params
+    run = run_defaults(model, x0=x0, t0=t0, t_end=t_end)
+    for note in run.note(model, {"x0": "--x0", "t_end": "--t-end"}):
+        _echo(f"note: {note}", err=True)
+    return run.x0, run.t0, run.t_end
 
 
 def _fmt(v: float) -> str:
@@ -252,12 +271,12 @@ def _check_outputs(force: bool, outputs) -> None:
     directory, or an existing file without ``--force``, exits with 1. (The files cannot
     collide: data and figure suffixes differ, and the Lyapunov figure has its own stem.)
     """
+    outputs = [o for o in outputs if o[1] is not None]
+    if not outputs:     # nothing to check: xarray and matplotlib are not imported
+        return
     from .io import _check_output_path
-    from .plot import figure_formats
 
     for option, path, kind in outputs:
-        if path is None:
-            continue
         p = Path(path)
         suffix = p.suffix.lower()
         hint = option.split()[0]
@@ -267,6 +286,8 @@ def _check_outputs(force: bool, outputs) -> None:
                     f"{str(path)!r}: the data are written as NetCDF; give a file name ending "
                     f"in {', '.join(NETCDF_SUFFIXES)}", param_hint=hint)
         else:
+            from .plot import figure_formats
+
             formats = figure_formats()
             if (suffix[1:] or "png") not in formats:
                 raise click.BadParameter(
@@ -353,6 +374,52 @@ def _write_figures(figures, out, dataset):
 
 
 # ======================================================================================
+# options shared by the commands: one name for one thing
+# ======================================================================================
+
+_PARAM_HELP = ("Set a parameter: NAME=VALUE (repeatable), over the model's defaults. "
+               "-s/--set NAME=VALUE is the same.")
+
+
+def _param_options(fn, help_text: str = _PARAM_HELP):
+    """``-p/--param NAME=VALUE`` and its synonym ``-s/--set NAME=VALUE`` (hidden; the
+    spelling ``sweep`` and ``basins`` used first), in every command that runs a model."""
+    fn = click.option("--set", "-s", "sets", multiple=True, metavar="NAME=VALUE", hidden=True,
+                      help="The same as -p/--param NAME=VALUE.")(fn)
+    return click.option("--param", "-p", "params", multiple=True, metavar="NAME=VALUE",
+                        help=help_text)(fn)
+
+
+_SWEEP_PARAM_HELP = ("Set a parameter: NAME=VALUE (repeatable), over the model's defaults. "
+                     "A NAME without =VALUE names the swept parameter instead (the same as "
+                     "--sweep NAME). -s/--set NAME=VALUE is the same as --param NAME=VALUE.")
+
+
+def _sweep_param_options(fn):
+    return _param_options(fn, _SWEEP_PARAM_HELP)
+
+
+def _sliding_option(fn):
+    return click.option(
+        "--sliding", type=click.Choice(["convex", "utkin"], case_sensitive=False),
+        default=None, help="Sliding vector field on Filippov surfaces: Filippov's convex "
+                           "combination (default) or Utkin's equivalent control.")(fn)
+
+
+def _method_name(method: str) -> str:
+    """The library's spelling of a --method choice (case-insensitive on the command line)."""
+    return "auto" if method.lower() == "auto" else method.upper()
+
+
+def _method_option(default: str, fn=None):
+    def deco(f):
+        return click.option("--method", type=click.Choice(["auto", "RK45", "DOP853"],
+                                                          case_sensitive=False),
+                            default=None, help=f"Runge-Kutta pair (default {default}).")(f)
+    return deco if fn is None else deco(fn)
+
+
+# ======================================================================================
 # commands
 # ======================================================================================
 
@@ -401,33 +468,32 @@ def models_cmd():
 
 @main.command("simulate")
 @click.argument("model", metavar="MODEL|FILE")
-@click.option("--param", "-p", "params", multiple=True, metavar="NAME=VALUE",
-              help="Parameter value (repeatable); overrides the model's defaults.")
+@_param_options
 @click.option("--x0", "x0", multiple=True, metavar="VALUES",
               help="Initial state: comma-separated values in state order (--x0 1,0) or "
                    "NAME=VALUE pairs (--x0 y=1 --x0 v=0). Default: the model's [defaults].")
-@click.option("--t0", type=float, default=None, help="Start time (default 0).")
+@click.option("--t0", type=float, default=None,
+              help="Start time (default: the model's [defaults], else 0).")
 @click.option("--t-end", "t_end", type=float, default=None,
-              help=f"End time (default: the model's [defaults], else {FALLBACK_T_END:g}).")
+              help=f"End time (default: the model's [defaults], else t0 + "
+                   f"{FALLBACK_T_END:g}).")
 @click.option("--rtol", type=float, default=None, help="Relative tolerance (default 1e-10).")
 @click.option("--atol", type=float, default=None, help="Absolute tolerance (default 1e-12).")
-@click.option("--method", type=click.Choice(["RK45", "DOP853"], case_sensitive=False),
-              default=None, help="Runge-Kutta pair (default RK45).")
-@click.option("--exact", is_flag=True,
+@_method_option("auto")
+@click.option("--exact/--no-exact", default=None,
               help="Propagate the modes that are affine in the state with harmonic forcing "
-                   "exactly (matrix exponential) instead of by the Runge-Kutta pair.")
+                   "exactly (matrix exponential), or integrate every mode with the Runge-Kutta "
+                   "pair; unset: exactly wherever a mode allows it (default auto).")
 @click.option("--mode", default=None, metavar="NAME", help="Initial mode.")
-@click.option("--sliding", type=click.Choice(["convex", "utkin"], case_sensitive=False),
-              default=None, help="Sliding vector field on Filippov surfaces: Filippov's convex "
-                                 "combination (default) or Utkin's equivalent control.")
+@_sliding_option
 @click.option("--out", "out", type=click.Path(dir_okay=False), default=None,
               help="Write the trajectory to this NetCDF file (.nc).")
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
               help="Write a figure of the trajectory to this file (PNG; PDF, SVG... by "
                    "suffix).")
 @click.option("--force", is_flag=True, help=_FORCE_HELP)
-def simulate_cmd(model, params, x0, t0, t_end, rtol, atol, method, exact, mode, sliding, out,
-                 plot, force):
+def simulate_cmd(model, params, sets, x0, t0, t_end, rtol, atol, method, exact, mode, sliding,
+                 out, plot, force):
     """Simulate MODEL (a built-in name, see `pwsdyn models`, or a TOML file).
 
     Prints a summary; with --out and --plot also writes the trajectory and a figure.
@@ -440,23 +506,17 @@ def simulate_cmd(model, params, x0, t0, t_end, rtol, atol, method, exact, mode, 
     import pwsdyn
     from .errors import ModelError, SolveError
 
-    cli_params = _parse_params(params)
+    cli_params, hints = _all_params(params, sets)
     cli_x0 = _parse_x0(x0)
     _check_outputs(force, [("--out", out, "data"), ("--plot", plot, "figure")])
     try:
         mdl = pwsdyn.load_model(model)
-        defaults = _model_defaults(mdl)
     except ModelError as exc:
         _fail(exc)
-    _check_params(mdl, cli_params)
+    _check_params(mdl, cli_params, hints)
     if cli_x0 is not None:
         _check_x0(mdl, cli_x0)
-
-    try:
-        x0_val, t0, t_end, all_params = _resolve_defaults(mdl, defaults, cli_x0, t0, t_end,
-                                                          cli_params)
-    except (TypeError, ValueError) as exc:
-        _fail(f"model {mdl.name!r}: bad `defaults` table: {exc}")
+    x0_val, t0, t_end = _run_defaults(mdl, cli_x0, t0, t_end)
 
     options = {}
     if rtol is not None:
@@ -464,16 +524,16 @@ def simulate_cmd(model, params, x0, t0, t_end, rtol, atol, method, exact, mode, 
     if atol is not None:
         options["atol"] = atol
     if method is not None:
-        options["method"] = method.upper()
-    if exact:
-        options["exact"] = True
+        options["method"] = _method_name(method)
+    if exact is not None:
+        options["exact"] = exact
     if mode is not None:
         options["mode"] = mode
     if sliding is not None:
         options["sliding"] = sliding.lower()
 
     try:
-        traj = pwsdyn.simulate(mdl, x0_val, (t0, t_end), params=all_params, throw=False,
+        traj = pwsdyn.simulate(mdl, x0_val, (t0, t_end), params=cli_params, throw=False,
                                **options)
     except (ModelError, SolveError, ValueError, TypeError) as exc:
         _fail(exc)
@@ -497,35 +557,37 @@ def simulate_cmd(model, params, x0, t0, t_end, rtol, atol, method, exact, mode, 
               f"{traj.state[-1]}: {traj.message}")
 
 
-def _explore_common(model, sets, x0, method, rtol, atol, exact=False):
-    """Load MODEL, check ``--set`` and ``--x0`` and collect integrator options."""
+def _explore_common(model, params, sets, x0, method, rtol, atol, exact=None, sliding=None,
+                    swept=None):
+    """Load MODEL, check ``-p/--param`` (``-s/--set``) and ``--x0`` and collect integrator
+    options. ``swept`` (sweep) is the swept parameter: it must be one of the model's, and
+    a value given for it is left out (the sweep sets it)."""
     import pwsdyn
     from .errors import ModelError
 
-    params = _parse_params(sets)
+    cli_params, hints = _all_params(params, sets)
     cli_x0 = _parse_x0(x0)
     try:
         mdl = pwsdyn.load_model(model)
-        defaults = _model_defaults(mdl)
     except ModelError as exc:
         _fail(exc)
-    unknown = [k for k in params if k not in mdl.parameters]
-    if unknown:
-        raise click.BadParameter(f"unknown parameter(s) {unknown} for model {mdl.name!r}; "
-                                 f"parameters are {list(mdl.parameters)}", param_hint="--set")
+    if swept is not None and swept not in mdl.parameters:
+        raise click.BadParameter(f"unknown parameter {swept!r} for model {mdl.name!r}; "
+                                 f"parameters are {list(mdl.parameters)}",
+                                 param_hint="--sweep/--param")
+    _check_params(mdl, cli_params, hints)
     if cli_x0 is not None:
         _check_x0(mdl, cli_x0)
-    all_params = dict(defaults.get("params", {}) or {})
-    all_params.update(params)
-    if cli_x0 is None:
-        cli_x0 = defaults.get("x0")
+    cli_params.pop(swept, None)
     options = {}
-    for k, v in (("rtol", rtol), ("atol", atol), ("method", method.upper() if method else None)):
+    for k, v in (("rtol", rtol), ("atol", atol), ("method", _method_name(method) if method else None),
+                 ("sliding", sliding.lower() if sliding else None)):
         if v is not None:
             options[k] = v
-    if exact:
-        options["exact"] = True
-    return mdl, all_params, cli_x0, options
+    if exact is not None:
+        options["exact"] = exact
+    # parameters and x0 not given here: the model's defaults, applied by pwsdyn.sweep/basins
+    return mdl, cli_params, cli_x0, options
 
 
 def _run_store(out, store):
@@ -540,32 +602,32 @@ def _run_store(out, store):
 
 
 _EXPLORE_OPTIONS = [
-    click.option("--set", "-s", "sets", multiple=True, metavar="NAME=VALUE",
-                 help="Value of another parameter (repeatable); default: the model's."),
     click.option("--x0", "x0", multiple=True, metavar="VALUES",
                  help="Initial state (as for `simulate`); default: the model's [defaults]."),
     click.option("--transient", type=int, default=200, show_default=True,
                  help="Forcing periods (maps: iterations) discarded."),
-    click.option("--samples", type=int, default=None,
-                 help="Forcing periods (maps: iterations) recorded [sweep 100, basins 32]."),
     click.option("--section", default="stroboscopic", show_default=True,
                  help="'stroboscopic' or the name of an event (e.g. impact)."),
     click.option("--workers", type=int, default=None,
-                 help="1: in this process; N: local Dask cluster of N processes "
-                      "(default: one per core)."),
+                 help="Threads (default: one per core; 1: one after the other), or worker "
+                      "processes with --scheduler processes."),
     click.option("--scheduler", default=None, metavar="ADDRESS",
-                 help="Run on the Dask cluster of this scheduler instead."),
+                 help="'processes' for a local Dask cluster of worker processes, or the "
+                      "address of a Dask scheduler to run on (default: threads here)."),
     click.option("--chunk-size", "chunk_size", type=int, default=None,
                  help="Values (basins: grid rows) per chunk (default: 1/16 of them)."),
     click.option("--store", default=None, type=click.Path(file_okay=False),
                  help="Resumable store directory (default: OUT.store, removed when done)."),
-    click.option("--rtol", type=float, default=None, help="Relative tolerance (1e-10)."),
-    click.option("--atol", type=float, default=None, help="Absolute tolerance (1e-12)."),
-    click.option("--method", type=click.Choice(["RK45", "DOP853"], case_sensitive=False),
-                 default=None, help="Runge-Kutta pair (default RK45)."),
-    click.option("--exact", is_flag=True,
+    click.option("--rtol", type=float, default=None,
+                 help="Relative tolerance (default 1e-10)."),
+    click.option("--atol", type=float, default=None,
+                 help="Absolute tolerance (default 1e-12)."),
+    _method_option("auto"),
+    click.option("--exact/--no-exact", default=None,
                  help="Propagate the modes that are affine in the state with harmonic forcing "
-                      "exactly (matrix exponential) instead of by the Runge-Kutta pair."),
+                      "exactly (matrix exponential), or integrate every mode with the "
+                      "Runge-Kutta pair; unset: exactly wherever a mode allows it (default auto)."),
+    _sliding_option,
     click.option("--no-progress", "no_progress", is_flag=True, help="No progress bar."),
     click.option("--out", type=click.Path(dir_okay=False), default=None,
                  help="Write the dataset to this NetCDF file (.nc)."),
@@ -583,11 +645,13 @@ def _explore_options(fn):
 
 def _finish_explore(ds, out, store_path, remove_store, figures, force):
     """Write --out (then remove the default store), then the ``figures`` (see
-    :func:`_write_figures`)."""
+    :func:`_write_figures`); every file or directory left behind is listed."""
     import shutil
 
     from .io import save_dataset
 
+    if store_path is not None and not remove_store:
+        _echo(f"store       {store_path} (resumable; kept)")
     if out is not None:
         try:
             save_dataset(ds, out, overwrite=force)
@@ -616,7 +680,8 @@ def _explore_errors():
 
 @main.command("sweep")
 @click.argument("model", metavar="MODEL|FILE")
-@click.option("--param", "param", required=True, metavar="NAME", help="Parameter swept.")
+@click.option("--sweep", "swept", default=None, metavar="NAME", help="Parameter swept.")
+@_sweep_param_options
 @click.option("--from", "start", type=float, required=True, help="First value.")
 @click.option("--to", "stop", type=float, required=True, help="Last value.")
 @click.option("--num", type=int, required=True, help="Number of values (evenly spaced).")
@@ -625,42 +690,54 @@ def _explore_errors():
 @click.option("--lyapunov", is_flag=True, help="Also compute Lyapunov exponents (slower).")
 @click.option("--state", default=None, help="State plotted (default: first, or last for an "
               "event section).")
+@click.option("--samples", type=int, default=None,
+              help="Forcing periods (maps: iterations) recorded at each value [100, or 300 "
+                   "with --lyapunov].")
 @_explore_options
-def sweep_cmd(model, param, start, stop, num, direction, lyapunov, state, sets, x0, transient,
-              samples, section, workers, scheduler, chunk_size, store, rtol, atol, method,
-              exact, no_progress, out, plot, force):
-    """Brute-force bifurcation diagram of MODEL in parameter --param.
+def sweep_cmd(model, swept, params, sets, start, stop, num, direction, lyapunov, state,
+              samples, x0, transient, section, workers, scheduler, chunk_size, store, rtol,
+              atol, method, exact, sliding, no_progress, out, plot, force):
+    """Brute-force bifurcation diagram of MODEL in the parameter --sweep NAME.
 
     For each of --num values from --from to --to, run --transient forcing periods, record
     --samples periods at the section and continue the final state into the next value.
+    Parameters are set with -p/--param NAME=VALUE as in every command; a --param NAME
+    without a value names the swept parameter (the spelling before --sweep, still valid).
 
     \b
     Examples:
-      pwsdyn sweep impact-oscillator --param omega --from 2 --to 3.6 --num 400 \\
+      pwsdyn sweep impact-oscillator --sweep omega --from 2 --to 3.6 --num 400 \\
           --out diagram.nc --plot diagram.png
-      pwsdyn sweep sqrt-map --param mu --from 0.001 --to 0.05 --num 200 --set lam=0.8 \\
+      pwsdyn sweep sqrt-map --sweep mu --from 0.001 --to 0.05 --num 200 -p lam=0.8 \\
           --lyapunov --plot sqrt.png
     """
     import numpy as np
 
     import pwsdyn
-    from .plot import plot_bifurcation, plot_lyapunov
 
+    # --sweep NAME, or the older spelling --param NAME (a --param without "=VALUE")
+    named = list(dict.fromkeys(([swept] if swept is not None else [])
+                               + [v.strip() for v in params if "=" not in v]))
+    if not named:
+        raise click.UsageError("Missing option '--sweep' (the swept parameter: --sweep NAME, "
+                               "or --param NAME)")
+    if len(named) > 1:
+        raise click.BadParameter(f"one swept parameter, got {named}",
+                                 param_hint="--sweep/--param")
+    param = named[0]
+    params = [v for v in params if "=" in v]
     if num < 1:
         raise click.BadParameter(f"must be at least 1, got {num}", param_hint="--num")
     lyap_plot = _lyapunov_path(plot) if plot is not None and lyapunov else None
     _check_outputs(force, [("--out", out, "data"), ("--plot", plot, "figure"),
                            ("--plot (its Lyapunov figure)", lyap_plot, "figure")])
-    mdl, params, x0v, options = _explore_common(model, sets, x0, method, rtol, atol, exact)
-    if param not in mdl.parameters:
-        raise click.BadParameter(f"unknown parameter {param!r} for model {mdl.name!r}; "
-                                 f"parameters are {list(mdl.parameters)}", param_hint="--param")
-    params.pop(param, None)
+    mdl, params, x0v, options = _explore_common(model, params, sets, x0, method, rtol, atol,
+                                                exact, sliding, swept=param)
     store_path, remove_store = _run_store(out, store)
     values = np.linspace(start, stop, num) if num > 1 else np.array([start])
     try:
         ds = pwsdyn.sweep(mdl, param, values, x0v, params=params, transient=transient,
-                          samples=100 if samples is None else samples, section=section,
+                          samples=samples, section=section,
                           direction=direction, lyapunov=lyapunov, workers=workers,
                           scheduler=scheduler, chunk_size=chunk_size, store=store_path,
                           out=None, progress=not no_progress, **options)
@@ -677,7 +754,9 @@ def sweep_cmd(model, param, start, stop, num, direction, lyapunov, state, sets, 
         _echo(f"failed      {nbad} value(s) failed or diverged (status != 0)")
 
     figures = []
-    if plot is not None:
+    if plot is not None:    # matplotlib is imported only for a figure
+        from .plot import plot_bifurcation, plot_lyapunov
+
         figures.append((plot, lambda: plot_bifurcation(ds, state=state, path=plot,
                                                        overwrite=force)))
     if lyap_plot is not None:
@@ -688,6 +767,7 @@ def sweep_cmd(model, param, start, stop, num, direction, lyapunov, state, sets, 
 
 @main.command("basins")
 @click.argument("model", metavar="MODEL|FILE")
+@_param_options
 @click.option("--x", "xname", required=True, metavar="STATE", help="State on the first axis.")
 @click.option("--x-from", "x_from", type=float, required=True)
 @click.option("--x-to", "x_to", type=float, required=True)
@@ -697,25 +777,27 @@ def sweep_cmd(model, param, start, stop, num, direction, lyapunov, state, sets, 
 @click.option("--y-from", "y_from", type=float, default=None)
 @click.option("--y-to", "y_to", type=float, default=None)
 @click.option("--y-num", "y_num", type=int, default=None)
+@click.option("--samples", type=int, default=32, show_default=True,
+              help="Forcing periods (maps: iterations) recorded from each start.")
 @_explore_options
-def basins_cmd(model, xname, x_from, x_to, x_num, yname, y_from, y_to, y_num, sets, x0,
-               transient, samples, section, workers, scheduler, chunk_size, store, rtol,
-               atol, method, exact, no_progress, out, plot, force):
+def basins_cmd(model, params, sets, xname, x_from, x_to, x_num, yname, y_from, y_to, y_num,
+               samples, x0, transient, section, workers, scheduler, chunk_size, store, rtol,
+               atol, method, exact, sliding, no_progress, out, plot, force):
     """Basins of attraction of MODEL on a grid of initial conditions.
 
     \b
     Example:
       pwsdyn basins bouncing-ball --x y --x-from 0.1 --x-to 2 --x-num 100 \\
-          --y v --y-from -4 --y-to 4 --y-num 100 --set A=0.2236 --set omega=6.2832 \\
+          --y v --y-from -4 --y-to 4 --y-num 100 -p A=0.2236 -p omega=6.2832 \\
           --out basins.nc --plot basins.png
     """
     import numpy as np
 
     import pwsdyn
-    from .plot import plot_basins
 
     _check_outputs(force, [("--out", out, "data"), ("--plot", plot, "figure")])
-    mdl, params, x0v, options = _explore_common(model, sets, x0, method, rtol, atol, exact)
+    mdl, params, x0v, options = _explore_common(model, params, sets, x0, method, rtol, atol,
+                                                exact, sliding)
     grid = {}
     for name, a, b, n, hint in ((xname, x_from, x_to, x_num, "--x"),
                                 (yname, y_from, y_to, y_num, "--y")):
@@ -736,7 +818,7 @@ def basins_cmd(model, xname, x_from, x_to, x_num, yname, y_from, y_to, y_num, se
     store_path, remove_store = _run_store(out, store)
     try:
         ds = pwsdyn.basins(mdl, grid, x0v, params=params, transient=transient,
-                           samples=32 if samples is None else samples, section=section,
+                           samples=samples, section=section,
                            workers=workers, scheduler=scheduler, chunk_size=chunk_size,
                            store=store_path, out=None, progress=not no_progress, **options)
     except _explore_errors() as exc:
@@ -755,15 +837,16 @@ def basins_cmd(model, xname, x_from, x_to, x_num, yname, y_from, y_to, y_num, se
         _echo(f"basin {int(b):>3}   {100 * f:6.2f}%  {what}")
 
     figures = []
-    if plot is not None:
+    if plot is not None:    # matplotlib is imported only for a figure
+        from .plot import plot_basins
+
         figures.append((plot, lambda: plot_basins(ds, path=plot, overwrite=force)))
     _finish_explore(ds, out, store_path, remove_store, figures, force)
 
 
 @main.command("orbit")
 @click.argument("model", metavar="MODEL|FILE")
-@click.option("--param", "-p", "params", multiple=True, metavar="NAME=VALUE",
-              help="Parameter value (repeatable); overrides the model's defaults.")
+@_param_options
 @click.option("--x0", "x0", multiple=True, metavar="VALUES",
               help="Guess of the state at t0: values in state order (--x0 1,0) or NAME=VALUE "
                    "pairs. Default: the model's [defaults] x0.")
@@ -790,16 +873,16 @@ def basins_cmd(model, xname, x_from, x_to, x_num, yname, y_from, y_to, y_num, se
               help="Newton tolerance on the shooting residual (relative).")
 @click.option("--rtol", type=float, default=None, help="Relative tolerance (default 1e-12).")
 @click.option("--atol", type=float, default=None, help="Absolute tolerance (default 1e-12).")
-@click.option("--method", type=click.Choice(["RK45", "DOP853"], case_sensitive=False),
-              default=None, help="Runge-Kutta pair (default DOP853).")
+@_method_option("DOP853")
+@_sliding_option
 @click.option("--out", "out", type=click.Path(dir_okay=False), default=None,
               help="Write one period with its monodromy and multipliers to this NetCDF file.")
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
               help="Write a figure of the orbit with its events and multipliers (PNG; PDF, "
                    "SVG... by suffix).")
 @click.option("--force", is_flag=True, help=_FORCE_HELP)
-def orbit_cmd(model, params, x0, t0, period, periods, transient, mode, nodes, tol, rtol, atol,
-              method, out, plot, force):
+def orbit_cmd(model, params, sets, x0, t0, period, periods, transient, mode, nodes, tol, rtol,
+              atol, method, sliding, out, plot, force):
     """Find a periodic orbit of MODEL by Newton shooting and print its Floquet multipliers.
 
     Prints the period, the signature (the events over one period) and the multipliers; with
@@ -815,15 +898,14 @@ def orbit_cmd(model, params, x0, t0, period, periods, transient, mode, nodes, to
     from .errors import ModelError, SolveError
     from .orbits import OrbitError, PeriodicOrbit, find_periodic_orbit
 
-    cli_params = _parse_params(params)
+    cli_params, hints = _all_params(params, sets)
     cli_x0 = _parse_x0(x0)
     _check_outputs(force, [("--out", out, "data"), ("--plot", plot, "figure")])
     try:
         mdl = pwsdyn.load_model(model)
-        defaults = _model_defaults(mdl)
     except ModelError as exc:
         _fail(exc)
-    _check_params(mdl, cli_params)
+    _check_params(mdl, cli_params, hints)
     if cli_x0 is not None:
         _check_x0(mdl, cli_x0)
     if periods is not None and periods < 1:
@@ -834,14 +916,12 @@ def orbit_cmd(model, params, x0, t0, period, periods, transient, mode, nodes, to
         except ValueError:
             raise click.BadParameter(f"'auto' or a positive integer, got {nodes!r}",
                                      param_hint="--nodes") from None
-    try:
-        x0_val, t0, t_end, all_params = _resolve_defaults(mdl, defaults, cli_x0, t0, None,
-                                                          cli_params)
-    except (TypeError, ValueError) as exc:
-        _fail(f"model {mdl.name!r}: bad `defaults` table: {exc}")
+    x0_val, t0, t_end = _run_defaults(mdl, cli_x0, t0, None)
+    all_params = cli_params
     options = {"tol": tol, "nodes": nodes}
     for key, val in (("rtol", rtol), ("atol", atol),
-                     ("method", method.upper() if method else None)):
+                     ("method", _method_name(method) if method else None),
+                     ("sliding", sliding.lower() if sliding else None)):
         if val is not None:
             options[key] = val
     autonomous = mdl.forcing_period is None
@@ -850,7 +930,8 @@ def orbit_cmd(model, params, x0, t0, period, periods, transient, mode, nodes, to
         transient = t_end - t0
     try:
         if transient:
-            sim_opts = {k: options[k] for k in ("rtol", "atol", "method") if k in options}
+            sim_opts = {k: options[k] for k in ("rtol", "atol", "method", "sliding")
+                        if k in options}
             traj = pwsdyn.simulate(mdl, x0_val, (t0, t0 + transient), params=all_params,
                                    mode=mode, **sim_opts)
             orbit = PeriodicOrbit.from_trajectory(traj, period=period, periods=periods,

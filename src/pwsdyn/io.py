@@ -1,18 +1,42 @@
-"""Trajectories as labelled arrays (xarray) and NetCDF files.
+"""Trajectories as labelled arrays (xarray) and NetCDF files; the metadata of every file.
 
 A :class:`~pwsdyn.integrate.trajectory.Trajectory` becomes an :class:`xarray.Dataset` that
 holds everything needed to rebuild it: the nodes, the event log, the dense output, and the
 model itself (its definition as JSON in the attributes), so that a saved trajectory can be
 reloaded in another process and evaluated at any time with results identical to the last bit.
 
-Layout of the dataset
+Self-describing files
 ---------------------
+Every file pwsdyn writes (trajectories, periodic orbits, sweeps, basins, Lyapunov spectra and
+the chunk files of their stores) follows the CF conventions (``Conventions = "CF-1.10"``):
+
+* variables have a ``long_name`` and, where the model's ``[units]`` table gives them, ``units``
+  (UDUNITS strings as the model writes them; ``"1"`` for counts, phases, multipliers). A
+  variable over the ``state`` dimension has ``units`` when all states share one; otherwise
+  the per-state units are the auxiliary coordinate ``state_units`` (and ``state_long_name``
+  the ``[descriptions]``);
+* integer codes (``status``, ``interval_kind``, basin ``label``) have ``flag_values`` and
+  ``flag_meanings``;
+* global attributes: ``title``, ``source``, ``references`` (the model's), the versions of
+  pwsdyn, numpy, scipy, numba, xarray and sympy (``<name>_version``), the model's name, hash,
+  definition (``model_spec``, JSON) and full text (``model_text``: the TOML source, or for a
+  model built from a dict its definition as indented JSON; ``model_text_format`` says which),
+  ``model_units`` and ``model_descriptions`` (JSON); ``date_created`` (ISO 8601, UTC) and
+  ``history`` are added when the file is written (:func:`save_dataset`).
+
+Files are read back with the times and units as numbers (:func:`open_dataset` decodes no
+dates or time deltas). Files written before these attributes existed read as before.
+
+Layout of a trajectory dataset
+------------------------------
 Dimensions and coordinates:
 
 ``node``
-    Stored nodes (accepted steps and both sides of every event).
+    Stored nodes (accepted steps and both sides of every event). The coordinate ``t``
+    (over ``node``) is the time of each node: a coordinate, not an index, because both sides
+    of an event share one time.
 ``state``
-    State names of the model.
+    State names of the model, with ``state_units`` and ``state_long_name``.
 ``state_in``
     State names again, for the columns of ``jacobian`` (derivatives with respect to the
     initial state).
@@ -25,10 +49,14 @@ Dimensions and coordinates:
 ``event``
     Entries of the event log.
 
-Attributes: ``pwsdyn_type`` (``"trajectory"``), ``model``, ``model_hash``, ``model_spec`` (the
-model definition as JSON; ``pwsdyn.load_model(json.loads(...))`` rebuilds it), ``params``,
+Variables: ``x``, ``discrete_state``, ``y``, ``interval_kind``, ``dense``, the event log
+(``event_t``, ``event_t_after``, ``event_name``, ``event_kind``, ``event_mode_before``,
+``event_mode_after``, ``event_x_before``, ``event_x_after``), ``jacobian`` and the scalar
+``status`` (a :class:`~pwsdyn.Status` code with its flags).
+
+Attributes: those above, ``pwsdyn_type`` (``"trajectory"``), ``params``, ``parameter_units``,
 ``options`` and ``stats`` (JSON), ``status`` (the :class:`~pwsdyn.Status` name),
-``status_code``, ``message``, ``t0``, ``t_end``, ``pwsdyn_version`` and ``provenance`` (JSON).
+``status_code``, ``message``, ``t0``, ``t_end`` and ``provenance`` (JSON).
 
 This module only reads result objects; the numerical code never imports it.
 """
@@ -36,6 +64,7 @@ This module only reads result objects; the numerical code never imports it.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import json
 import math
@@ -97,7 +126,7 @@ def _dumps(obj) -> str:
     return json.dumps(_json_safe(obj), allow_nan=False, sort_keys=False)
 
 
-def _spec_to_json(spec: dict) -> str:
+def _spec_to_json(spec: dict, indent: int | None = None) -> str:
     """The model definition as JSON text that :func:`pwsdyn.load_model` accepts back.
 
     A TOML file gives plain strings, numbers, tables and arrays, which JSON holds as they are.
@@ -119,7 +148,7 @@ def _spec_to_json(spec: dict) -> str:
 
     # TOML allows inf/nan floats; Python's JSON writes and reads them as Infinity/NaN, which is
     # what a round trip through `load_model` needs (a string "inf" would be an expression).
-    return json.dumps(spec, default=default)
+    return json.dumps(spec, default=default, indent=indent)
 
 
 @functools.lru_cache(maxsize=None)
@@ -163,6 +192,177 @@ def _expr_printer_class():
 
 def _expr_printer():
     return _expr_printer_class()()
+
+
+# ======================================================================================
+# CF conventions: units, long names, flags, global attributes
+# ======================================================================================
+
+#: The metadata conventions of every file pwsdyn writes.
+CONVENTIONS = "CF-1.10"
+#: The packages whose versions every file records (``<name>_version`` attributes).
+VERSIONED_PACKAGES = ("pwsdyn", "numpy", "scipy", "numba", "xarray", "sympy")
+
+
+@functools.lru_cache(maxsize=None)
+def package_versions() -> dict:
+    """``{"pwsdyn_version": ..., "numpy_version": ..., ...}`` for
+    :data:`VERSIONED_PACKAGES` (``"unknown"`` where a version cannot be found)."""
+    from importlib import metadata
+
+    out = {}
+    for name in VERSIONED_PACKAGES:
+        if name == "pwsdyn":
+            out["pwsdyn_version"] = _library_version()
+            continue
+        try:
+            out[f"{name}_version"] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            mod = __import__(name)
+            out[f"{name}_version"] = str(getattr(mod, "__version__", "unknown"))
+    return out
+
+
+def model_text(model) -> tuple[str, str]:
+    """The model's full text and its format: the TOML source it was read from
+    (``"toml"``), else a canonical serialisation of its definition (``"json"``, indented;
+    ``pwsdyn.load_model(json.loads(text))`` rebuilds it)."""
+    text = getattr(model, "text", "") or ""
+    if text:
+        return text, "toml"
+    return _spec_to_json(model.spec, indent=1), "json"
+
+
+def model_attrs(model) -> dict:
+    """Global attributes that describe the model: name, hash, kind, definition (JSON and full
+    text), units and descriptions of its quantities (JSON), its description and reference."""
+    text, fmt = model_text(model)
+    attrs = {
+        "model": str(model.name),
+        "model_hash": str(model.hash),
+        "model_kind": "map" if getattr(model, "is_map", False) else "flow",
+        "model_spec": _spec_to_json(model.spec),
+        "model_text": text,
+        "model_text_format": fmt,
+        "model_units": json.dumps(dict(getattr(model, "units", {}) or {})),
+        "model_descriptions": json.dumps(dict(getattr(model, "descriptions", {}) or {})),
+    }
+    if getattr(model, "description", ""):
+        attrs["model_description"] = str(model.description)
+    if getattr(model, "reference", ""):
+        attrs["references"] = str(model.reference)
+    return attrs
+
+
+def cf_global_attrs(model, kind: str, title: str, source: str) -> dict:
+    """The global attributes of a pwsdyn dataset: ``Conventions``, ``title``, ``source``,
+    the versions of pwsdyn and its numerical dependencies, and :func:`model_attrs`.
+    ``date_created`` and ``history`` are added when the file is written
+    (:func:`save_dataset`)."""
+    return {
+        "Conventions": CONVENTIONS,
+        "title": title,
+        "source": f"pwsdyn {_library_version()}: {source}",
+        "pwsdyn_type": kind,
+        **package_versions(),
+        **model_attrs(model),
+    }
+
+
+def time_units(model) -> str | None:
+    """The unit of time of ``model`` (``[units] t``); ``"1"`` for a map (iterations)."""
+    if getattr(model, "is_map", False):
+        return "1"
+    return model.unit("t") if hasattr(model, "unit") else None
+
+
+def inverse_time_units(model) -> str | None:
+    """The unit of a rate per unit time (Lyapunov exponents): ``1/<time unit>``."""
+    tu = time_units(model)
+    if tu is None:
+        return None
+    if tu == "1":
+        return "1"
+    return f"{tu}-1" if tu.isidentifier() else f"1/({tu})"
+
+
+def quantity_attrs(model, name: str, default_long_name: str | None = None) -> dict:
+    """``long_name`` (the ``[descriptions]`` entry, else ``default_long_name``, else the
+    name) and ``units`` (where ``[units]`` gives one) of a state, parameter or ``t``."""
+    unit = time_units(model) if name == "t" else model.unit(name)
+    attrs = {"long_name": model.describe(name) or default_long_name or name}
+    if unit is not None:
+        attrs["units"] = unit
+    return attrs
+
+
+def state_attrs(model, long_name: str, **extra) -> dict:
+    """Attributes of a variable over the ``state`` dimension: ``long_name`` and ``units``
+    where all states share one unit; otherwise a ``comment`` pointing to the per-state
+    units (the ``state_units`` coordinate)."""
+    attrs = {"long_name": long_name, **extra}
+    units = {model.unit(s) for s in model.states}
+    if len(units) == 1 and None not in units:
+        attrs["units"] = units.pop()
+    elif units != {None}:
+        attrs["comment"] = "units differ by state: see the state_units coordinate"
+    return attrs
+
+
+def state_coords(model) -> dict:
+    """The ``state`` coordinate with its per-state units and long names as auxiliary
+    coordinates (``""`` where the model gives no unit)."""
+    names = list(model.states)
+    return {
+        "state": ("state", _str_array(names), {"long_name": "state variable"}),
+        "state_units": ("state", _str_array(model.unit(s) or "" for s in names),
+                        {"long_name": "unit of the state variable (empty: not given)"}),
+        "state_long_name": ("state", _str_array(model.describe(s) or s for s in names),
+                            {"long_name": "description of the state variable"}),
+    }
+
+
+def flag_attrs(codes: dict, dtype=np.int64) -> dict:
+    """``flag_values`` and ``flag_meanings`` (CF) of an integer code variable from
+    ``{value: meaning}`` (meanings are words joined by ``_``); ``flag_values`` has the
+    variable's type ``dtype``, as CF requires."""
+    items = sorted(codes.items())
+    return {"flag_values": np.array([k for k, _ in items], dtype=dtype),
+            "flag_meanings": " ".join(m for _, m in items)}
+
+
+def run_status_codes(*, is_map: bool = False, section_missed: bool = False) -> dict:
+    """The codes of a ``status`` variable of a sweep or a Lyapunov result: 0 success, the
+    :class:`~pwsdyn.Status` of a failed flow run (maps: 2 no piece applies, 3 non-finite),
+    -1 diverged, -3 the section at the end of the window was not logged (sweeps)."""
+    if is_map:
+        codes = {0: "success", 2: "no_piece_applies", 3: "nonfinite"}
+    else:
+        codes = {int(s): s.name.lower() for s in Status if s.failed}
+        codes[0] = "success"
+        if section_missed:
+            codes[-3] = "section_missed"
+    codes[-1] = "diverged"
+    return codes
+
+
+def _utc_now() -> str:
+    import datetime
+
+    now = datetime.datetime.now(datetime.timezone.utc).replace(microsecond=0)
+    return now.strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+def stamp(ds: xr.Dataset) -> xr.Dataset:
+    """A shallow copy of ``ds`` with ``date_created`` (ISO 8601, UTC; kept if it has one)
+    and a line appended to ``history``, as a file is written."""
+    now = _utc_now()
+    ds = ds.copy()
+    ds.attrs.setdefault("date_created", now)
+    line = f"{now} written by pwsdyn {_library_version()}"
+    old = str(ds.attrs.get("history", "") or "")
+    ds.attrs["history"] = f"{old}\n{line}" if old else line
+    return ds
 
 
 # ======================================================================================
@@ -215,19 +415,21 @@ def trajectory_to_dataset(traj) -> xr.Dataset:
     y = np.asarray(traj._y if traj._y is not None else x, dtype=float)
     ny = y.shape[1]
 
+    tattrs = quantity_attrs(model, "t", "time")
     data_vars = {
-        "t": (("node",), t, {"long_name": "time of the node"}),
-        "x": (("node", "state"), x, {"long_name": "state at the node"}),
+        "x": (("node", "state"), x, state_attrs(model, "state at the node")),
         "discrete_state": (("node",), _str_array(traj.state),
-                           {"long_name": "mode name, stick:<event> or slide:<switch>"}),
+                           {"long_name": "discrete state at the node: mode name, "
+                                         "stick:<event> or slide:<switch>"}),
         "y": (("node", "ycomp"), y,
               {"long_name": "full node vector: state, then variational matrix (row-major)"}),
     }
     if traj._ikind is not None:
         data_vars["interval_kind"] = (
             ("interval",), np.asarray(traj._ikind, dtype=np.int64),
-            {"long_name": "0: dense polynomial, 1: jump or no dense output (linear), "
-                          "2: chattering gap (linear)"})
+            {"long_name": "how the interval after the node is evaluated",
+             **flag_attrs({0: "dense_polynomial", 1: "linear_jump_or_no_dense_output",
+                           2: "linear_chattering_gap"})})
     if traj._dense is not None:
         dense = np.asarray(traj._dense, dtype=float)
         data_vars["dense"] = (
@@ -243,39 +445,58 @@ def trajectory_to_dataset(traj) -> xr.Dataset:
 
     data_vars.update({
         "event_t": (("event",), np.array([e.t for e in ev], dtype=float),
-                    {"long_name": "time of the event (start of a chattering sequence)"}),
+                    {**tattrs, "long_name": "time of the event (start of a chattering "
+                                            "sequence)"}),
         "event_t_after": (("event",), np.array([e.t_after for e in ev], dtype=float),
-                          {"long_name": "time after the event (accumulation time of chatter)"}),
-        "event_name": (("event",), _str_array(e.name for e in ev), {}),
-        "event_kind": (("event",), _str_array(e.kind for e in ev), {}),
-        "event_mode_before": (("event",), _str_array(e.mode_before for e in ev), {}),
-        "event_mode_after": (("event",), _str_array(e.mode_after for e in ev), {}),
-        "event_x_before": (("event", "state"), evx("x_before"), {}),
-        "event_x_after": (("event", "state"), evx("x_after"), {}),
+                          {**tattrs, "long_name": "time after the event (accumulation time "
+                                                  "of chatter)"}),
+        "event_name": (("event",), _str_array(e.name for e in ev),
+                       {"long_name": "name of the event or switch"}),
+        "event_kind": (("event",), _str_array(e.kind for e in ev),
+                       {"long_name": "kind of the event record (impact, transition, "
+                                     "crossing, chatter, stick, release, slide_start, "
+                                     "slide_end, ...)"}),
+        "event_mode_before": (("event",), _str_array(e.mode_before for e in ev),
+                              {"long_name": "discrete state before the event"}),
+        "event_mode_after": (("event",), _str_array(e.mode_after for e in ev),
+                             {"long_name": "discrete state after the event"}),
+        "event_x_before": (("event", "state"), evx("x_before"),
+                           state_attrs(model, "state just before the event")),
+        "event_x_after": (("event", "state"), evx("x_after"),
+                          state_attrs(model, "state just after the event")),
     })
     if traj.jacobian is not None:
         data_vars["jacobian"] = (
             ("state", "state_in"), np.asarray(traj.jacobian, dtype=float),
             {"long_name": "derivative of the final state with respect to the initial state"})
 
+    status = Status(traj.status)
+    data_vars["status"] = ((), np.int64(int(status)),
+                           {"long_name": "how the simulation ended",
+                            **flag_attrs({int(s): s.name.lower() for s in Status})})
+
     coords = {
-        "node": np.arange(len(t)),
-        "state": _str_array(names),
-        "event": np.arange(ne),
-        "ycomp": _str_array(_ycomp_labels(names, ny)),
+        "node": ("node", np.arange(len(t)), {"long_name": "index of the stored node"}),
+        # the time of each node: a coordinate, not an index (both sides of an event share it)
+        "t": ("node", t, tattrs),
+        **state_coords(model),
+        "event": ("event", np.arange(ne), {"long_name": "index of the event record"}),
+        "ycomp": ("ycomp", _str_array(_ycomp_labels(names, ny)),
+                  {"long_name": "component of the full node vector"}),
     }
     if traj.jacobian is not None:
-        coords["state_in"] = _str_array(names)
+        coords["state_in"] = ("state_in", _str_array(names),
+                              {"long_name": "initial state variable"})
 
     provenance = dict(traj.provenance or {})
-    status = Status(traj.status)
     attrs = {
-        "pwsdyn_type": TRAJECTORY_TYPE,
-        "title": f"pwsdyn trajectory of model {model.name}",
-        "model": str(model.name),
-        "model_hash": str(model.hash),
-        "model_spec": _spec_to_json(model.spec),
+        **cf_global_attrs(model, TRAJECTORY_TYPE,
+                          f"pwsdyn trajectory of model {model.name}",
+                          f"event-driven simulation (pwsdyn.simulate, method "
+                          f"{traj.options.get('method', '?')})"),
         "params": _dumps(dict(traj.params)),
+        "parameter_units": json.dumps({k: model.unit(k) for k in model.parameters
+                                       if model.unit(k) is not None}),
         "options": _dumps(dict(traj.options)),
         "status": status.name,
         "status_code": int(status),
@@ -283,9 +504,10 @@ def trajectory_to_dataset(traj) -> xr.Dataset:
         "stats": _dumps(dict(traj.stats)),
         "t0": float(traj.t0),
         "t_end": float(traj.t_end),
-        "pwsdyn_version": str(provenance.get("pwsdyn_version", _library_version())),
         "provenance": _dumps(provenance),
     }
+    # the version that made the data (a reloaded trajectory keeps its own)
+    attrs["pwsdyn_version"] = str(provenance.get("pwsdyn_version", _library_version()))
     return xr.Dataset(data_vars, coords=coords, attrs=attrs)
 
 
@@ -352,6 +574,9 @@ def trajectory_from_dataset(ds: xr.Dataset, model=None):
             warnings.warn(f"the model rebuilt from the file has hash {model.hash}, the file "
                           f"records {stored_hash}: the model definition was read differently "
                           f"(written by pwsdyn {ds.attrs.get('pwsdyn_version')})", stacklevel=2)
+        elif ds.attrs.get("model_text_format") == "toml" and ds.attrs.get("model_text"):
+            # keep the TOML source with the model, so that the next file carries it too
+            model = dataclasses.replace(model, text=str(ds.attrs["model_text"]))
     else:
         model = load_model(model)
 
@@ -423,7 +648,9 @@ def save_dataset(ds, path, *, overwrite: bool = False) -> Path:
     """Write a dataset (or a trajectory) to a NetCDF-4 file, atomically.
 
     The data go to a temporary file in the same directory, which is then moved to ``path`` in
-    one step, so ``path`` is never left half-written.
+    one step, so ``path`` is never left half-written. The file gets the global attributes
+    ``date_created`` (ISO 8601, UTC; a dataset that has one keeps it) and ``history`` (a
+    line appended); ``ds`` itself is not changed.
 
     Parameters
     ----------
@@ -454,6 +681,8 @@ def save_dataset(ds, path, *, overwrite: bool = False) -> Path:
         else:
             raise ArgumentError(f"`ds` must be an xarray.Dataset or a Trajectory, got "
                             f"{type(ds).__name__}")
+
+    ds = stamp(ds)
 
     def write(tmp):
         with _engine_hint():
@@ -564,10 +793,13 @@ def open_dataset(path, *, lazy: bool = False) -> xr.Dataset:
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no such file: {str(path)!r}")
+    # times and rates carry the model's units ("s", "seconds"...): numbers, never decoded to
+    # dates or timedeltas
+    kwargs = {"engine": ENGINE, "decode_times": False, "decode_timedelta": False}
     with _engine_hint():
         if lazy:
-            return xr.open_dataset(path, engine=ENGINE)
-        return xr.load_dataset(path, engine=ENGINE)
+            return xr.open_dataset(path, **kwargs)
+        return xr.load_dataset(path, **kwargs)
 
 
 def load_trajectory(path, model=None):

@@ -14,14 +14,23 @@ This module only reads result objects; the numerical code never imports it.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from .errors import ArgumentError
+
+if TYPE_CHECKING:
+    import xarray as xr
+
+    from .integrate.trajectory import Trajectory
+    from .orbits import PeriodicOrbit
 
 #: Colour of the trajectory itself.
 TRAJECTORY_COLOR = "#0072B2"
@@ -216,12 +225,54 @@ def _span_states(traj, a, b, num):
     return ts, xs
 
 
+def _number(v) -> str:
+    """A parameter value for mathtext: 4 significant digits, powers of ten as a reader
+    writes them (``2 \\times 10^{-5}``)."""
+    try:
+        v = float(v)
+    except (TypeError, ValueError):
+        return str(v)
+    s = f"{v:.4g}"
+    if "e" in s:
+        mant, exp = s.split("e")
+        power = f"10^{{{int(exp)}}}"
+        return power if mant == "1" else f"{mant} \\times {power}"
+    return s
+
+
+def _wrap(items: list, plain: list, width: int, sep: str = ", ") -> list:
+    """``items`` joined by ``sep`` into lines whose plain text is at most ``width`` long."""
+    lines: list = []
+    cur: list = []
+    n = 0
+    for item, text in zip(items, plain):
+        if cur and n + len(sep) + len(text) > width:
+            lines.append(sep.join(cur))
+            cur, n = [], 0
+        n += (len(sep) if cur else 0) + len(text)
+        cur.append(item)
+    if cur:
+        lines.append(sep.join(cur))
+    return lines
+
+
+def _values_text(values: dict, exclude=(), width: int = 90) -> list:
+    """Lines of ``name = value`` (mathtext, names typeset) for the entries of ``values``
+    not in ``exclude``."""
+    keys = [k for k in values if k not in exclude]
+    items = [f"${_latex_name(k)} = {_number(values[k])}$" for k in keys]
+    plain = [f"{k} = {float(values[k]):.4g}" if isinstance(values[k], (int, float))
+             else f"{k} = {values[k]}" for k in keys]
+    return _wrap(items, plain, width)
+
+
 def _title(traj) -> str:
     model = traj.model
-    params = ", ".join(f"${_latex_name(k)} = {v:.4g}$" for k, v in traj.params.items())
-    title = f"{model.name}"
-    if params:
-        title += f"   ({params})"
+    lines = _values_text(dict(traj.params), width=90)
+    if len(lines) == 1 and len(lines[0]) < 60:
+        title = f"{model.name}   ({lines[0]})"
+    else:
+        title = "\n".join([f"{model.name}"] + lines)
     if traj.status.failed:
         title += f"\nstopped early: {traj.status.name} at $t = {traj.t_final:.10g}$"
     if traj._dense is None:
@@ -230,61 +281,100 @@ def _title(traj) -> str:
 
 
 # ======================================================================================
+# axes: the figure's own, or the user's (``ax=``)
+# ======================================================================================
+
+def _root_figure(ax) -> Figure:
+    """The figure that holds ``ax`` (the top-level one when ``ax`` lies in a subfigure)."""
+    fig = ax.figure
+    while getattr(fig, "figure", None) is not None and fig.figure is not fig:
+        fig = fig.figure
+    return fig
+
+
+def _user_axes(ax, counts: dict, argname: str = "ax", single_ok: bool = False) -> tuple:
+    """Check ``ax`` (one Axes or a sequence of them) against the accepted numbers of axes.
+
+    ``counts`` maps each accepted number of axes to what it means (for the error message).
+    Returns the list of axes and their common figure."""
+    axes: list = []
+    if isinstance(ax, Axes):
+        axes = [ax]
+    elif not isinstance(ax, (str, bytes)):
+        try:
+            axes = list(np.asarray(ax, dtype=object).ravel())
+        except Exception:
+            axes = []
+    if not axes or not all(isinstance(a, Axes) for a in axes):
+        raise ArgumentError(f"`{argname}` must be a matplotlib Axes or a sequence of Axes, "
+                            f"got {type(ax).__name__}")
+    if len(axes) not in counts:
+        accepted = "; ".join(f"{k} axes: {what}" for k, what in counts.items())
+        if single_ok:
+            accepted = "one Axes (not in a list): the phase plane; " + accepted
+        raise ArgumentError(f"`{argname}` holds {len(axes)} axes; this figure takes "
+                            f"{accepted}")
+    figs = {id(_root_figure(a)) for a in axes}
+    if len(figs) != 1:
+        raise ArgumentError(f"`{argname}`: all axes must belong to one figure")
+    if len({id(a) for a in axes}) != len(axes):
+        raise ArgumentError(f"`{argname}`: the same axes is given twice")
+    return axes, _root_figure(axes[0])
+
+
+def _trajectory_slots(ax, n_series: int, has_phase: bool, multipliers: bool = False):
+    """Split the user's axes into (time-series axes, phase-plane axes, multiplier axes,
+    figure): one Axes is the phase plane (a one-state model's time series); a sequence holds
+    the time series, then the phase plane, then (an orbit's) multipliers."""
+    if isinstance(ax, Axes):
+        if has_phase:
+            return [], ax, None, _root_figure(ax)
+        if n_series == 1:
+            return [ax], None, None, _root_figure(ax)
+    series = f"the {n_series} time series" if n_series > 1 else "the time series"
+    counts = {n_series: series}
+    if has_phase:
+        counts[n_series + 1] = f"{series}, then the phase plane"
+        if multipliers:
+            counts[n_series + 2] = f"{series}, the phase plane, then the Floquet multipliers"
+    axes, fig = _user_axes(ax, counts, single_ok=has_phase)
+    k = len(axes)
+    if k == n_series:
+        return axes, None, None, fig
+    if k == n_series + 1:
+        return axes[:-1], axes[-1], None, fig
+    return axes[:n_series], axes[n_series], axes[n_series + 1], fig
+
+
+# ======================================================================================
 # the figure
 # ======================================================================================
 
-def plot_trajectory(traj, path=None, states=None, phase=None, *, num: int = 4000,
-                    title: str | None = None, overwrite: bool = False) -> Figure:
-    """A figure of a trajectory: time series, phase plane, events and event surfaces.
+@dataclass
+class _Prepared:
+    """A trajectory sampled and analysed for drawing."""
 
-    Panels: on the left the time series of each state; on the right the phase plane of two
-    states. The flow is drawn with a break at each jump of the state (impacts, resets) and a
-    thin dotted line joining the two sides of the jump. Events are marked at the state just
-    before them, coloured and shaped by kind. Segments of sticking or sliding on a surface are
-    underlaid with a thick band. Event surfaces are drawn dashed: a surface that gives one
-    state as a function of time (a wall, a vibrating table ``y = A sin(omega t)``) in that
-    state's time series; a time-independent surface of the phase-plane states as its zero
-    contour in the phase plane.
+    shown: list
+    phase_ij: tuple | None
+    T: np.ndarray
+    X: np.ndarray
+    tol: np.ndarray
+    curves: list
+    contours: list
+    spans: list
+    events: list
+    msize: float
+    num_eff: int
 
-    Parameters
-    ----------
-    traj : Trajectory
-        A result of :func:`pwsdyn.simulate`.
-    path : str or pathlib.Path, optional
-        Also save the figure there (PNG at 120 dpi unless the suffix names another format).
-        The file is written atomically (temporary file, then rename). The path is checked
-        before the figure is drawn (directory, format, existing file).
-    states : sequence of str or int, optional
-        States shown as time series (default: all), by name or index.
-    phase : (str or int, str or int), optional
-        The two states of the phase plane (default: the first two). A model with one state
-        has no phase plane.
-    num : int
-        Least number of uniform sample times (both sides of every event are added). Long
-        runs get up to three per stored step, at most 60000 unless ``num`` is larger.
-    title : str, optional
-        Replaces the default title (model name and parameter values).
-    overwrite : bool
-        Replace an existing file at ``path``; by default it is refused with
-        :class:`~pwsdyn.OutputExistsError` before anything is drawn.
 
-    Returns
-    -------
-    matplotlib.figure.Figure
-
-    Examples
-    --------
-    >>> import pwsdyn
-    >>> from pwsdyn.plot import plot_trajectory
-    >>> traj = pwsdyn.simulate("bouncing-ball", {"y": 1.0, "v": 0.0}, (0, 5))
-    >>> fig = plot_trajectory(traj)
-    """
+def _check_trajectory(traj) -> None:
     for attr in ("t", "x", "events", "model", "sample"):
         if not hasattr(traj, attr):
             raise ArgumentError(f"`traj` must be a Trajectory, got {type(traj).__name__}")
-    if path is not None:
-        _check_figure_path(path, overwrite)
-    model = traj.model
+
+
+def _panels(model, states, phase) -> tuple:
+    """The states shown as time series and the phase-plane pair (checked arguments)."""
     names = list(model.states)
     n = len(names)
     if states is None:
@@ -305,9 +395,12 @@ def plot_trajectory(traj, path=None, states=None, phase=None, *, num: int = 4000
         phase_ij = (_state_index(model, phase[0], "phase"), _state_index(model, phase[1], "phase"))
         if phase_ij[0] == phase_ij[1]:
             raise ArgumentError(f"`phase` must name two different states, got {phase!r}")
-    if not (isinstance(num, (int, np.integer)) and num >= 2):
-        raise ArgumentError(f"`num` must be an integer >= 2, got {num!r}")
+    return shown, phase_ij
 
+
+def _prepare(traj, shown, phase_ij, num) -> _Prepared:
+    model = traj.model
+    n = len(model.states)
     # at least a few samples per stored step, so long runs with many oscillations stay smooth;
     # capped because every sample is evaluated from the dense output one by one
     num_eff = int(min(max(num, 3 * len(traj.t)), max(num, _MAX_AUTO_SAMPLES)))
@@ -322,30 +415,30 @@ def plot_trajectory(traj, path=None, states=None, phase=None, *, num: int = 4000
              for a, b, kind, _ in _constrained_spans(traj)]
     events = list(traj.events)
     msize = 30 if len(events) <= 200 else 12
+    return _Prepared(shown, phase_ij, T, X, tol, curves, contours, spans, events, msize,
+                     num_eff)
 
-    nrows = len(shown)
-    fig = Figure(figsize=(11.0, max(4.2, 1.9 * nrows + 1.6)), layout="constrained")
-    if phase_ij is not None:
-        gs = fig.add_gridspec(nrows, 2, width_ratios=[1.45, 1.0])
-    else:
-        gs = fig.add_gridspec(nrows, 1)
+
+def _draw_trajectory(traj, pr: _Prepared, ts_axes: list, ph_ax, own: bool) -> dict:
+    """Draw the time series into ``ts_axes`` (one per shown state) and the phase plane into
+    ``ph_ax`` (or none); returns the legend handles by key."""
+    model = traj.model
+    names = list(model.states)
+    T, X, tol = pr.T, pr.X, pr.tol
     handles: dict = {}
-    label_of = {k: f"${_latex_name(names[k])}$" for k in range(n)}
+    label_of = {k: f"${_latex_name(names[k])}$" for k in range(len(names))}
 
     # --- time series ---------------------------------------------------------------------
-    ts_axes = []
-    for row, k in enumerate(shown):
-        ax = fig.add_subplot(gs[row, 0], sharex=ts_axes[0] if ts_axes else None)
-        ts_axes.append(ax)
-        for kind, ss, xs in spans:
+    for row, (ax, k) in enumerate(zip(ts_axes, pr.shown)):
+        for kind, ss, xs in pr.spans:
             style = CONSTRAINED_STYLES[kind]
             h, = ax.plot(ss, xs[:, k], color=style["color"], lw=6, alpha=0.35,
                          solid_capstyle="butt", zorder=1)
             handles.setdefault(f"{kind}", (h, style["label"]))
-        for c in curves:
+        for c in pr.curves:
             if c.state != k:
                 continue
-            tt = np.linspace(T[0], T[-1], num_eff)
+            tt = np.linspace(T[0], T[-1], pr.num_eff)
             with np.errstate(all="ignore"):
                 h, = ax.plot(tt, c.position(tt), ls="--", lw=1.1, color=SURFACE_COLOR, zorder=2)
             handles.setdefault(f"surface:{c.name}", (h, c.label))
@@ -357,19 +450,20 @@ def plot_trajectory(traj, path=None, states=None, phase=None, *, num: int = 4000
             jy = [(y0[0], y1[0]) for _, y0, y1 in jumps]
             h, = ax.plot(*_segments(jt, jy), ls=":", lw=0.9, color=TRAJECTORY_COLOR, zorder=3)
             handles.setdefault("jump", (h, "jump (reset)"))
-        _mark_events(ax, events, lambda e: (e.t, e.x_before[k]), msize, handles)
+        _mark_events(ax, pr.events, lambda e: (e.t, e.x_before[k]), pr.msize, handles)
         ax.set_ylabel(label_of[k])
         ax.grid(True, alpha=0.3, lw=0.6)
         ax.margins(x=0.01)
-        if row < nrows - 1:
+        if own and row < len(ts_axes) - 1:
             ax.tick_params(labelbottom=False)
-    ts_axes[-1].set_xlabel("$t$")
+        if not own or row == len(ts_axes) - 1:
+            ax.set_xlabel("$t$")
 
     # --- phase plane -----------------------------------------------------------------------
-    if phase_ij is not None:
-        i, j = phase_ij
-        ax = fig.add_subplot(gs[:, 1])
-        for kind, ss, xs in spans:
+    if ph_ax is not None and pr.phase_ij is not None:
+        i, j = pr.phase_ij
+        ax = ph_ax
+        for kind, ss, xs in pr.spans:
             style = CONSTRAINED_STYLES[kind]
             h, = ax.plot(xs[:, i], xs[:, j], color=style["color"], lw=6, alpha=0.35,
                          solid_capstyle="round", zorder=1)
@@ -382,35 +476,191 @@ def plot_trajectory(traj, path=None, states=None, phase=None, *, num: int = 4000
             jy = [(y0[1], y1[1]) for _, y0, y1 in jumps]
             h, = ax.plot(*_segments(jx, jy), ls=":", lw=0.9, color=TRAJECTORY_COLOR, zorder=3)
             handles.setdefault("jump", (h, "jump (reset)"))
-        _mark_events(ax, events, lambda e: (e.x_before[i], e.x_before[j]), msize, handles)
+        _mark_events(ax, pr.events, lambda e: (e.x_before[i], e.x_before[j]), pr.msize,
+                     handles)
         h = ax.scatter([X[0, i]], [X[0, j]], s=40, facecolors="white", edgecolors="k",
                        linewidths=1.2, zorder=5)
         handles.setdefault("start", (h, "initial state"))
         ax.set_xlabel(label_of[i])
         ax.set_ylabel(label_of[j])
         ax.grid(True, alpha=0.3, lw=0.6)
-        ax.set_title("phase plane", fontsize="medium")
-        _draw_contours(ax, contours, phase_ij, handles)
+        if own:
+            ax.set_title("phase plane", fontsize="medium")
+        _draw_contours(ax, pr.contours, pr.phase_ij, handles)
+    return handles
 
-    fig.suptitle(title if title is not None else _title(traj), fontsize="large")
+
+def _legend_items(model, handles: dict) -> list:
     order = (["trajectory", "jump", "start"] + [f"surface:{s.name}" for s in model.surfaces]
              + list(CONSTRAINED_STYLES) + [f"event:{k}" for k in EVENT_STYLES])
-    items = [handles[key] for key in order if key in handles]
+    return [handles[key] for key in order if key in handles]
+
+
+def _trajectory_figure(n_series: int, has_phase: bool, multipliers: bool = False):
+    """The figure of :func:`plot_trajectory` (and :func:`plot_orbit` with ``multipliers``):
+    time series on the left, the phase plane to their right, and for an orbit a column with
+    the Floquet multipliers (and their values below) on the far right."""
+    width_ratios = [1.45] + ([1.0] if has_phase else []) + ([0.7] if multipliers else [])
+    width = 11.0 + (2.9 if multipliers else 0.0)
+    fig = Figure(figsize=(width, max(4.2, 1.9 * n_series + 1.6)), layout="constrained")
+    gs = fig.add_gridspec(n_series, len(width_ratios), width_ratios=width_ratios)
+    ts_axes: list = []
+    for row in range(n_series):
+        ts_axes.append(fig.add_subplot(gs[row, 0], sharex=ts_axes[0] if ts_axes else None))
+    ph_ax = fig.add_subplot(gs[:, 1]) if has_phase else None
+    mu_ax = text_ax = None
+    if multipliers:
+        sub = gs[:, -1].subgridspec(2, 1, height_ratios=[1.0, 0.8])
+        mu_ax = fig.add_subplot(sub[0])
+        text_ax = fig.add_subplot(sub[1])
+        text_ax.set_axis_off()
+    return fig, ts_axes, ph_ax, mu_ax, text_ax
+
+
+def _finish(fig, model, handles, title: str, ts_axes: list, ph_ax, own: bool) -> None:
+    """Title and legend: the figure's (own figure) or the first and last axes' (``ax=``)."""
+    items = _legend_items(model, handles)
+    if own:
+        fig.suptitle(title, fontsize="large")
+        if items:
+            fig.legend([h for h, _ in items], [lab for _, lab in items],
+                       loc="outside lower center", ncol=min(len(items), 4), frameon=False,
+                       fontsize="small")
+        return
+    axes = ts_axes + ([ph_ax] if ph_ax is not None else [])
+    axes[0].set_title(title, fontsize="medium")
     if items:
-        fig.legend([h for h, _ in items], [lab for _, lab in items], loc="outside lower center",
-                   ncol=min(len(items), 4), frameon=False, fontsize="small")
+        axes[-1].legend([h for h, _ in items], [lab for _, lab in items], fontsize="x-small",
+                        loc="best")
+
+
+def plot_trajectory(traj: Trajectory, path: str | Path | None = None,
+                    states: Sequence[str | int] | str | int | None = None,
+                    phase: tuple[str | int, str | int] | None = None, *, num: int = 4000,
+                    title: str | None = None, overwrite: bool = False,
+                    ax: Axes | Sequence[Axes] | None = None) -> Figure:
+    """A figure of a trajectory: time series, phase plane, events and event surfaces.
+
+    Panels: on the left the time series of each state; on the right the phase plane of two
+    states. The flow is drawn with a break at each jump of the state (impacts, resets) and a
+    thin dotted line joining the two sides of the jump. Events are marked at the state just
+    before them, coloured and shaped by kind. Segments of sticking or sliding on a surface are
+    underlaid with a thick band. Event surfaces are drawn dashed: a surface that gives one
+    state as a function of time (a wall, a vibrating table ``y = A sin(omega t)``) in that
+    state's time series; a time-independent surface of the phase-plane states as its zero
+    contour in the phase plane.
+
+    Parameters
+    ----------
+    traj : Trajectory
+        A result of :func:`pwsdyn.simulate`.
+    path : str or pathlib.Path, optional
+        Also save the figure there (PNG at 120 dpi unless the suffix names another format).
+        The file is written atomically (temporary file, then rename). The path is checked
+        before the figure is drawn (directory, format, existing file). With ``ax``, the
+        figure that holds ``ax`` is saved.
+    states : sequence of str or int, optional
+        States shown as time series (default: all), by name or index.
+    phase : (str or int, str or int), optional
+        The two states of the phase plane (default: the first two). A model with one state
+        has no phase plane.
+    num : int
+        Least number of uniform sample times (both sides of every event are added). Long
+        runs get up to three per stored step, at most 60000 unless ``num`` is larger.
+    title : str, optional
+        Replaces the default title (model name and parameter values).
+    overwrite : bool
+        Replace an existing file at ``path``; by default it is refused with
+        :class:`~pwsdyn.OutputExistsError` before anything is drawn.
+    ax : matplotlib.axes.Axes or sequence of Axes, optional
+        Draw into these axes of your own figure instead of a new one: one Axes receives the
+        phase plane (the time series of a one-state model); a sequence receives the time
+        series of ``states`` in order, then (if it holds one more axes) the phase plane --
+        ``ax=[ax_x]`` with ``states=["x"]`` draws one time series. The title goes to the
+        first of these axes and the legend into the last; the figure's layout, title and
+        legend are left alone.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The new figure, or with ``ax`` the figure that holds ``ax``.
+
+    Examples
+    --------
+    >>> import pwsdyn
+    >>> from pwsdyn.plot import plot_trajectory
+    >>> traj = pwsdyn.simulate("bouncing-ball", {"y": 1.0, "v": 0.0}, (0, 5))
+    >>> fig = plot_trajectory(traj)
+    """
+    _check_trajectory(traj)
+    if path is not None:
+        _check_figure_path(path, overwrite)
+    model = traj.model
+    shown, phase_ij = _panels(model, states, phase)
+    if not (isinstance(num, (int, np.integer)) and num >= 2):
+        raise ArgumentError(f"`num` must be an integer >= 2, got {num!r}")
+    own = ax is None
+    if own:
+        fig, ts_axes, ph_ax, _, _ = _trajectory_figure(len(shown), phase_ij is not None)
+    else:
+        ts_axes, ph_ax, _, fig = _trajectory_slots(ax, len(shown), phase_ij is not None)
+    pr = _prepare(traj, shown, phase_ij, num)
+    handles = _draw_trajectory(traj, pr, ts_axes, ph_ax, own)
+    _finish(fig, model, handles, title if title is not None else _title(traj), ts_axes, ph_ax,
+            own)
     if path is not None:
         _save_figure(fig, path, overwrite)
     return fig
 
 
-def plot_orbit(orbit, path=None, states=None, phase=None, *, num: int = 4000,
-               overwrite: bool = False) -> Figure:
+def _draw_multipliers(ax, mult: np.ndarray) -> None:
+    """The Floquet multipliers in the complex plane, with the unit circle."""
+    th = np.linspace(0.0, 2.0 * np.pi, 200)
+    ax.plot(np.cos(th), np.sin(th), color=SURFACE_COLOR, lw=0.8)
+    ax.axhline(0.0, color="0.8", lw=0.5, zorder=0)
+    ax.axvline(0.0, color="0.8", lw=0.5, zorder=0)
+    ax.scatter(mult.real, mult.imag, s=36, marker="x", color="#D55E00", linewidths=1.4,
+               zorder=3)
+    big = float(np.max(np.abs(mult))) if mult.size else 0.0
+    lim = max(1.15, 1.1 * big) if np.isfinite(big) else 1.15
+    ax.set_xlim(-lim, lim)
+    ax.set_ylim(-lim, lim)
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel(r"Re $\mu$", fontsize="small")
+    ax.set_ylabel(r"Im $\mu$", fontsize="small", labelpad=1)
+    ax.tick_params(labelsize="x-small")
+    ax.set_title("Floquet multipliers", fontsize="medium")
+
+
+def _multiplier_text(mult: np.ndarray, trivial=None, most: int = 6) -> str:
+    """The multipliers, largest modulus first: each value, and its modulus below it."""
+    order = np.argsort(-np.abs(mult), kind="stable")
+    lines = []
+    for r, m in enumerate(mult[order][:most]):
+        re, im = float(m.real), float(m.imag)
+        value = f"{re:.4g}" if im == 0 else f"{re:.4g} {'+' if im > 0 else '-'} {abs(im):.4g}i"
+        lines.append(f"$\\mu_{{{r + 1}}}$ = {value}")
+        lines.append(f"      $|\\mu_{{{r + 1}}}|$ = {abs(m):.4g}")
+    if len(mult) > most:
+        lines.append(f"... ({len(mult) - most} more)")
+    if not lines:
+        lines.append("(no multipliers)")
+    if trivial is not None:
+        lines.append(f"(trivial multiplier 1 left out:\n |$\\mu$ - 1| = {abs(trivial - 1):.2g})")
+    return "\n".join(lines)
+
+
+def plot_orbit(orbit: PeriodicOrbit, path: str | Path | None = None,
+               states: Sequence[str | int] | str | int | None = None,
+               phase: tuple[str | int, str | int] | None = None, *, num: int = 4000,
+               overwrite: bool = False, ax: Axes | Sequence[Axes] | None = None) -> Figure:
     """A figure of a periodic orbit: one period with its events, and its Floquet multipliers.
 
     The panels of :func:`plot_trajectory` for ``orbit.trajectory`` (time series, phase plane,
-    events marked by kind, event surfaces), the period and stability in the title, and an inset
-    in the phase plane (or the first time series) with the multipliers and the unit circle.
+    events marked by kind, event surfaces), the period, stability and largest multiplier
+    modulus in the title, and a separate panel on the right with the multipliers in the
+    complex plane (the unit circle drawn) and their values listed below it -- apart from the
+    other panels, so it never covers the orbit or its tick labels.
 
     Parameters
     ----------
@@ -420,10 +670,15 @@ def plot_orbit(orbit, path=None, states=None, phase=None, *, num: int = 4000,
         Also save the figure there.
     states, phase, num, overwrite
         As for :func:`plot_trajectory`.
+    ax : matplotlib.axes.Axes or sequence of Axes, optional
+        Draw into your own axes, as for :func:`plot_trajectory`; a sequence may hold one more
+        axes after the phase plane for the multipliers (otherwise they are only summarised in
+        the title).
 
     Returns
     -------
     matplotlib.figure.Figure
+        The new figure, or with ``ax`` the figure that holds ``ax``.
     """
     for attr in ("trajectory", "multipliers", "period", "events"):
         if not hasattr(orbit, attr):
@@ -432,46 +687,41 @@ def plot_orbit(orbit, path=None, states=None, phase=None, *, num: int = 4000,
         raise ArgumentError("the orbit has no trajectory to plot")
     if path is not None:
         _check_figure_path(path, overwrite)
+    traj = orbit.trajectory
+    model = traj.model
+    shown, phase_ij = _panels(model, states, phase)
+    if not (isinstance(num, (int, np.integer)) and num >= 2):
+        raise ArgumentError(f"`num` must be an integer >= 2, got {num!r}")
     mult = np.atleast_1d(np.asarray(orbit.multipliers if orbit.multipliers is not None else [],
                                     dtype=complex))
+    own = ax is None
+    text_ax = None
+    if own:
+        fig, ts_axes, ph_ax, mu_ax, text_ax = _trajectory_figure(len(shown),
+                                                                 phase_ij is not None, True)
+    else:
+        ts_axes, ph_ax, mu_ax, fig = _trajectory_slots(ax, len(shown), phase_ij is not None,
+                                                       multipliers=True)
     stab = "stable" if orbit.stable else "unstable"
-    head = _title(orbit.trajectory).split("\n")[0]
-    title = (f"{head}\nperiodic orbit: $T = {orbit.period:.10g}$, {len(orbit.events)} events "
-             f"per period, {stab}"
+    head = _title(traj).split("\n(no dense")[0].split("\nstopped early")[0]
+    biggest = (f", max $|\\mu| = {_number(np.max(np.abs(mult)))}$"
+               if mult.size and np.all(np.isfinite(mult)) else "")
+    n_ev = len(orbit.events)
+    title = (f"{head}\nperiodic orbit: $T = {orbit.period:.10g}$, {n_ev} "
+             f"event{'' if n_ev == 1 else 's'} per period, {stab}{biggest}"
              + ("" if orbit.converged else " (NOT converged)"))
-    fig = plot_trajectory(orbit.trajectory, states=states, phase=phase, num=num, title=title)
-    axes = [ax for ax in fig.axes if ax.get_title() == "phase plane"] or fig.axes[:1]
-    ins = axes[0].inset_axes(_emptiest_corner(axes[0], 0.28))
-    th = np.linspace(0.0, 2.0 * np.pi, 200)
-    ins.plot(np.cos(th), np.sin(th), color=SURFACE_COLOR, lw=0.8)
-    ins.scatter(mult.real, mult.imag, s=18, marker="x", color="#D55E00", zorder=3)
-    lim = max(1.15, 1.1 * float(np.max(np.abs(mult)))) if mult.size else 1.15
-    ins.set_xlim(-lim, lim)
-    ins.set_ylim(-lim, lim)
-    ins.set_aspect("equal")
-    ins.axhline(0.0, color="0.8", lw=0.5, zorder=0)
-    ins.axvline(0.0, color="0.8", lw=0.5, zorder=0)
-    ins.tick_params(labelsize="x-small")
-    ins.set_title("Floquet multipliers", fontsize="x-small")
+    pr = _prepare(traj, shown, phase_ij, num)
+    handles = _draw_trajectory(traj, pr, ts_axes, ph_ax, own)
+    _finish(fig, model, handles, title, ts_axes, ph_ax, own)
+    if mu_ax is not None:
+        _draw_multipliers(mu_ax, mult)
+    if text_ax is not None:
+        text_ax.text(0.0, 1.0, _multiplier_text(mult, getattr(orbit, "trivial_multiplier", None)),
+                     transform=text_ax.transAxes, va="top", ha="left", fontsize="small",
+                     linespacing=1.4)
     if path is not None:
         _save_figure(fig, path, overwrite)
     return fig
-
-
-def _emptiest_corner(ax, size: float) -> list:
-    """Axes-fraction bounds of the corner square of ``ax`` holding the fewest data points."""
-    pts = [np.asarray(line.get_xydata(), dtype=float) for line in ax.get_lines()]
-    pts = np.concatenate(pts) if pts else np.zeros((0, 2))
-    pts = pts[np.all(np.isfinite(pts), axis=1)]
-    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
-    u = (pts[:, 0] - x0) / (x1 - x0) if len(pts) else np.zeros(0)
-    v = (pts[:, 1] - y0) / (y1 - y0) if len(pts) else np.zeros(0)
-    m = 0.02
-    corners = [[1 - size - m, 1 - size - m], [m, 1 - size - m], [1 - size - m, m], [m, m]]
-    counts = [np.count_nonzero((u >= a) & (u <= a + size) & (v >= b) & (v <= b + size))
-              for a, b in corners]
-    a, b = corners[int(np.argmin(counts))]
-    return [a, b, size, size]
 
 
 def _segments(xpairs, ypairs):
@@ -570,6 +820,10 @@ def _save_figure(fig: Figure, path, overwrite: bool = False) -> Path:
 
 #: Colours of the up and down sweeps (Okabe-Ito blue and vermillion).
 SWEEP_COLORS = {"up": "#0072B2", "down": "#D55E00"}
+#: Markers of the up and down sweeps: filled dots up, crosses down -- where both sweeps
+#: give the same points the dot shows through the cross, where they differ (hysteresis)
+#: each reads on its own, also in grey scale.
+SWEEP_MARKERS = {"up": "o", "down": "x"}
 #: Colours of the basin labels -2 (run failed) and -1 (diverged); attractors use BASIN_COLORS.
 BASIN_SPECIAL_COLORS = {-2: "#7F7F7F", -1: "#000000"}
 BASIN_COLORS = ("#0072B2", "#E69F00", "#009E73", "#CC79A7", "#56B4E9", "#D55E00", "#F0E442",
@@ -586,13 +840,47 @@ def _sweep_param(ds):
     return ds.attrs["parameter"]
 
 
-def plot_bifurcation(ds, state=None, path=None, *, markersize: float = 1.0,
-                     overwrite: bool = False) -> Figure:
+def _settings(ds) -> dict:
+    """The run settings stored with a sweep or basins dataset (empty if unreadable)."""
+    import json
+
+    try:
+        s = json.loads(ds.attrs.get("settings", "{}"))
+    except (TypeError, ValueError):
+        return {}
+    return s if isinstance(s, dict) else {}
+
+
+def _fixed_text(ds, exclude=(), width: int = 80) -> str:
+    """The parameter values of the run (not ``exclude``), wrapped into lines."""
+    params = _settings(ds).get("params")
+    if not isinstance(params, dict):
+        return ""
+    return "\n".join(_values_text(params, exclude=exclude, width=width))
+
+
+def _explore_title(ds, what: str, exclude=()) -> str:
+    head = f"{ds.attrs.get('model', '')}: {what}"
+    fixed = _fixed_text(ds, exclude)
+    return f"{head}\n{fixed}" if fixed else head
+
+
+def _sweep_handle(d: str) -> Line2D:
+    """A legend entry of a sweep direction, large enough to read."""
+    return Line2D([], [], ls="none", marker=SWEEP_MARKERS[d], color=SWEEP_COLORS[d],
+                  ms=6, mew=1.5, label=f"sweep {d}")
+
+
+def plot_bifurcation(ds: xr.Dataset, state: str | int | None = None,
+                     path: str | Path | None = None, *, markersize: float = 1.5, overwrite: bool = False,
+                     ax: Axes | Sequence[Axes] | None = None) -> Figure:
     """Bifurcation diagram of a :func:`pwsdyn.sweep` result.
 
-    Top: the section points of ``state`` against the parameter, the up and down sweeps in
-    two colours (down drawn over up with smaller markers, so hysteresis shows both). Bottom:
-    events per period (maps: border crossings per iteration).
+    Top: the section points of ``state`` against the parameter, the up sweep as dots and the
+    down sweep as crosses in another colour (down drawn over up, so where the sweeps agree
+    both show and hysteresis reads at once). Bottom: events per period (maps: border
+    crossings per iteration). The title gives the model and the values of the parameters
+    held fixed.
 
     Parameters
     ----------
@@ -602,13 +890,20 @@ def plot_bifurcation(ds, state=None, path=None, *, markersize: float = 1.0,
         The state plotted (default: the first state for a stroboscopic section, the last --
         the velocity of the zoo's mechanical models -- for an event section).
     path : str or Path, optional
-        Also save the figure there (PNG, PDF, SVG by extension).
+        Also save the figure there (PNG, PDF, SVG by extension; with ``ax``, the figure that
+        holds ``ax``).
+    markersize : float
+        Size of the section points in points (default 1.5).
     overwrite : bool
         Replace an existing file at ``path`` (default: refused, see :func:`plot_trajectory`).
+    ax : matplotlib.axes.Axes or pair of Axes, optional
+        Draw into your own axes: one Axes receives the diagram only, a pair the diagram and
+        the events per period.
 
     Returns
     -------
     matplotlib.figure.Figure
+        The new figure, or with ``ax`` the figure that holds ``ax``.
     """
     pname = _sweep_param(ds)
     if path is not None:
@@ -622,61 +917,96 @@ def plot_bifurcation(ds, state=None, path=None, *, markersize: float = 1.0,
         state = states[state]
     if state not in states:
         raise ArgumentError(f"unknown state {state!r}; states are {states}")
-    fig = Figure(figsize=(8.0, 6.0), layout="constrained")
-    ax, ax2 = fig.subplots(2, 1, sharex=True, height_ratios=(3, 1))
+    if ax is None:
+        fig = Figure(figsize=(8.0, 6.0), layout="constrained")
+        ax1, ax2 = fig.subplots(2, 1, sharex=True, height_ratios=(3, 1))
+    else:
+        axes, fig = _user_axes(ax, {1: "the diagram", 2: "the diagram, then the events per "
+                                                          "period"})
+        ax1, ax2 = (axes + [None])[:2]
     pv = ds[pname].values
+    handles = []
     for d in [str(x) for x in ds.direction.values]:
         sec = ds.section.sel(direction=d, state=state).values  # (param, sample)
         X = np.repeat(pv[:, None], sec.shape[1], axis=1)
         ok = np.isfinite(sec)
-        ms = markersize if d == "up" else markersize * 0.6
-        ax.plot(X[ok], sec[ok], marker="o", ms=ms, mew=0, ls="none", color=SWEEP_COLORS[d],
-                alpha=0.7, label=f"sweep {d}", rasterized=True)
-        ax2.plot(pv, ds.events_per_period.sel(direction=d).values, drawstyle="steps-mid",
-                 color=SWEEP_COLORS[d], lw=1.0, label=f"sweep {d}")
+        marker = SWEEP_MARKERS.get(d, "o")
+        # a dot is all face; the smaller cross drawn on it is all stroke, so where the two
+        # sweeps agree the dot's rim shows around the cross
+        cross = marker == "x"
+        ax1.plot(X[ok], sec[ok], marker=marker, ms=markersize * (1.2 if cross else 2.0),
+                 mew=0.45 * markersize if cross else 0, ls="none",
+                 color=SWEEP_COLORS.get(d, "k"), alpha=0.9, label=f"sweep {d}",
+                 rasterized=True)
+        handles.append(_sweep_handle(d))
+        if ax2 is not None:
+            ax2.plot(pv, ds.events_per_period.sel(direction=d).values, drawstyle="steps-mid",
+                     color=SWEEP_COLORS.get(d, "k"), lw=1.0, ls="-" if d == "up" else "--",
+                     label=f"sweep {d}")
         bad = ds.status.sel(direction=d).values != 0
         if bad.any():
-            ax.plot(pv[bad], np.full(bad.sum(), np.nanmin(sec) if ok.any() else 0.0), "x",
-                    color=SWEEP_COLORS[d], ms=4, label=f"failed / diverged ({d})")
+            h, = ax1.plot(pv[bad], np.full(bad.sum(), np.nanmin(sec) if ok.any() else 0.0), "|",
+                          color=SWEEP_COLORS.get(d, "k"), ms=6, mew=1.2,
+                          label=f"failed / diverged ({d})")
+            handles.append(h)
     section = ds.attrs.get("section", "stroboscopic")
     what = "stroboscopic section" if section == "stroboscopic" else f"before each {section}"
     if ds.attrs.get("model_kind") == "map":
         what = "iterates"
-    ax.set_ylabel(f"{_tex(state)} ({what})")
-    ax2.set_ylabel("iterate crossings" if ds.attrs.get("model_kind") == "map"
-                   else "events / period")
-    ax2.set_xlabel(_tex(pname))
-    ax.set_title(f"{ds.attrs.get('model', '')}: bifurcation diagram in {pname}")
-    ax.legend(loc="best", fontsize=8, markerscale=6)
-    ax2.grid(True, lw=0.3)
+    ax1.set_ylabel(f"{_tex(state)} ({what})")
+    ax1.set_title(_explore_title(ds, f"bifurcation diagram in {_tex(pname)}", (pname,)),
+                  fontsize="medium")
+    ax1.legend(handles=handles, loc="best", fontsize=8)
+    if ax2 is not None:
+        ax2.set_ylabel("iterate crossings" if ds.attrs.get("model_kind") == "map"
+                       else "events / period")
+        ax2.set_xlabel(_tex(pname))
+        ax2.grid(True, lw=0.3)
+        if ax is not None:
+            ax2.legend(fontsize=8, loc="best")
+    if ax2 is None or ax is not None:
+        ax1.set_xlabel(_tex(pname))
     if path is not None:
         _save_figure(fig, path, overwrite)
     return fig
 
 
-def plot_lyapunov(ds, path=None, *, overwrite: bool = False) -> Figure:
+def plot_lyapunov(ds: xr.Dataset, path: str | Path | None = None, *, overwrite: bool = False,
+                  ax: Axes | None = None) -> Figure:
     """Lyapunov exponents against the parameter (a :func:`pwsdyn.sweep` run with
-    ``lyapunov=True``): every exponent, up and down sweeps in two colours, zero marked.
-    ``path`` and ``overwrite`` as for :func:`plot_bifurcation`."""
+    ``lyapunov=True``): every exponent (solid: the largest, dashed: the others), the up sweep
+    with dots and the down sweep with crosses in another colour, zero marked; the title gives
+    the values of the parameters held fixed. ``path`` and ``overwrite`` as for
+    :func:`plot_bifurcation`; ``ax``: draw into this Axes of your own figure (and return that
+    figure)."""
     pname = _sweep_param(ds)
     if "lyapunov" not in ds:
         raise ArgumentError("the sweep has no Lyapunov exponents: run it with lyapunov=True")
     if path is not None:
         _check_figure_path(path, overwrite)
-    fig = Figure(figsize=(8.0, 4.0), layout="constrained")
-    ax = fig.subplots()
+    if ax is None:
+        fig = Figure(figsize=(8.0, 4.4), layout="constrained")
+        ax = fig.subplots()
+    else:
+        (ax,), fig = _user_axes(ax, {1: "the exponents"})
     pv = ds[pname].values
     ax.axhline(0.0, color="0.5", lw=0.8)
     for d in [str(x) for x in ds.direction.values]:
         ly = ds.lyapunov.sel(direction=d).values
+        marker = SWEEP_MARKERS.get(d, "o")
         for i in range(ly.shape[1]):
-            ax.plot(pv, ly[:, i], color=SWEEP_COLORS[d], lw=1.0, marker=".", ms=3,
-                    ls="-" if i == 0 else "--",
+            ax.plot(pv, ly[:, i], color=SWEEP_COLORS.get(d, "k"), lw=1.0, marker=marker,
+                    ms=3 if marker == "o" else 4, mew=0 if marker == "o" else 1.0,
+                    ls="-" if i == 0 else "--", alpha=0.85,
                     label=f"$\\lambda_{{{i + 1}}}$ ({d})")
     unit = "per iteration" if ds.attrs.get("model_kind") == "map" else "per unit time"
     ax.set_xlabel(_tex(pname))
     ax.set_ylabel(f"Lyapunov exponents ({unit})")
-    ax.set_title(f"{ds.attrs.get('model', '')}: Lyapunov spectrum")
+    window = _settings(ds).get("samples")
+    what = "Lyapunov spectrum"
+    if isinstance(window, int):
+        what += f" ({window} {'iterations' if unit == 'per iteration' else 'periods'} per value)"
+    ax.set_title(_explore_title(ds, what, (pname,)), fontsize="medium")
     ax.legend(fontsize=8, ncols=2)
     ax.grid(True, lw=0.3)
     if path is not None:
@@ -684,18 +1014,59 @@ def plot_lyapunov(ds, path=None, *, overwrite: bool = False) -> Figure:
     return fig
 
 
-def plot_basins(ds, path=None, *, overwrite: bool = False) -> Figure:
+def _attractor_points(ds, b: int, dims) -> np.ndarray:
+    """The stored section points of attractor ``b`` in the grid's coordinates (rows)."""
+    if "attractor_points" not in ds:
+        return np.zeros((0, len(dims)))
+    pts = ds.attractor_points.isel(attractor=b).transpose("cycle_point", "state")
+    cols = [pts.sel(state=s).values for s in dims]
+    P = np.column_stack(cols) if cols else np.zeros((0, 0))
+    return P[np.all(np.isfinite(P), axis=1)]
+
+
+def _tag_attractors(ax, tags: list) -> None:
+    """Number the attractors next to their markers; attractors that lie at one place (within
+    3 % of the axes) share one tag, "0, 2"."""
+    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+    groups: list = []
+    for b, x, y in tags:
+        u, v = (x - x0) / (x1 - x0), (y - y0) / (y1 - y0)
+        for g in groups:
+            if abs(g[1] - u) < 0.03 and abs(g[2] - v) < 0.03:
+                g[0].append(b)
+                break
+        else:
+            groups.append([[b], u, v])
+    for members, u, v in groups:
+        ax.annotate(", ".join(map(str, members)), (u, v), xycoords="axes fraction",
+                    xytext=(6, 6), textcoords="offset points", fontsize=9, fontweight="bold",
+                    color="k", zorder=5,
+                    bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.85))
+
+
+def plot_basins(ds: xr.Dataset, path: str | Path | None = None, *, overwrite: bool = False,
+                ax: Axes | None = None) -> Figure:
     """Basins of attraction of a :func:`pwsdyn.basins` result: one categorical colour per
-    attractor, black for divergence, grey for failed runs, and a legend with each attractor's
-    period, events per period and basin fraction. ``path`` and ``overwrite`` as for
-    :func:`plot_bifurcation`."""
+    attractor, black for divergence, grey for failed runs; each attractor marked where it
+    lies (its section points, ``attractor_points``: a periodic attractor's cycle as circles,
+    the non-periodic class's sample as small diamonds, edged in black and filled with its
+    basin's colour, numbered); a legend with each attractor's period, events per period and
+    basin fraction; the parameter values in the title. ``path`` and ``overwrite`` as for
+    :func:`plot_bifurcation`; ``ax``: draw into this Axes of your own figure (and return that
+    figure)."""
     from matplotlib.colors import BoundaryNorm, ListedColormap
+    from matplotlib.legend_handler import HandlerTuple
     from matplotlib.patches import Patch
 
     if ds.attrs.get("kind") != "basins":
         raise ArgumentError("expected the dataset of pwsdyn.basins (attribute kind = 'basins')")
     if path is not None:
         _check_figure_path(path, overwrite)
+    if ax is None:
+        fig = Figure(figsize=(7.8, 6.0), layout="constrained")
+        ax = fig.subplots()
+    else:
+        (ax,), fig = _user_axes(ax, {1: "the basins"})
     lab = ds.label
     dims = lab.dims
     K = ds.sizes["attractor"]
@@ -704,8 +1075,6 @@ def plot_basins(ds, path=None, *, overwrite: bool = False) -> Figure:
         BASIN_COLORS[k % len(BASIN_COLORS)] for k in range(K)]
     cmap = ListedColormap(colors)
     norm = BoundaryNorm(np.arange(-2.5, K, 1.0), cmap.N)
-    fig = Figure(figsize=(7.5, 6.0), layout="constrained")
-    ax = fig.subplots()
     frac = dict(zip(ds.basin.values.tolist(), ds.fraction.values.tolist()))
     if len(dims) == 2:
         x, y = ds[dims[0]].values, ds[dims[1]].values
@@ -719,24 +1088,51 @@ def plot_basins(ds, path=None, *, overwrite: bool = False) -> Figure:
                       shading="nearest", rasterized=True)
         ax.set_yticks([])
         ax.set_xlabel(_tex(dims[0]))
+    xlim, ylim = ax.get_xlim(), ax.get_ylim()
+    states = [str(s) for s in ds.state.values] if "state" in ds.coords else []
     handles = []
+    tags: list = []   # (attractor, x, y) of a point of each attractor inside the grid
+    is_map = ds.attrs.get("model_kind") == "map"
     for b, c in zip(ids, colors):
         f = frac.get(b, 0.0)
+        marker = None
         if b >= 0:
             k = int(ds.attractor_period.values[b])
             ev = float(ds.attractor_events_per_period.values[b])
+            per = "crossing{}/iteration" if is_map else "event{}/period"
             text = (f"{b}: non-periodic" if k == 0 else f"{b}: period {k}") + \
-                f", {ev:.3g} events/period"
+                f", {ev:.3g} " + per.format("" if ev == 1 else "s")
             if float(ds.attractor_stick_time.values[b]) > 0:
                 text += ", sticks"
+            P = (_attractor_points(ds, b, list(dims)) if all(s in states for s in dims)
+                 else np.zeros((0, len(dims))))
+            if len(P):
+                px = P[:, 0]
+                py = P[:, 1] if len(dims) == 2 else np.full(len(P), 0.5)
+                inside = ((px >= min(xlim)) & (px <= max(xlim)) & (py >= min(ylim))
+                          & (py <= max(ylim)))
+                style = dict(marker="o", ms=8) if k else dict(marker="D", ms=4.5)
+                marker, = ax.plot(px, py, ls="none", mfc=c, mec="k", mew=1.3, zorder=4,
+                                  label=f"attractor {b}", **style)
+                if inside.any():
+                    tags.append((b, px[inside][0], py[inside][0]))
+                else:
+                    text += ", outside the grid"
         elif f == 0:
             continue
         else:
             text = "diverged" if b == -1 else "failed (budget)"
-        handles.append(Patch(color=c, label=f"{text} ({100 * f:.1f}%)"))
-    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8,
-              title="attractor")
-    ax.set_title(f"{ds.attrs.get('model', '')}: basins of attraction")
+        patch = Patch(color=c)
+        handles.append(((patch, marker) if marker is not None else patch,
+                        f"{text} ({100 * f:.1f}%)"))
+    ax.set_xlim(xlim)
+    ax.set_ylim(ylim)
+    _tag_attractors(ax, tags)
+    ax.legend([h for h, _ in handles], [t for _, t in handles],
+              handler_map={tuple: HandlerTuple(ndivide=1)}, loc="upper left",
+              bbox_to_anchor=(1.01, 1.0), fontsize=8,
+              title="attractor (markers: its section points)", title_fontsize=8)
+    ax.set_title(_explore_title(ds, "basins of attraction"), fontsize="medium")
     if path is not None:
         _save_figure(fig, path, overwrite)
     return fig

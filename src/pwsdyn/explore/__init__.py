@@ -1,6 +1,6 @@
 """Global analysis: brute-force bifurcation diagrams (:func:`sweep`), basins of attraction
 (:func:`basins`) and Lyapunov spectra (:func:`lyapunov_spectrum`) of piecewise-smooth flows
-and maps, chunked, parallel on Dask and resumable from a store on disk."""
+and maps, chunked, parallel (threads by default, or Dask) and resumable from a store on disk."""
 
 from ._lyapunov import LyapunovSpectrum as LyapunovSpectrum
 from ._lyapunov import lyapunov_spectrum as lyapunov_spectrum

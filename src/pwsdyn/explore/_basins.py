@@ -15,7 +15,7 @@ matched in grid order (row by row) -- so labels do not depend on chunking or wor
 * ``-1``: diverged (a state beyond ``bound``, or a non-finite state);
 * ``-2``: the run failed (a step or event budget spent, step size underflow, Zeno).
 
-Labels are ints with ``-1`` for divergence as in Attractors.jl (STYLE.md); basin fractions
+Labels are ints with ``-1`` for divergence as in Attractors.jl; basin fractions
 are counts over the grid and sum to 1.
 """
 
@@ -23,15 +23,15 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
-from typing import Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 import xarray as xr
 
-from .. import __version__
 from .. import _validate as V
-from ..errors import ArgumentError, OutputExistsError, Status
+from ..errors import ArgumentError, Status
+from ..io import (_check_output_path, cf_global_attrs, flag_attrs, quantity_attrs,
+                  run_status_codes, state_attrs, state_coords, time_units)
 from ..integrate.simulate import DEFAULTS, check_mode, integrator_options, state_vector
 from ._common import (check_common, check_section, check_time_unit, DIVERGED, ModelContext,
                       model_payload, period_estimate)
@@ -39,8 +39,28 @@ from ._executor import run_chunks
 from ._store import ChunkStore
 from ._sweep import _period_function, _settings_json, run_window
 
+if TYPE_CHECKING:
+    from distributed import Client
+
+    from .._typing import ModelLike, PathLike, StateLike
+
 LABEL_DIVERGED = -1
 LABEL_FAILED = -2
+
+
+def _chunk_attrs(model) -> dict:
+    """Attributes of the variables of a chunk file (fingerprints of the starts of a chunk)."""
+    is_map = bool(getattr(model, "is_map", False))
+    timed = {"units": time_units(model)} if time_units(model) else {}
+    return {
+        "status": {"long_name": "status of the run from the start",
+                   **flag_attrs(run_status_codes(is_map=is_map, section_missed=True))},
+        "period": {"long_name": "period of the section points (0: none found)", "units": "1"},
+        "cycle": {"long_name": "the last cycle of section points"},
+        "events_per_period": {"long_name": "events per period", "units": "1"},
+        "stick_time": {"long_name": "time spent sticking per period", **timed},
+        "slide_time": {"long_name": "time spent sliding per period", **timed},
+    }
 
 
 def basins_chunk(task: dict) -> dict:
@@ -72,6 +92,8 @@ def basins_chunk(task: dict) -> dict:
         out["period"][r] = k
         if k:
             out["cycle"][r, :k] = pts[-k:]
+        elif len(pts):  # non-periodic: the last section points show where the motion lies
+            out["cycle"][r, :min(mp, len(pts))] = pts[-mp:]
     return out
 
 
@@ -104,7 +126,8 @@ def classify(fp: dict, match_tol: float) -> tuple[np.ndarray, list[dict]]:
                 table.append({"period": 0, "kind": "non-periodic",
                               "events_per_period": fp["events_per_period"][i],
                               "stick_time": fp["stick_time"][i],
-                              "slide_time": fp["slide_time"][i], "cycle": None, "first": i})
+                              "slide_time": fp["slide_time"][i],
+                              "cycle": fp["cycle"][i].copy(), "first": i})
             labels[i] = nonper
             continue
         cyc = fp["cycle"][i, :k]
@@ -126,13 +149,16 @@ def classify(fp: dict, match_tol: float) -> tuple[np.ndarray, list[dict]]:
     return labels, table
 
 
-def basins(model, grid: Mapping[str, object], x0=None, *, params=None, transient: int = 200,
+def basins(model: ModelLike, grid: Mapping[str, object], x0: StateLike | None = None, *,
+           params: Mapping[str, float] | None = None, transient: int = 200,
            samples: int = 32, section: str = "stroboscopic", phase: float = 0.0,
            period: float | None = None, max_period: int | None = None,
            period_tol: float = 1e-6, match_tol: float = 1e-4, bound: float = 1e8,
-           chunk_size: int | None = None, workers: int | None = None, client=None,
-           scheduler: str | None = None, store=None, out=None, progress: bool = True,
-           **options) -> xr.Dataset:
+           chunk_size: int | None = None, workers: int | None = None,
+           client: Client | None = None, scheduler: str | None = None,
+           store: PathLike | None = None, out: PathLike | None = None,
+           overwrite: bool = False, progress: bool = True,
+           **options: Any) -> xr.Dataset:
     """Basins of attraction on a grid of initial conditions.
 
     Parameters
@@ -144,7 +170,8 @@ def basins(model, grid: Mapping[str, object], x0=None, *, params=None, transient
     x0 : sequence or dict, optional
         Values of the states not on the grid (default: the model's ``[defaults] x0``, else 0).
     params : dict, optional
-        Parameter values.
+        Parameter values by name, over the model's (``model.parameters``: the
+        ``[parameters]`` table with ``[defaults] params`` over it, as on the command line).
     transient, samples : int
         Forcing periods (maps: iterations) discarded, then recorded (defaults 200 and 32).
     section : str
@@ -163,7 +190,7 @@ def basins(model, grid: Mapping[str, object], x0=None, *, params=None, transient
         Divergence threshold (label -1).
     chunk_size : int, optional
         Grid rows (first axis) per chunk (default ``ceil(rows / 16)``).
-    workers, client, scheduler, store, out, progress
+    workers, client, scheduler, store, out, overwrite, progress
         As for :func:`pwsdyn.sweep`.
     **options
         Integrator options of :func:`pwsdyn.simulate`.
@@ -175,8 +202,10 @@ def basins(model, grid: Mapping[str, object], x0=None, *, params=None, transient
         attractor table over ``attractor``: ``attractor_period`` (0: the non-periodic class),
         ``attractor_kind``, ``attractor_events_per_period``, ``attractor_stick_time``,
         ``attractor_slide_time``, ``attractor_points`` (attractor, cycle_point, state: one
-        cycle of section points), ``attractor_start`` (state: the first start that reached
-        it); and ``fraction`` over ``basin`` (-2, -1, 0, 1, ...), summing to 1.
+        cycle of section points; for the non-periodic class the last ``max_period`` section
+        points of its first start, to show where it lies), ``attractor_start`` (state: the
+        first start that reached it); and ``fraction`` over ``basin`` (-2, -1, 0, 1, ...),
+        summing to 1.
 
     Raises
     ------
@@ -198,6 +227,7 @@ def basins(model, grid: Mapping[str, object], x0=None, *, params=None, transient
         max_period=max_period, period_tol=period_tol, bound=bound, chunk_size=chunk_size,
         workers=workers, progress=progress, store=store, out=out, scheduler=scheduler)
     match_tol = V.tolerance("match_tol", match_tol)
+    overwrite = V.flag("overwrite", overwrite)
     model = V.model(model, caller="basins()")
     is_map = bool(getattr(model, "is_map", False))
     if not isinstance(grid, Mapping) or not 1 <= len(grid) <= 2:
@@ -231,7 +261,7 @@ def basins(model, grid: Mapping[str, object], x0=None, *, params=None, transient
         check_mode(model, integrator_options(options, "basins()"))
         check_time_unit(model, p, period, phase, transient + samples)
     if x0 is None:
-        x0 = (model.spec.get("defaults") or {}).get("x0")
+        x0 = model.defaults.get("x0")
     base = state_vector(model, x0) if x0 is not None else np.zeros(model.n_states)
     if max_period is None:
         max_period = max(1, min(samples // 4, 64))
@@ -244,10 +274,7 @@ def basins(model, grid: Mapping[str, object], x0=None, *, params=None, transient
     rows = shape[0]
     if chunk_size is None:
         chunk_size = max(1, math.ceil(rows / 16))
-    out_path = Path(out) if out is not None else None
-    if out_path is not None and out_path.exists():
-        raise OutputExistsError(f"output file {str(out_path)!r} exists; nothing was overwritten "
-                              "(choose another name or delete it)")
+    out_path = _check_output_path(out, overwrite=overwrite) if out is not None else None
 
     idx = [model.states.index(nm_) for nm_, _ in axes]
     mesh = np.meshgrid(*[a for _, a in axes], indexing="ij")
@@ -272,8 +299,14 @@ def basins(model, grid: Mapping[str, object], x0=None, *, params=None, transient
 
     results: dict[int, dict] = {}
     st = None
+    chunk_attrs = _chunk_attrs(model)
     if store is not None:   # takes the store's lock, held until st.close()
-        st = ChunkStore(store, "basins", model.name, model.hash, settings, len(tasks))
+        st = ChunkStore(store, "basins", model.name, model.hash, settings, len(tasks),
+                        attrs=cf_global_attrs(model, "basins_chunk",
+                                              f"chunk of pwsdyn basins of model {model.name}",
+                                              "one chunk of a basin computation "
+                                              "(pwsdyn.basins); the store's manifest.json "
+                                              "describes the run"))
     try:
         if st is not None:
             for i in st.done():
@@ -285,7 +318,8 @@ def basins(model, grid: Mapping[str, object], x0=None, *, params=None, transient
             if st is not None:
                 st.write(i, xr.Dataset({k: (("start",) + tuple(f"d{j}"
                                                                for j in range(v.ndim - 1)),
-                                            v) for k, v in res.items()}, attrs={"chunk": i}))
+                                            v, chunk_attrs.get(k, {}))
+                                        for k, v in res.items()}, attrs={"chunk": i}))
 
         todo = [i for i in range(len(tasks)) if i not in results]
         run_chunks(basins_chunk, tasks, todo, on_result, workers=workers, client=client,
@@ -300,44 +334,74 @@ def basins(model, grid: Mapping[str, object], x0=None, *, params=None, transient
     if out_path is not None:
         from ..io import save_dataset
 
-        save_dataset(ds, out_path)
+        save_dataset(ds, out_path, overwrite=overwrite)
     return ds
 
 
 def _assemble(model, axes, shape, labels, table, fp, starts, settings) -> xr.Dataset:
     n = model.n_states
     K = len(table)
-    mp = max([t["period"] for t in table] + [1])
+    # a periodic attractor's cycle; the non-periodic class: the section points of its first
+    # start (NaN where there were fewer)
+    size = [t["period"] or (0 if t["cycle"] is None else len(t["cycle"])) for t in table]
+    mp = max(size + [1])
     pts = np.full((K, mp, n), np.nan)
     for j, t in enumerate(table):
         if t["cycle"] is not None:
-            pts[j, : t["period"]] = t["cycle"]
+            pts[j, : size[j]] = t["cycle"][: size[j]]
     flat = starts.reshape(-1, n)
     dims = tuple(nm_ for nm_, _ in axes)
     basin_ids = np.array([LABEL_FAILED, LABEL_DIVERGED] + list(range(K)), dtype=np.int64)
     total = labels.size
     frac = np.array([np.count_nonzero(labels == b) / total for b in basin_ids])
+    tunit = time_units(model)
+    timed = {"units": tunit} if tunit else {}
+    is_map = bool(getattr(model, "is_map", False))
+    per = "iteration" if is_map else "forcing period"
+    codes = {LABEL_FAILED: "failed", LABEL_DIVERGED: "diverged"}
+    codes.update({j: "non_periodic" if t["period"] == 0 else f"attractor_{j}"
+                  for j, t in enumerate(table)})
     data = {
         "label": (dims, labels.reshape(shape),
-                  {"long_name": "attractor label (-1 diverged, -2 failed)"}),
+                  {"long_name": "attractor reached from this start (its index in the attractor "
+                                "table; -1 diverged, -2 failed)", **flag_attrs(codes)}),
         "attractor_period": (("attractor",), np.array([t["period"] for t in table],
-                                                       dtype=np.int64)),
-        "attractor_kind": (("attractor",), np.array([t["kind"] for t in table], dtype=str)),
+                                                       dtype=np.int64),
+                             {"long_name": f"period of the attractor in {per}s (0: the "
+                                           "non-periodic class)", "units": "1"}),
+        "attractor_kind": (("attractor",), np.array([t["kind"] for t in table], dtype=str),
+                           {"long_name": "periodic or non-periodic"}),
         "attractor_events_per_period": (("attractor",),
-                                        np.array([t["events_per_period"] for t in table])),
-        "attractor_stick_time": (("attractor",), np.array([t["stick_time"] for t in table])),
-        "attractor_slide_time": (("attractor",), np.array([t["slide_time"] for t in table])),
-        "attractor_points": (("attractor", "cycle_point", "state"), pts),
+                                        np.array([t["events_per_period"] for t in table]),
+                                        {"long_name": f"events per {per} on the attractor",
+                                         "units": "1"}),
+        "attractor_stick_time": (("attractor",), np.array([t["stick_time"] for t in table]),
+                                 {"long_name": f"time spent sticking per {per}", **timed}),
+        "attractor_slide_time": (("attractor",), np.array([t["slide_time"] for t in table]),
+                                 {"long_name": f"time spent sliding per {per}", **timed}),
+        "attractor_points": (("attractor", "cycle_point", "state"), pts,
+                             state_attrs(model, "one cycle of section points of the attractor "
+                                                "(NaN beyond its period)")),
         "attractor_start": (("attractor", "state"),
-                            flat[[t["first"] for t in table]].reshape(K, n)),
-        "fraction": (("basin",), frac, {"long_name": "basin fraction"}),
+                            flat[[t["first"] for t in table]].reshape(K, n),
+                            state_attrs(model, "first start of the grid that reached the "
+                                               "attractor")),
+        "fraction": (("basin",), frac, {"long_name": "fraction of the grid in the basin",
+                                        "units": "1"}),
     }
-    coords = {nm_: a for nm_, a in axes}
-    coords.update(attractor=np.arange(K), basin=basin_ids, state=list(model.states),
-                  cycle_point=np.arange(mp))
-    attrs = {"kind": "basins", "model": model.name, "model_hash": model.hash,
-             "model_kind": "map" if getattr(model, "is_map", False) else "flow",
-             "pwsdyn_version": __version__, "settings": json.dumps(settings, sort_keys=True)}
+    coords = {nm_: (nm_, a, quantity_attrs(model, nm_, f"initial {nm_}")) for nm_, a in axes}
+    coords.update(
+        attractor=("attractor", np.arange(K), {"long_name": "index of the attractor"}),
+        basin=("basin", basin_ids, {"long_name": "basin label (-2 failed, -1 diverged, >= 0 "
+                                                 "attractor index)"}),
+        cycle_point=("cycle_point", np.arange(mp), {"long_name": "index of the cycle point"}),
+        **state_coords(model))
+    what = "map" if is_map else "flow"
+    attrs = {**cf_global_attrs(model, "basins",
+                               f"pwsdyn basins of attraction of model {model.name}",
+                               f"attractors reached from a grid of initial conditions of a "
+                               f"{what} (pwsdyn.basins)"),
+             "kind": "basins", "settings": json.dumps(settings, sort_keys=True)}
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
 

@@ -16,13 +16,14 @@ step for the section.
 
 from __future__ import annotations
 
-
 import math
+import threading
 
 import numpy as np
 
 from .. import _validate as V
 from ..errors import ArgumentError
+from ..integrate._load import kernel
 from ..integrate._start import ADMIT_BEHIND, REGULAR, Start, start_state
 from ..integrate.simulate import kernel_tables
 from ..model import compile_model, load_model
@@ -37,14 +38,23 @@ SECTION_MISSED = -3
 
 
 def model_payload(model) -> dict:
-    """What a worker needs to rebuild ``model``: its spec dict and origin (picklable)."""
+    """What a worker needs to rebuild ``model``: its spec dict and origin (picklable).
+
+    Called once per run in the calling process, after the arguments are checked and before
+    any work is handed out: for a flow it also loads the compiled integrator here, so on a
+    machine without numba's cache it is compiled once, in this process, with its message
+    (:func:`pwsdyn.integrate._load.kernel`), not at the same time in every worker."""
     if not model.spec:
         raise ArgumentError(f"model {model.name!r} has no spec dict (it was not made by "
                          "pwsdyn.load_model); build it with load_model to use it here")
+    if not getattr(model, "is_map", False):
+        kernel()
     return {"spec": model.spec, "origin": model.origin, "hash": model.hash}
 
 
 _CONTEXTS: dict = {}
+#: Worker threads of one process share the contexts: each model is built once.
+_CONTEXTS_LOCK = threading.RLock()
 
 
 class ModelContext:
@@ -69,6 +79,11 @@ class ModelContext:
 
     @classmethod
     def get(cls, payload_or_model) -> "ModelContext":
+        with _CONTEXTS_LOCK:
+            return cls._get(payload_or_model)
+
+    @classmethod
+    def _get(cls, payload_or_model) -> "ModelContext":
         if isinstance(payload_or_model, dict):
             key = payload_or_model["hash"]
             if key not in _CONTEXTS:

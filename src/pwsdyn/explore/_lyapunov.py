@@ -3,7 +3,7 @@
 Flows: the variational equations ``Phi' = f_x Phi`` are integrated with the state and, at
 every event, ``Phi`` is multiplied by the event's saltation matrix (impacts, crossings,
 sliding entry and exit, the complete-chattering map; slides "Saltation matrices"). Tangent
-dynamics that ignore these jumps give wrong exponents (DESIGN.md; ChaosTools.jl issue 324).
+dynamics that ignore these jumps give wrong exponents (ChaosTools.jl issue 324).
 The run is cut into segments (default one forcing period): each segment starts from the end
 state of the previous one with ``Phi = I``, so the kernel returns the segment's Jacobian
 ``J_k`` (saltations included); the tangent basis is updated by ``J_k Q = Q' R`` (QR
@@ -28,7 +28,7 @@ Maps: the same QR iteration with the Jacobian of the applied piece at every iter
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Mapping, NamedTuple
+from typing import TYPE_CHECKING, Any, Mapping, NamedTuple
 
 import numpy as np
 
@@ -41,6 +41,9 @@ from ..integrate.trajectory import EVENT_KINDS
 from ..stability._context import forcing_period
 from ..integrate._start import STICK
 from ._common import ModelContext, check_bound, failed_status, readmit, start_of
+
+if TYPE_CHECKING:
+    from .._typing import ModelLike, StateLike
 
 
 @dataclass
@@ -78,6 +81,8 @@ class LyapunovSpectrum:
         Sticking episodes begun in the window (``stick`` records).
     ends_stuck : bool
         The run ends sticking for good (see Notes; exponents ``-inf``).
+    model : Model or MapModel, optional
+        The model of the run (for :meth:`to_dataset`).
 
     Notes
     -----
@@ -117,6 +122,7 @@ class LyapunovSpectrum:
     contact_time: float = 0.0
     contact_episodes: int = 0
     ends_stuck: bool = False
+    model: object = field(default=None, repr=False)
 
     def __post_init__(self):
         if self.span is None:
@@ -130,6 +136,76 @@ class LyapunovSpectrum:
     def contact_fraction(self) -> float:
         """``contact_time / span``: the fraction of the window spent sticking (0 if empty)."""
         return self.contact_time / self.span if self.span else 0.0
+
+    def to_dataset(self):
+        """The result as an :class:`xarray.Dataset` with CF attributes: ``exponents``
+        (exponent), ``convergence`` (segment, exponent), ``x_final`` (state), the scalars
+        ``time``, ``span``, ``contact_time``, ``contact_episodes``, ``ends_stuck`` and
+        ``status`` (with its flags); the event counts, the provenance and the model (its full
+        text) in the attributes."""
+        import json
+
+        import xarray as xr
+
+        from ..io import (_dumps, cf_global_attrs, flag_attrs, inverse_time_units,
+                          run_status_codes, state_attrs, state_coords, time_units)
+
+        model = self.model
+        if model is None:
+            raise ArgumentError("this result has no model attached (it was not made by "
+                                "pwsdyn.lyapunov_spectrum); it cannot be saved")
+        is_map = bool(getattr(model, "is_map", False))
+        n = model.n_states
+        lu = {"units": inverse_time_units(model)} if inverse_time_units(model) else {}
+        tu = {"units": time_units(model)} if time_units(model) else {}
+        per = "per iteration" if is_map else "per unit time"
+        x_final = (np.full(n, np.nan) if self.x_final is None
+                   else np.asarray(self.x_final, dtype=float))
+        conv = np.asarray(self.convergence, dtype=float).reshape(-1, n)
+        data = {
+            "exponents": (("exponent",), np.asarray(self.exponents, dtype=float),
+                          {"long_name": f"Lyapunov exponents, decreasing ({per})", **lu}),
+            "convergence": (("segment", "exponent"), conv,
+                            {"long_name": "running estimates after each segment "
+                                          "(Gram-Schmidt order)", **lu}),
+            "x_final": (("state",), x_final, state_attrs(model, "state at the end of the run")),
+            "time": ((), float(self.time), {"long_name": "averaging time (the window less "
+                                                         "the contact episodes)", **tu}),
+            "span": ((), float(self.span), {"long_name": "length of the averaging window",
+                                            **tu}),
+            "contact_time": ((), float(self.contact_time),
+                             {"long_name": "time spent sticking in the window", **tu}),
+            "contact_episodes": ((), np.int64(self.contact_episodes),
+                                 {"long_name": "sticking episodes begun in the window",
+                                  "units": "1"}),
+            "ends_stuck": ((), np.int8(bool(self.ends_stuck)),
+                           {"long_name": "the run ends sticking for good",
+                            **flag_attrs({0: "false", 1: "true"}, np.int8)}),
+            "status": ((), np.int64(self.status),
+                       {"long_name": "status of the run",
+                        **flag_attrs(run_status_codes(is_map=is_map))}),
+        }
+        coords = {"exponent": ("exponent", np.arange(n),
+                               {"long_name": "index of the exponent (decreasing)"}),
+                  "segment": ("segment", np.arange(conv.shape[0]),
+                              {"long_name": "index of the averaged segment"}),
+                  **state_coords(model)}
+        attrs = {**cf_global_attrs(model, "lyapunov_spectrum",
+                                   f"pwsdyn Lyapunov spectrum of model {model.name}",
+                                   "QR re-orthonormalisation of the tangent dynamics with "
+                                   "saltation matrices (pwsdyn.lyapunov_spectrum)"),
+                 "events": json.dumps(dict(self.events)),
+                 "provenance": _dumps(dict(self.provenance))}
+        if "params" in self.provenance:
+            attrs["params"] = _dumps(dict(self.provenance["params"]))
+        return xr.Dataset(data, coords=coords, attrs=attrs)
+
+    def save(self, path, overwrite: bool = False):
+        """Write :meth:`to_dataset` to a NetCDF file; an existing file is refused
+        (:class:`~pwsdyn.OutputExistsError`) unless ``overwrite=True``."""
+        from ..io import save_dataset
+
+        return save_dataset(self.to_dataset(), path, overwrite=overwrite)
 
 
 #: Kernel event kind codes (``EventLog.kind_code``) that delimit contact episodes.
@@ -240,7 +316,7 @@ def flow_segments(ctx: ModelContext, x, t0: float, seg: float, n_seg: int, p, op
                     ep_start = st_start = ta
                     episodes += 1
                 traj = _simulate_compiled(ctx.cm, x, ta, ta + seg, p, vopts, mode0=start.mode,
-                                          dkind0=STICK, didx0=start.idx)
+                                          dkind0=STICK, didx0=start.index)
             else:
                 traj = _simulate_compiled(ctx.cm, x, ta, ta + seg, p, vopts)
         starts[k] = x
@@ -331,19 +407,22 @@ def flow_segments(ctx: ModelContext, x, t0: float, seg: float, n_seg: int, p, op
                         contact, episodes, ends_stuck)
 
 
-def lyapunov_spectrum(model, x0, params: Mapping[str, float] | None = None, *,
+def lyapunov_spectrum(model: ModelLike, x0: StateLike | None = None,
+                      params: Mapping[str, float] | None = None, *,
                       transient: int = 100, duration: int = 1000, segment: float | None = None,
-                      t0: float = 0.0, bound: float = 1e8, **options) -> LyapunovSpectrum:
+                      t0: float | None = None, bound: float = 1e8,
+                      **options: Any) -> LyapunovSpectrum:
     """The full Lyapunov spectrum of a piecewise-smooth flow (with saltation matrices at every
     event) or map, by QR re-orthonormalisation.
 
     Parameters
     ----------
     model : Model, MapModel, str, path or dict
-    x0 : sequence or dict
-        Initial state.
+    x0 : sequence or dict, optional
+        Initial state (default: the model's ``[defaults] x0``).
     params : dict, optional
-        Parameter values overriding the model's defaults.
+        Parameter values by name, over the model's defaults (``model.parameters``: the
+        ``[parameters]`` table with ``[defaults] params`` over it).
     transient : int
         Segments (flows) or iterations (maps) discarded before averaging (default 100).
     duration : int
@@ -351,8 +430,8 @@ def lyapunov_spectrum(model, x0, params: Mapping[str, float] | None = None, *,
     segment : float, optional
         Length of a segment (flows): default the forcing period; required for autonomous
         flows. The basis is re-orthonormalised once per segment.
-    t0 : float
-        Start time (flows).
+    t0 : float, optional
+        Start time (flows; default: the model's ``[defaults] t0``, else 0).
     bound : float
         A state component beyond this magnitude counts as divergence (status -1).
     **options
@@ -383,10 +462,14 @@ def lyapunov_spectrum(model, x0, params: Mapping[str, float] | None = None, *,
     transient = V.integer("transient", transient, lo=0)
     duration = V.integer("duration", duration, lo=1)
     segment = V.positive("segment", segment, allow_none=True)
-    t0 = V.number("t0", t0)
     bound = V.positive("bound", bound, allow_inf=True)
     model = V.model(model, caller="lyapunov_spectrum()")
+    t0 = V.number("t0", model.defaults.get("t0", 0.0) if t0 is None else t0)
     p = model.parameter_vector(params)
+    if x0 is None:
+        x0 = model.defaults.get("x0")
+        if x0 is None:
+            raise ArgumentError(f"give `x0`: model {model.name!r} has no [defaults] x0")
     x = state_vector(model, x0)
     n = model.n_states
     prov = {"model": model.name, "model_hash": model.hash, "pwsdyn_version": __version__,
@@ -402,7 +485,7 @@ def lyapunov_spectrum(model, x0, params: Mapping[str, float] | None = None, *,
                                            int(transient), int(duration), float(bound))
         status = 0 if st == MAP_OK else (-1 if st == MAP_DIVERGED else int(st))
         return LyapunovSpectrum(np.sort(ex)[::-1], float(done), ex[None, :], {}, status, xe,
-                                prov)
+                                prov, model=model)
     opts = {**integrator_options(options, "lyapunov_spectrum()"), "dense": False,
             "throw": False}
     check_mode(model, opts)
@@ -432,7 +515,8 @@ def lyapunov_spectrum(model, x0, params: Mapping[str, float] | None = None, *,
         t += transient * segment
     if status:
         n = model.n_states
-        return LyapunovSpectrum(np.full(n, np.nan), 0.0, np.zeros((0, n)), {}, status, x, prov)
+        return LyapunovSpectrum(np.full(n, np.nan), 0.0, np.zeros((0, n)), {}, status, x, prov,
+                                model=model)
     fs = flow_segments(ctx, x, t, segment, int(duration), p, opts, bound, keep_events=True,
                        discrete=discrete)
     counts: dict = {}
@@ -443,4 +527,4 @@ def lyapunov_spectrum(model, x0, params: Mapping[str, float] | None = None, *,
     return LyapunovSpectrum(np.sort(fs.exponents)[::-1], fs.time, fs.running[:fs.done],
                             counts, fs.status, fs.x, prov, span=fs.span,
                             contact_time=fs.contact_time, contact_episodes=fs.contact_episodes,
-                            ends_stuck=fs.ends_stuck)
+                            ends_stuck=fs.ends_stuck, model=model)

@@ -136,6 +136,10 @@ class ChunkStore:
     settings : dict
         Everything the results depend on (JSON-serialisable); compared on resume.
     n_chunks : int
+    attrs : dict, optional
+        Global attributes written into every chunk file (CF conventions, model, versions:
+        :func:`pwsdyn.io.cf_global_attrs`), with ``date_created`` and ``history``; not part
+        of the manifest, so stores written before keep resuming.
 
     Raises
     ------
@@ -148,8 +152,9 @@ class ChunkStore:
     """
 
     def __init__(self, path, kind: str, model_name: str, model_hash: str, settings: dict,
-                 n_chunks: int):
+                 n_chunks: int, attrs: dict | None = None):
         self.path = Path(path)
+        self.attrs = dict(attrs or {})
         self.manifest = _canonical({"kind": kind, "model": model_name, "model_hash": model_hash,
                                     "settings": settings, "n_chunks": int(n_chunks),
                                     "pwsdyn_version": __version__, "format": FORMAT})
@@ -360,7 +365,11 @@ class ChunkStore:
         path, side = self.chunk_path(i), self.checksum_path(i)
         if path.exists():
             return
+        from ..io import stamp
+
         ds = ds.copy()
+        ds.attrs = {**self.attrs, **ds.attrs}
+        ds = stamp(ds)
         ds.attrs.update(pwsdyn_chunk=int(i), pwsdyn_store=self.identity)
         tmp = path.with_name(path.name + f".tmp{os.getpid()}")
         ds.to_netcdf(tmp, engine="h5netcdf")
@@ -397,7 +406,8 @@ class ChunkStore:
             raise StoreError(f"chunk file {_q(path)} does not match its checksum in {_q(side)}: "
                              "it was corrupted, truncated, or replaced by another file. " + fix)
         try:
-            with xr.open_dataset(io.BytesIO(data), engine="h5netcdf") as ds:
+            with xr.open_dataset(io.BytesIO(data), engine="h5netcdf", decode_times=False,
+                                 decode_timedelta=False) as ds:
                 ds = ds.load()
         except Exception as exc:
             raise StoreError(f"chunk file {_q(path)} cannot be read as NetCDF ({exc}). "

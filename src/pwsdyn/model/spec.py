@@ -17,6 +17,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import math
+import os
 import re
 import tomllib
 from dataclasses import dataclass, field
@@ -59,20 +60,77 @@ def check_identifiers(states, parameters, origin: str = "<model>") -> None:
                                  f"{sorted(_RESERVED)}", source=origin)
 
 
+def check_text(text, W: "_Where", fieldname: str, limit: int, value=None) -> str:
+    """Free text of a model (its name, a unit, a description): a string of 1 to ``limit``
+    printable characters -- no control characters, line breaks or bidirectional overrides,
+    which could rewrite what a terminal or a file shows. Errors name ``fieldname``."""
+    if not isinstance(text, str) or not text.strip():
+        raise W.error(f"`{fieldname}` must be a non-empty string", fieldname, value)
+    bad = next((c for c in text if not c.isprintable()), None)
+    if bad is not None:
+        raise W.error(f"`{fieldname}` contains the non-printable character U+{ord(bad):04X}; "
+                      "use printable characters only", fieldname, value)
+    if len(text) > limit:
+        raise W.error(f"`{fieldname}` is {len(text)} characters long; at most {limit} are "
+                      "allowed", fieldname, value)
+    return text
+
+
 def check_model_name(name, W: "_Where") -> str:
     """The model's ``name``: text of 1 to :data:`MAX_MODEL_NAME_LENGTH` printable characters
-    (no control characters, line breaks or bidirectional overrides, which could rewrite what
-    a terminal or a file shows)."""
-    if not isinstance(name, str) or not name.strip():
-        raise W.error("`name` must be a non-empty string", "name")
-    bad = next((c for c in name if not c.isprintable()), None)
-    if bad is not None:
-        raise W.error(f"`name` contains the non-printable character U+{ord(bad):04X}; use "
-                      "printable characters only", "name")
-    if len(name) > MAX_MODEL_NAME_LENGTH:
-        raise W.error(f"`name` is {len(name)} characters long; at most "
-                      f"{MAX_MODEL_NAME_LENGTH} are allowed", "name")
-    return name
+    (:func:`check_text`)."""
+    return check_text(name, W, "name", MAX_MODEL_NAME_LENGTH)
+
+
+#: Longest unit in a model's ``[units]`` table (UDUNITS strings such as ``"m s-2"``).
+MAX_UNIT_LENGTH = 64
+#: Longest entry of a model's ``[descriptions]`` table.
+MAX_DESCRIPTION_LENGTH = 256
+#: The optional tables of text about the model's quantities, with the limits of their entries.
+ANNOTATION_TABLES = {"units": MAX_UNIT_LENGTH, "descriptions": MAX_DESCRIPTION_LENGTH}
+
+
+def check_annotations(data: dict, states, parameters, W: "_Where", *, time: bool = True
+                      ) -> tuple[dict, dict]:
+    """The optional ``[units]`` and ``[descriptions]`` tables: ``name = "text"`` for states,
+    parameters and (flows) the time ``t``, e.g. ``y = "m"`` and ``y = "height above the
+    table"``. Unknown names, values that are not strings, and text that is empty, too long
+    or not printable are refused naming the file, line and field. Returns the two tables
+    (name -> text; empty when absent). They document the model (files, figures) and never
+    enter its digest."""
+    names = ([TIME] if time else []) + list(states) + list(parameters)
+    out = []
+    for table, limit in ANNOTATION_TABLES.items():
+        raw = data.get(table)
+        if raw is None:
+            out.append({})
+            continue
+        if not isinstance(raw, dict):
+            raise W.error(f"`{table}` must be a table of name = \"text\" (states, parameters"
+                          + (f", time {TIME!r}" if time else "") + ")", table)
+        entries = {}
+        for k, v in raw.items():
+            if k not in names:
+                known = (f"states are {list(states)}, parameters are {list(parameters)}"
+                         + (f", time is {TIME!r}" if time else " (a map has no time)"))
+                raise W.error(f"`{table}` names unknown state or parameter {k!r}; {known}",
+                              f"{table}.{k}")
+            if not isinstance(v, str):
+                raise W.error(f"`{table}.{k}` must be a string, got {type(v).__name__} "
+                              f"{v!r}", f"{table}.{k}")
+            entries[k] = check_text(v, W, f"{table}.{k}", limit, v)
+        out.append(entries)
+    return out[0], out[1]
+
+
+def default_parameters(parameters: dict, defaults) -> dict:
+    """The parameter values a run uses when the caller gives none: the ``[parameters]``
+    table with the model's ``[defaults] params`` over it (both checked already)."""
+    values = dict(parameters)
+    if isinstance(defaults, dict):
+        for k, v in (defaults.get("params") or {}).items():
+            values[k] = float(v)
+    return values
 
 
 @dataclass(frozen=True)
@@ -166,8 +224,29 @@ class SymbolicSystem:
     def n_states(self) -> int:
         return len(self.states)
 
+    @property
+    def defaults(self) -> dict:
+        """The model's ``[defaults]`` table (``x0``, ``t0``, ``t_end``, ``params``; checked
+        when the model was loaded), ``{}`` when it has none. Its ``params`` are already in
+        :attr:`parameters`."""
+        d = (self.spec or {}).get("defaults")
+        return d if isinstance(d, dict) else {}
+
+    def unit(self, name: str) -> str | None:
+        """The unit of a state, parameter or the time ``t`` from the ``[units]`` table, or
+        ``None`` where the model gives none."""
+        return (getattr(self, "units", None) or {}).get(name)
+
+    def describe(self, name: str) -> str | None:
+        """The description of a state, parameter or the time ``t`` from the
+        ``[descriptions]`` table, or ``None``."""
+        return (getattr(self, "descriptions", None) or {}).get(name)
+
     def parameter_vector(self, params: Mapping[str, float] | None = None):
         """Default parameter values overridden by ``params`` (by name), as a float array.
+
+        The defaults are :attr:`parameters`: the ``[parameters]`` table with the model's
+        ``[defaults] params`` over it -- the values the command line uses too.
 
         Raises :class:`~pwsdyn.errors.ArgumentError` (a ``ValueError``) naming an unknown
         parameter, a value that is not a real number (a string, ``None``, a bool) or a
@@ -203,7 +282,15 @@ class SymbolicSystem:
 
 @dataclass(frozen=True, eq=False)
 class Model(SymbolicSystem):
-    """A piecewise-smooth hybrid model (symbolic). Create it with :func:`load_model`."""
+    """A piecewise-smooth hybrid model (symbolic). Create it with :func:`load_model`.
+
+    ``parameters`` holds the values a run uses unless ``params`` overrides them: the
+    ``[parameters]`` table with the ``[defaults] params`` table over it (the API and the
+    command line use the same values). ``units`` and ``descriptions`` hold the optional
+    ``[units]`` and ``[descriptions]`` tables (by state, parameter or ``t``); ``text`` is the
+    TOML source the model was read from (empty for a model built from a dict). None of the
+    three enters :attr:`digest`.
+    """
 
     name: str
     states: tuple
@@ -219,6 +306,9 @@ class Model(SymbolicSystem):
     initial_mode: int = 0
     origin: str = "<dict>"
     spec: dict = field(default_factory=dict, repr=False)
+    units: dict = field(default_factory=dict, repr=False)
+    descriptions: dict = field(default_factory=dict, repr=False)
+    text: str = field(default="", repr=False)
 
     # --- symbols -------------------------------------------------------------------------
     @property
@@ -277,7 +367,8 @@ class Model(SymbolicSystem):
     @functools.cached_property
     def digest(self) -> str:
         """SHA-256 (64 hex digits) of everything that defines the compiled model (not its
-        description); names the compiled module in the cache."""
+        description, units, descriptions or parameter values); names the compiled module in
+        the cache."""
         parts = [self.name, repr(self.states), repr(list(self.parameters))]
         parts += [f"mode {m.name}: " + sp.srepr(m.rhs) for m in self.modes]
         parts += [f"surface {s.name}: " + sp.srepr(s.expr) for s in self.surfaces]
@@ -309,7 +400,8 @@ def zoo_path(name: str) -> Path:
     return Path(str(resources.files("pwsdyn.model") / "zoo" / f"{name}.toml"))
 
 
-def load_model(source, **kwargs) -> Model:
+def load_model(source: str | os.PathLike[str] | Mapping[str, Any] | Model,
+               **kwargs: Any) -> Model:
     """Load a model from a TOML file path, a built-in name, a TOML string or a dict.
 
     Parameters
@@ -398,15 +490,35 @@ class _Where:
         self.origin = origin
         self.lines = text.splitlines() if text else []
 
+    def _table(self, name: str) -> tuple[int, int] | None:
+        """Lines ``(header, end]`` of the table ``[name]`` (to the next header), if any."""
+        head = re.compile(rf"^\s*\[\s*{re.escape(name)}\s*\]\s*(#.*)?$")
+        for i, ln in enumerate(self.lines):
+            if head.match(ln):
+                end = next((j for j in range(i + 1, len(self.lines))
+                            if self.lines[j].lstrip().startswith("[")), len(self.lines))
+                return i + 1, end
+        return None
+
     def line(self, key: str, value: Any = None) -> int | None:
+        # the innermost plain table holding the key ([modes.flight] for modes.flight.y)
+        parts = key.split(".")
+        table = next((t for t in (self._table(".".join(parts[:k]))
+                                  for k in range(len(parts) - 1, 0, -1)) if t is not None),
+                     None)
         key = key.split(".")[-1]
         key = re.sub(r"\[\d+\]$", "", key)
         pat = re.compile(rf"^\s*(\[+\s*)?[\"']?{re.escape(key)}[\"']?\s*(=|\]|\.)")
         hits = [i + 1 for i, ln in enumerate(self.lines) if pat.search(ln)]
+        inside = [h for h in hits if table[0] < h <= table[1]] if table is not None else []
+        # a key of a plain table ([units], [defaults], [modes.m]): its line within that table
+        hits = inside or hits
         if value is not None and isinstance(value, str):
             sharp = [h for h in hits if value in self.lines[h - 1]]
             if sharp:
                 return sharp[0]
+            if inside:
+                return inside[0]
             anywhere = [i + 1 for i, ln in enumerate(self.lines) if value in ln]
             if anywhere:
                 return anywhere[0]
@@ -419,7 +531,7 @@ class _Where:
 
 _TOP_KEYS = {"name", "description", "source", "reference", "states", "parameters",
              "definitions", "modes", "events", "switches", "forcing_period", "initial_mode",
-             "notes", "defaults"}
+             "notes", "defaults", "units", "descriptions"}
 _EVENT_KEYS = {"name", "kind", "surface", "direction", "modes", "mode", "guard", "reset",
                "target", "terminal", "description"}
 
@@ -638,6 +750,7 @@ def model_from_dict(data: dict, origin: str = "<dict>", text: str | None = None)
         init = mode_ref(data["initial_mode"], "initial_mode")
 
     _check_defaults(data.get("defaults"), states, parameters, W)
+    units, descriptions = check_annotations(data, states, parameters, W)
 
     desc = data.get("description", "")
     ref = data.get("reference", data.get("source", ""))
@@ -671,10 +784,13 @@ def model_from_dict(data: dict, origin: str = "<dict>", text: str | None = None)
     for sw in switches:
         for e in sw.family or ():
             check_expression(e, refuse(f"in the sliding family of switch {sw.name!r}", "modes"))
+    # the values runs use: [parameters] with [defaults] params over them (checked above)
+    parameters = default_parameters(parameters, data.get("defaults"))
     return Model(name=name, states=tuple(states), parameters=parameters, modes=tuple(modes),
                  surfaces=tuple(surfaces), events=tuple(events), switches=tuple(switches),
                  description=desc, reference=ref, definitions=definitions, forcing_period=fp,
-                 initial_mode=init, origin=origin, spec=data)
+                 initial_mode=init, origin=origin, spec=data,
+                 units=units, descriptions=descriptions, text=text or "")
 
 
 _DEFAULTS_KEYS = {"x0", "t0", "t_end", "params"}
@@ -736,3 +852,65 @@ def _check_defaults(d, states, parameters, W: _Where) -> None:
             if not number(v):
                 raise W.error(f"`defaults.params.{k}` must be a finite number, got {v!r}",
                               "defaults.params", k)
+
+
+# ======================================================================================
+# the defaults of a run: one rule for the API and the command line
+# ======================================================================================
+
+#: End time of a run when neither the caller nor the model's ``[defaults]`` give one.
+FALLBACK_T_END = 10.0
+
+
+@dataclass(frozen=True)
+class RunDefaults:
+    """The start of a run as :func:`run_defaults` resolved it.
+
+    ``x0`` is the caller's (a sequence or a dict) or the model's ``[defaults] x0``, else the
+    zero state; ``t0`` and ``t_end`` the caller's, else the model's ``[defaults]``, else 0 and
+    ``t0 +`` :data:`FALLBACK_T_END`. ``fallback`` names the values (``"x0"``, ``"t_end"``)
+    for which neither the caller nor the model gave one: callers say so (a warning, a note).
+    """
+
+    x0: Any
+    t0: float
+    t_end: float
+    fallback: tuple = ()
+
+    def note(self, model, flags: Mapping[str, str] | None = None) -> list[str]:
+        """One sentence per fallback value; ``flags`` names the caller's spelling of each
+        (``{"x0": "--x0"}`` on the command line)."""
+        flags = {"x0": "x0", "t_end": "t_end", **(flags or {})}
+        out = []
+        if "x0" in self.fallback:
+            zero = ", ".join(f"{s}=0" for s in model.states)
+            out.append(f"no {flags['x0']} given and model {model.name!r} has no defaults.x0; "
+                       f"starting from zero ({zero})")
+        if "t_end" in self.fallback:
+            out.append(f"no {flags['t_end']} given and model {model.name!r} has no "
+                       f"defaults.t_end; using t_end = {self.t_end:g}")
+        return out
+
+
+def run_defaults(model, x0=None, t0=None, t_end=None) -> RunDefaults:
+    """The initial state and time span of a run of ``model``: what the caller gives, else
+    the model's ``[defaults]`` table, else the zero state, ``t0 = 0`` and
+    ``t_end = t0 +`` :data:`FALLBACK_T_END` (the one rule of :func:`pwsdyn.simulate` and of
+    ``pwsdyn simulate`` and ``pwsdyn orbit``). Parameter defaults need no resolving:
+    ``[defaults] params`` are in ``model.parameters``."""
+    d = model.defaults
+    fallback = []
+    if x0 is None:
+        x0 = d.get("x0")
+        if x0 is None:
+            x0 = [0.0] * model.n_states
+            fallback.append("x0")
+    if t0 is None:
+        t0 = float(d.get("t0", 0.0))
+    if t_end is None:
+        if d.get("t_end") is not None:
+            t_end = float(d["t_end"])
+        else:
+            t_end = t0 + FALLBACK_T_END
+            fallback.append("t_end")
+    return RunDefaults(x0, t0, t_end, tuple(fallback))
