@@ -22,6 +22,7 @@ function) and a new model costs only the compilation of its own small function.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -235,6 +236,20 @@ def _emit_body(model: Model) -> str:
     # reach the source
     check_identifiers(model.states, model.parameters, origin=model.origin)
     der = derivatives(model)
+    return emit_evaluate(der.cases, model.states, model.parameters)
+
+
+def emit_evaluate(cases: dict, states, parameters) -> str:
+    """Source of a module with one numba function ``evaluate(which, idx, t, x, p, out)`` of
+    :data:`EVALUATE_SIGNATURE` that writes the expressions ``cases[(which, idx)]`` (SymPy, in
+    the symbols ``t``, ``states`` and ``parameters``) into ``out``.
+
+    The model's own module is ``emit_evaluate(derivatives(model).cases, ...)``; other code
+    (the orbit problems of :mod:`pwsdyn.orbits.problem`) emits its own cases the same way, so
+    that the compiled kernel integrates them. ``states`` and ``parameters`` must be checked
+    identifiers (:func:`~pwsdyn.model.spec.check_identifiers`): they become prefixed locals.
+    """
+    check_identifiers(states, parameters)
     pr = _Printer()
     lines = [
         "import math",
@@ -248,16 +263,16 @@ def _emit_body(model: Model) -> str:
     # User names become locals with a prefix (``s_`` states, ``p_`` parameters), so that no
     # state or parameter (``x``, ``p``, ``out``, ``math``, ...) can shadow an argument of
     # ``evaluate``, a module global or a CSE temporary (``_c0``, ...).
-    rename = {sym: sp.Symbol(f"s_{sym.name}", real=True) for sym in model.state_symbols}
-    rename.update({sym: sp.Symbol(f"p_{sym.name}", real=True)
-                   for sym in model.parameter_symbols})
+    rename = {sp.Symbol(s, real=True): sp.Symbol(f"s_{s}", real=True) for s in states}
+    rename.update({sp.Symbol(s, real=True): sp.Symbol(f"p_{s}", real=True)
+                   for s in parameters})
     rename[U_SYMBOL] = sp.Symbol("u_sw", real=True)
-    for i, s in enumerate(model.states):
+    for i, s in enumerate(states):
         lines.append(f"    s_{s} = x[{i}]")
-    for i, s in enumerate(model.parameters):
+    for i, s in enumerate(parameters):
         lines.append(f"    p_{s} = p[{i}]")
     by_which: dict = {}
-    for (which, idx), exprs in der.cases.items():
+    for (which, idx), exprs in cases.items():
         by_which.setdefault(which, []).append((idx, exprs))
     for which in sorted(by_which):
         lines.append(f"    if which == {which}:")
@@ -322,7 +337,10 @@ def compile_model(model: Model) -> CompiledModel:
     """
     key = model.digest
     if key in _COMPILED:
-        return _COMPILED[key]
+        cm = _COMPILED[key]
+        # the same code with the caller's model: what the digest leaves out (description,
+        # units, text) may differ from the model compiled first, and results carry the model
+        return cm if cm.model is model else dataclasses.replace(cm, model=model)
     t0 = time.perf_counter()
     n = model.n_states
 

@@ -1,6 +1,11 @@
 """Periodic orbits of hybrid models: Newton single and multiple shooting over the segments of
-the orbit, with Floquet multipliers from the saltation-corrected monodromy matrix."""
+the orbit, with Floquet multipliers from the saltation-corrected monodromy matrix; orbits on a
+fixed signature as problems ``F(u, p) = 0`` with exact Jacobians (:class:`OrbitProblem`)."""
 
 from ._orbit import (PeriodicOrbit as PeriodicOrbit, Recurrence as Recurrence,
                      RecurrenceWarning as RecurrenceWarning)
 from ._shooting import OrbitError as OrbitError, find_periodic_orbit as find_periodic_orbit
+from .problem import (Admissibility as Admissibility, OrbitProblem as OrbitProblem,
+                      OrbitSensitivity as OrbitSensitivity,
+                      ProblemEvaluation as ProblemEvaluation)
+from .signature import Signature as Signature, SignatureEvent as SignatureEvent

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -11,6 +12,12 @@ from .. import __version__
 from ..errors import Status
 from ..integrate.trajectory import Trajectory
 
+if TYPE_CHECKING:
+    from pathlib import Path
+
+    import xarray as xr
+
+    from .._typing import PathLike
 
 #: Default of ``max_periods`` of :meth:`PeriodicOrbit.from_trajectory`: the most forcing
 #: periods searched for a recurrence of the trajectory.
@@ -143,6 +150,17 @@ class PeriodicOrbit:
         the trajectory (``None`` for :func:`pwsdyn.find_periodic_orbit`, for an autonomous
         model given ``period``, and for a ``period`` that is not a multiple of the forcing
         period).
+    admissible : bool
+        The orbit is a solution of the hybrid model. Always true for an orbit found by
+        free-running shooting (the simulator made it); an orbit solved on a locked signature
+        (``find_periodic_orbit(..., signature=...)``, :class:`~pwsdyn.orbits.OrbitProblem`)
+        may have been followed past a grazing or sliding bifurcation, where it crosses a
+        surface it must not cross or meets one with the wrong sign of the normal velocity.
+    reason : str or None
+        Why it is not admissible (``None`` when it is).
+    locked : bool
+        Solved on a fixed signature (:class:`~pwsdyn.orbits.OrbitProblem`): its trajectory is
+        assembled from the segments integrated in their discrete states.
     """
 
     model: object
@@ -167,12 +185,72 @@ class PeriodicOrbit:
     closure: float = np.nan
     options: dict = field(default_factory=dict)
     recurrence: Recurrence | None = None
+    admissible: bool = True
+    reason: str | None = None
+    locked: bool = False
+    # (OrbitProblem, u, p) behind the orbit, made on demand for `sensitivity`
+    _source: object = field(default=None, repr=False)
 
     # ------------------------------------------------------------------------------------
     @property
-    def signature(self) -> tuple:
-        """``(kind, name, mode_before, mode_after)`` of each event over one period."""
-        return tuple((e.kind, e.name, e.mode_before, e.mode_after) for e in self.events)
+    def signature(self):
+        """The events of one period from ``t0`` as a :class:`~pwsdyn.orbits.Signature`: a
+        tuple of ``(kind, name, mode_before, mode_after)``, comparable, hashable and
+        printable; pass it to ``find_periodic_orbit(..., signature=...)`` to lock it."""
+        from .signature import Signature
+
+        return Signature.from_events(self.events)
+
+    def problem(self, parameters=None):
+        """The orbit problem of this orbit's signature and the orbit's unknowns:
+        ``(OrbitProblem, u, p)`` (see :class:`~pwsdyn.orbits.OrbitProblem`; ``parameters``
+        default all of the model's)."""
+        from .problem import OrbitProblem
+
+        if self._source is not None and (parameters is None or tuple(parameters)
+                                         == self._source[0].parameters):
+            return self._source
+        prob, u = OrbitProblem.from_orbit(self, parameters=parameters)
+        p = prob.p0.copy()
+        # the orbit's events give u to the Newton tolerance; solve once more on the segments
+        res = prob.solve(u, p)
+        if res.converged:
+            u = res.x
+        src = (prob, u, p)
+        if parameters is None:
+            self._source = src
+        return src
+
+    def sensitivity(self, name: str):
+        """Derivatives of the orbit with respect to parameter ``name`` along its branch.
+
+        Returns an :class:`~pwsdyn.orbits.OrbitSensitivity`: ``x0`` (``d x0/d p``; forced
+        orbits at the fixed time ``t0``, autonomous ones in the fixed section through ``x0``
+        with normal ``phase_normal``), ``period`` (``d period/d p``), ``multipliers``
+        (``d mu/d p`` of each of :attr:`multipliers`), and the derivatives of the events' times
+        and states. They come from the orbit problem on the orbit's signature:
+        ``du/dp = -F_u^-1 F_p`` (exact Jacobians), the multipliers by a central difference of
+        the monodromy along that tangent (:meth:`OrbitProblem.sensitivity`).
+
+        Examples
+        --------
+        >>> import pwsdyn
+        >>> orbit = pwsdyn.find_periodic_orbit("impact-oscillator", [0.0, -0.5])
+        >>> d = orbit.sensitivity("sigma")
+        >>> d.x0.shape
+        (2,)
+        """
+        from .. import _validate as V
+
+        if not isinstance(name, str) or name not in self.model.parameters:
+            raise V.fail("name", f"a parameter of model {self.model.name!r} "
+                         f"{list(self.model.parameters)}", name)
+        if not self.converged:
+            raise ValueError("the orbit did not converge: it has no sensitivity")
+        prob, u, p = self.problem()
+        if self.autonomous:
+            return prob.sensitivity(u, p, name, x_ref=self.x0, phase_normal=self.phase_normal)
+        return prob.sensitivity(u, p, name, t0=self.t0)
 
     @property
     def transfer_matrices(self) -> list | None:
@@ -200,6 +278,8 @@ class PeriodicOrbit:
                 ", ".join(_fmt_complex(m) for m in np.atleast_1d(self.multipliers)))
         status = ("stable" if self.stable else "unstable") if self.stable is not None else "?"
         conv = "" if self.converged else ", NOT converged"
+        if not self.admissible:
+            conv += ", NOT admissible"
         return (f"PeriodicOrbit(model={self.model.name!r}, period={self.period:.12g}, "
                 f"events={len(self.events)}, multipliers=[{mult}], {status}{conv})")
 
@@ -214,7 +294,8 @@ class PeriodicOrbit:
                  f"t0          {self.t0:.15g}  in {self.state0}",
                  "x0          " + ", ".join(f"{s}={v:.15g}"
                                             for s, v in zip(self.model.states, self.x0))]
-        lines.append(f"signature   {len(self.events)} event(s) per period")
+        lines.append(f"signature   {len(self.events)} event(s) per period"
+                     + ("  (locked)" if self.locked else ""))
         for e in self.events:
             lines.append(f"  t0+{e.t - self.t0:<12.8g} {e.kind:<11} {e.name:<12} "
                          f"{e.mode_before} -> {e.mode_after}")
@@ -227,6 +308,8 @@ class PeriodicOrbit:
                 lines.append(f"trivial     {_fmt_complex(self.trivial_multiplier)} "
                              f"(|mu - 1| = {abs(self.trivial_multiplier - 1):.2e})")
             lines.append(f"stability   {'stable' if self.stable else 'unstable'}")
+        if not self.admissible:
+            lines.append(f"NOT ADMISSIBLE: {self.reason}")
         lines.append(f"newton      {self.iterations} iteration(s), "
                      f"{len(self.nodes)} shooting node(s), residuals "
                      + " ".join(f"{r:.2e}" for r in self.history)
@@ -235,11 +318,12 @@ class PeriodicOrbit:
 
     # ------------------------------------------------------------------------------------
     @classmethod
-    def from_trajectory(cls, traj, *, t0: float | None = None, period: float | None = None,
+    def from_trajectory(cls, traj: Trajectory, *, t0: float | None = None,
+                        period: float | None = None,
                         periods: int | None = None, refine: bool = True,
                         recurrence_tol: float = 1e-3,
                         max_periods: int = RECURRENCE_MAX_PERIODS,
-                        **kwargs) -> "PeriodicOrbit":
+                        **kwargs: Any) -> "PeriodicOrbit":
         """A periodic orbit from a simulated trajectory that has settled on it.
 
         The period is that of the motion at the end of the run, found by its recurrence (the
@@ -341,7 +425,7 @@ class PeriodicOrbit:
         return orbit
 
     # ------------------------------------------------------------------------------------
-    def to_dataset(self):
+    def to_dataset(self) -> xr.Dataset:
         """One period as an :class:`xarray.Dataset`: the trajectory's layout plus
         ``monodromy``, ``multiplier_real``/``multiplier_imag``, ``newton_residual`` and the
         period, ``t0``, stability in the attributes."""
@@ -349,30 +433,49 @@ class PeriodicOrbit:
 
         if self.trajectory is None:
             raise ValueError("this orbit has no trajectory to save")
+        from ..io import _library_version, quantity_attrs
+
         ds = self.trajectory.to_dataset()
         n = len(self.model.states)
+        if "state_in" not in ds.coords:
+            ds = ds.assign_coords(state_in=("state_in", ds["state"].values,
+                                            {"long_name": "initial state variable"}))
         ds["monodromy"] = (("state", "state_in"), np.asarray(self.monodromy, dtype=float),
                            {"long_name": "one-period Jacobian with full saltation matrices"})
         mult = np.atleast_1d(np.asarray(self.multipliers, dtype=complex))
-        ds["multiplier_real"] = (("multiplier",), mult.real)
-        ds["multiplier_imag"] = (("multiplier",), mult.imag)
-        ds["newton_residual"] = (("newton_iterate",), np.asarray(self.history, dtype=float))
-        ds["shooting_node"] = (("node_index",), np.asarray(self.nodes, dtype=float))
+        ds["multiplier_real"] = (("multiplier",), mult.real,
+                                 {"long_name": "real part of the Floquet multiplier",
+                                  "units": "1"})
+        ds["multiplier_imag"] = (("multiplier",), mult.imag,
+                                 {"long_name": "imaginary part of the Floquet multiplier",
+                                  "units": "1"})
+        ds["newton_residual"] = (("newton_iterate",), np.asarray(self.history, dtype=float),
+                                 {"long_name": "shooting residual (max norm relative to "
+                                               "1 + max|x|) after each Newton iterate",
+                                  "units": "1"})
+        ds["shooting_node"] = (("node_index",), np.asarray(self.nodes, dtype=float),
+                               {**quantity_attrs(self.model, "t", "time"),
+                                "long_name": "time of the shooting node"})
         if self.poincare_jacobian is not None:
-            ds["poincare_jacobian"] = (("state", "state_in"), self.poincare_jacobian)
+            ds["poincare_jacobian"] = (("state", "state_in"), self.poincare_jacobian,
+                                       {"long_name": "Jacobian of the Poincare map"})
         ds.attrs.update({
             "pwsdyn_type": "periodic_orbit",
+            "source": f"pwsdyn {_library_version()}: Newton shooting "
+                      "(pwsdyn.find_periodic_orbit), one period simulated",
             "title": f"pwsdyn periodic orbit of model {self.model.name}",
             "period": float(self.period), "orbit_t0": float(self.t0),
             "orbit_x0": json.dumps([float(v) for v in self.x0]),
             "orbit_state0": self.state0, "stable": int(bool(self.stable)),
             "converged": int(bool(self.converged)), "autonomous": int(bool(self.autonomous)),
             "signature": json.dumps([list(s) for s in self.signature]),
+            "admissible": int(bool(self.admissible)), "locked": int(bool(self.locked)),
+            "admissibility_reason": self.reason or "",
             "n_states": n,
         })
         return ds
 
-    def save(self, path, overwrite: bool = False):
+    def save(self, path: PathLike, overwrite: bool = False) -> Path:
         """Write :meth:`to_dataset` to a NetCDF file; an existing file is refused
         (:class:`~pwsdyn.OutputExistsError`) unless ``overwrite=True``."""
         from ..io import save_dataset

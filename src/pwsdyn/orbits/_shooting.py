@@ -30,16 +30,24 @@ naming the reason, with the last iterate as ``result``.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .. import _validate as V
 from ..errors import ArgumentError, PwsdynError
+from ..newton import TrialRejected, newton
 from ..integrate.simulate import integrator_options, _simulate_compiled, state_vector
 from ..stability._context import (DiscreteState, ModelContext, check_state_name, event_states,
                                   forcing_period, initial_state, trajectory_start_state)
 from ..stability._floquet import floquet_multipliers
 from ._orbit import RECURRENCE_MAX_PERIODS, PeriodicOrbit, Recurrence, merge_intervals
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from .._typing import ModelLike, StateLike
 
 #: Integrator options used by the shooting code unless given: tight tolerances, 8th order.
 SHOOTING_DEFAULTS = dict(method="DOP853", rtol=1e-12, atol=1e-12, max_steps=500_000)
@@ -251,11 +259,13 @@ def _place_nodes(ctx, ref, st0, t0, T, nodes, max_nodes):
     return (np.array([t0] + [c[0] for c in cands]), [st0] + [c[1] for c in cands])
 
 
-def find_periodic_orbit(model, x0, *, params=None, period: float | None = None,
-                        t0: float = 0.0, periods: int = 1, mode=None, nodes="auto",
-                        phase=None, tol: float = 1e-10, max_iter: int = 30,
-                        lock_tol: float = 1e-6, max_nodes: int = 24,
-                        **options) -> PeriodicOrbit:
+def find_periodic_orbit(model: ModelLike, x0: StateLike, *,
+                        params: Mapping[str, float] | None = None,
+                        period: float | None = None, t0: float | None = None, periods: int = 1,
+                        mode: str | None = None, nodes: str | int = "auto",
+                        phase: ArrayLike | None = None, tol: float = 1e-10,
+                        max_iter: int = 30, lock_tol: float = 1e-6, max_nodes: int = 24,
+                        signature: Any = None, **options: Any) -> PeriodicOrbit:
     """Find a periodic orbit by Newton shooting and compute its Floquet multipliers.
 
     Parameters
@@ -269,8 +279,9 @@ def find_periodic_orbit(model, x0, *, params=None, period: float | None = None,
         Forced models (``forcing_period`` in the model): the exact period, a multiple of the
         forcing period (default ``periods * forcing_period``). Autonomous models: a guess of the
         period (required).
-    t0 : float
-        Initial time; for a forced model it fixes the phase of ``x0``. A shooting node at an
+    t0 : float, optional
+        Initial time (default: the model's ``[defaults] t0``, else 0, as on the command line);
+        for a forced model it fixes the phase of ``x0``. A shooting node at an
         event makes the one-period map non-smooth, so when an event of the guess (or of an
         iterate) comes within 2% (1e-4) of a period of ``t0`` the base point is moved to the
         middle of the longest smooth segment: ``orbit.t0`` is the time used.
@@ -293,6 +304,15 @@ def find_periodic_orbit(model, x0, *, params=None, period: float | None = None,
     lock_tol : float
         The event sequence is locked once the residual is below this; a later change raises.
     max_nodes : int
+    signature : Signature, sequence or str, optional
+        Lock the orbit's signature (``orbit.signature`` of an earlier orbit, or its string):
+        the orbit is then solved on that event sequence by :class:`~pwsdyn.orbits.OrbitProblem`
+        (segment start states and durations; exact Jacobians) instead of free-running
+        shooting. The guess ``(t0, x0)`` lies in the segment that the signature's first event
+        ends (``mode``, if given, must be its state); each segment is integrated in its
+        discrete state whatever surfaces it meets, so the orbit can be followed past a
+        grazing: the result then has ``admissible = False`` and the ``reason``. ``nodes``,
+        ``lock_tol`` and ``max_nodes`` do not apply.
     **options
         Integrator options of :func:`pwsdyn.simulate`; defaults here are ``method='DOP853'``,
         ``rtol=1e-12``, ``atol=1e-12``.
@@ -306,7 +326,8 @@ def find_periodic_orbit(model, x0, *, params=None, period: float | None = None,
     OrbitError
         With ``reason`` ``'singular'``, ``'phase'``, ``'equilibrium'``, ``'signature'``,
         ``'budget'``, ``'no_progress'``, ``'diverged'`` or ``'simulation'`` and the last
-        iterate as ``result`` (``converged`` False).
+        iterate as ``result`` (``converged`` False). With ``signature``: ``'signature'`` when
+        the guess does not follow the signature (a segment never reaches its event).
 
     Examples
     --------
@@ -320,7 +341,7 @@ def find_periodic_orbit(model, x0, *, params=None, period: float | None = None,
     p = model.parameter_vector(params)
     x0 = state_vector(model, x0)
     period = V.positive("period", period, allow_none=True)
-    t0 = V.number("t0", t0)
+    t0 = V.number("t0", model.defaults.get("t0", 0.0) if t0 is None else t0)
     periods = V.integer("periods", periods, lo=1, hi=MAX_PERIODS)
     if not (isinstance(nodes, str) and nodes == "auto"):
         V.integer("nodes", nodes, lo=1, hi=MAX_NODES)
@@ -334,6 +355,12 @@ def find_periodic_orbit(model, x0, *, params=None, period: float | None = None,
     T, Tf = _orbit_period(model, p, period, periods)
     autonomous = Tf is None
     V.time_window("t0", t0, T, what="one period of the orbit")
+    if signature is not None:
+        from .problem import locked_orbit
+
+        return locked_orbit(model, x0, params=params, T=T, Tf=Tf, t0=t0, mode=mode,
+                            signature=signature, phase=phase, tol=tol, max_iter=max_iter,
+                            options=options)
     N = nodes if V.is_int(nodes) else max_nodes
     V.memory("find_periodic_orbit() with these `nodes`",
              8.0 * (N * model.n_states + 1) ** 2 * 3)
@@ -422,15 +449,90 @@ def _events_near_nodes(trajs, ts, T, margin=1e-4) -> bool:
     return False
 
 
+class _Fail(Exception):
+    def __init__(self, reason, message, X, T):
+        self.reason = reason
+        self.message = message
+        self.X = X
+        self.T = T
+
+
 def _newton(sh: _Shooter, X, T, *, tol, max_iter, lock_tol, history, allow_rebase=False
             ) -> PeriodicOrbit:
+    """Newton shooting on the unknowns ``z = (x_0, ..., x_{N-1}[, T])`` with the package's
+    solver (:func:`pwsdyn.newton.newton`); what is particular to free-running shooting is in
+    the residual function (the event sequence of a trial is compared with the locked one) and
+    in ``on_accept`` (chaining the nodes' discrete states, locking the sequence, moving nodes
+    away from events)."""
     ctx, n, N = sh.ctx, sh.ctx.n, sh.N
-    locked = None
+    T_fixed = T
+    run: dict = {"locked": None}
+
+    def unpack(z):
+        Xc = [z[i * n:(i + 1) * n] for i in range(N)]
+        return Xc, (float(z[-1]) if sh.autonomous else T_fixed)
 
     def evaluate(Xc, Tc):
         trajs, ends = sh.run(Xc, Tc)
         sig = tuple(_signature_of(tr, e, ctx) for tr, e in zip(trajs, ends))
-        return trajs, ends, sig, sh.residual(Xc, Tc, trajs)
+        run.update(trajs=trajs, ends=ends, sig=sig)
+        return sh.residual(Xc, Tc, trajs)
+
+    def fun(z):
+        Xc, Tc = unpack(z)
+        if sh.autonomous and "trajs" in run and not (0.05 * sh.T < Tc < 20.0 * sh.T):
+            raise TrialRejected("the period left its range", "period")
+        saved = {k: run[k] for k in ("trajs", "ends", "sig") if k in run}
+        try:
+            r = evaluate(Xc, Tc)
+        except _SimulationFailed as exc:
+            run.update(saved)
+            raise TrialRejected(_sim_message(sh, exc, Xc), "simulation", exc) from None
+        if run["locked"] is not None and run["sig"] != run["locked"]:
+            sig = run["sig"]
+            run.update(saved)
+            raise TrialRejected("the event sequence changed", "signature", sig)
+        return r
+
+    def jac(z):
+        Xc, Tc = unpack(z)
+        return sh.jacobian(Xc, Tc, run["trajs"], run["ends"])
+
+    def jac_scale(J, sv):
+        # relative to the blocks' scale (M_i and I): a smallest singular value below 1e-9 of
+        # it is a multiplier 1 to the accuracy of the variational solution; the step is noise
+        return max(sv[0], 1.0 + max(float(np.max(np.abs(tr.jacobian))) for tr in run["trajs"]))
+
+    def norm(r, z):
+        return sh.norm(r, unpack(z)[0])
+
+    def on_accept(z, r, res):
+        Xc, Tc = unpack(z)
+        ends = run["ends"]
+        new = None
+        # discrete states must chain: interval i ends in the state node i+1 starts in
+        mism = [i for i in range(N) if ends[i] != sh.states[(i + 1) % N]]
+        if mism:
+            if run["locked"] is not None:
+                raise _Fail("signature", _sig_message(sh, mism[0], ends, history), Xc, Tc)
+            for i in mism:
+                sh.states[(i + 1) % N] = ends[i]
+            try:
+                new = evaluate(Xc, Tc)
+            except _SimulationFailed as exc:
+                raise _Fail("simulation", _sim_message(sh, exc, Xc), Xc, Tc) from None
+            res = norm(new, z)
+        if allow_rebase and _events_near_nodes(run["trajs"], sh.times(Tc), Tc):
+            raise _Rebase(Xc, Tc)
+        if run["locked"] is None and res <= lock_tol:
+            run["locked"] = run["sig"]
+        elif run["locked"] is not None and run["sig"] != run["locked"]:
+            raise _Fail("signature", "the event sequence changed during the Newton iteration "
+                        f"after it had converged to {res:.2e}: the orbit is near a grazing, "
+                        f"sliding or chattering-count change and its signature is not "
+                        f"structurally stable. Locked: {_fmt_sig(run['locked'])}; now: "
+                        f"{_fmt_sig(run['sig'])}", Xc, Tc)
+        return new
 
     def fail(reason, msg, Xc, Tc):
         res = None
@@ -440,104 +542,55 @@ def _newton(sh: _Shooter, X, T, *, tol, max_iter, lock_tol, history, allow_rebas
             res = None
         raise OrbitError(reason, msg, result=res, history=history)
 
+    z0 = np.concatenate([np.concatenate(X)] + ([np.array([T])] if sh.autonomous else []))
     try:
-        trajs, ends, sig, r = evaluate(X, T)
-    except _SimulationFailed as exc:
-        fail("simulation", _sim_message(sh, exc, X), X, T)
-    for it in range(max_iter + 1):
-        # discrete states must chain: interval i ends in the state node i+1 starts in
-        mism = [i for i in range(N) if ends[i] != sh.states[(i + 1) % N]]
-        if mism:
-            if locked is not None:
-                fail("signature", _sig_message(sh, mism[0], ends, history), X, T)
-            for i in mism:
-                sh.states[(i + 1) % N] = ends[i]
-            trajs, ends, sig, r = evaluate(X, T)
-        res = sh.norm(r, X)
-        history.append(res)
-        if allow_rebase and _events_near_nodes(trajs, sh.times(T), T):
-            raise _Rebase(X, T)
-        if locked is None and res <= lock_tol:
-            locked = sig
-        elif locked is not None and sig != locked:
-            fail("signature", "the event sequence changed during the Newton iteration after it "
-                 f"had converged to {res:.2e}: the orbit is near a grazing, sliding or "
-                 f"chattering-count change and its signature is not structurally stable. "
-                 f"Locked: {_fmt_sig(locked)}; now: {_fmt_sig(sig)}", X, T)
-        if res <= tol:
-            if sh.autonomous:
-                f0 = ctx.field(sh.t0, X[0], sh.states[0], sh.gain)
-                if np.max(np.abs(f0)) <= 1e-8 * (1.0 + np.max(np.abs(X[0]))):
-                    fail("equilibrium", f"Newton converged to an equilibrium (the vector field "
-                         f"vanishes at x0 = {np.asarray(X[0]).tolist()}), not to a periodic "
-                         f"orbit: the guess is not near one", X, T)
-            return _build_orbit(sh, X, T, history, converged=True, trajs_sig=sig)
-        if it == max_iter:
-            break
-        J = sh.jacobian(X, T, trajs, ends)
-        if not np.all(np.isfinite(J)):
-            fail("simulation", "the variational solution is not finite", X, T)
-        sv = np.linalg.svd(J, compute_uv=False)
-        # relative to the blocks' scale (M_i and I): a smallest singular value below 1e-9 of
-        # it is a multiplier 1 to the accuracy of the variational solution; the step is noise
-        scale = max(sv[0], 1.0 + max(float(np.max(np.abs(tr.jacobian))) for tr in trajs))
-        if not sv[-1] > 1e-9 * scale:
-            what = ("a Floquet multiplier is 1 (the one-period map minus the identity is "
-                    "singular)" if not sh.autonomous else
-                    "a nontrivial multiplier is 1, or the phase condition is tangent to the "
-                    "flow at the current iterate")
-            fail("singular", f"singular Newton matrix (condition {sv[0] / max(sv[-1], 1e-300):.1e}"
-                 f") at iteration {it}: {what}; residual {res:.3e}", X, T)
-        z = np.concatenate([np.concatenate(X)] + ([np.array([T])] if sh.autonomous else []))
-        dz = np.linalg.solve(J, -r)
-        scale = 1.0 + np.max(np.abs(z))
-        if not np.all(np.isfinite(dz)) or np.max(np.abs(dz)) > 1e3 * scale:
-            fail("diverged", f"the Newton step ({np.max(np.abs(dz)):.3e}) is far larger than the "
-                 f"state ({scale:.3e}) at iteration {it}: the guess is not near a periodic "
-                 f"orbit", X, T)
-        # backtracking: full steps near the solution (quadratic convergence), halved steps
-        # away from it; a trial that breaks the locked signature or fails to integrate is
-        # treated like an increase of the residual
-        accepted = False
-        rejected_sig = None
-        lam = 1.0
-        for _ in range(8):
-            zt = z + lam * dz
-            Xt = [zt[i * n:(i + 1) * n] for i in range(N)]
-            Tt = float(zt[-1]) if sh.autonomous else T
-            if sh.autonomous and not (0.05 * sh.T < Tt < 20.0 * sh.T):
-                lam *= 0.5
-                continue
-            try:
-                tt, et, st, rt = evaluate(Xt, Tt)
-            except _SimulationFailed:
-                lam *= 0.5
-                continue
-            if locked is not None and st != locked:
-                rejected_sig = st
-                lam *= 0.5
-                continue
-            if sh.norm(rt, Xt) < res or sh.norm(rt, Xt) <= tol:
-                X, T, trajs, ends, sig, r = Xt, Tt, tt, et, st, rt
-                accepted = True
-                break
-            lam *= 0.5
-        if not accepted:
-            if rejected_sig is not None:
-                fail("signature", f"every Newton step from the iterate with residual {res:.2e} "
-                     f"changes the event sequence, which was locked below lock_tol = "
-                     f"{lock_tol:.1e}: the orbit near this guess has another signature, or it "
-                     f"is at a grazing, sliding or chattering-count bifurcation. Locked: "
-                     f"{_fmt_sig(locked)}; proposed: {_fmt_sig(rejected_sig)}", X, T)
-            if sh.autonomous and not (0.05 * sh.T < float(z[-1] + dz[-1]) < 20.0 * sh.T):
-                fail("diverged", f"the period ran away (Newton proposes T = "
-                     f"{float(z[-1] + dz[-1]):.6g} from the guess {sh.T:.6g}): the guess is "
-                     f"not near a periodic orbit", X, T)
-            fail("no_progress", f"no Newton step (down to 1/128 of the full step) reduced the "
-                 f"residual {res:.3e} at iteration {it}: the guess is not near a periodic orbit "
-                 f"(or the orbit is at a grazing/sliding bifurcation)", X, T)
-    fail("budget", f"no convergence in {max_iter} Newton iterations (residual {history[-1]:.3e}, "
-         f"tolerance {tol:.1e}); residuals: " + " ".join(f"{h:.2e}" for h in history), X, T)
+        out = newton(fun, z0, jac=jac, tol=tol, max_iter=max_iter, norm=norm, halvings=8,
+                     singular_rtol=1e-9, jac_scale=jac_scale, max_step_ratio=1e3,
+                     on_accept=on_accept, history=history)
+    except _Fail as f:
+        fail(f.reason, f.message, f.X, f.T)
+    Xc, Tc = unpack(out.x)
+    if out.converged:
+        if sh.autonomous:
+            f0 = ctx.field(sh.t0, Xc[0], sh.states[0], sh.gain)
+            if np.max(np.abs(f0)) <= 1e-8 * (1.0 + np.max(np.abs(Xc[0]))):
+                fail("equilibrium", f"Newton converged to an equilibrium (the vector field "
+                     f"vanishes at x0 = {np.asarray(Xc[0]).tolist()}), not to a periodic "
+                     f"orbit: the guess is not near one", Xc, Tc)
+        return _build_orbit(sh, Xc, Tc, history, converged=True, trajs_sig=run["sig"])
+    res = history[-1] if history else float("nan")
+    it = out.iterations
+    if out.reason == "simulation":
+        fail("simulation", out.message, Xc, Tc)
+    if out.reason == "nonfinite":
+        fail("simulation", "the variational solution is not finite", Xc, Tc)
+    if out.reason == "singular":
+        what = ("a Floquet multiplier is 1 (the one-period map minus the identity is "
+                "singular)" if not sh.autonomous else
+                "a nontrivial multiplier is 1, or the phase condition is tangent to the "
+                "flow at the current iterate")
+        fail("singular", f"singular Newton matrix at iteration {it}: {what}; {out.message}",
+             Xc, Tc)
+    if out.reason == "diverged":
+        fail("diverged", f"{out.message}: the guess is not near a periodic orbit", Xc, Tc)
+    if out.reason == "no_progress":
+        sigs = [e.data for e in out.rejections if e.reason == "signature"]
+        if sigs:
+            fail("signature", f"every Newton step from the iterate with residual {res:.2e} "
+                 f"changes the event sequence, which was locked below lock_tol = "
+                 f"{lock_tol:.1e}: the orbit near this guess has another signature, or it "
+                 f"is at a grazing, sliding or chattering-count bifurcation. Locked: "
+                 f"{_fmt_sig(run['locked'])}; proposed: {_fmt_sig(sigs[0])}", Xc, Tc)
+        if sh.autonomous and out.step is not None and \
+                not (0.05 * sh.T < float(out.x[-1] + out.step[-1]) < 20.0 * sh.T):
+            fail("diverged", f"the period ran away (Newton proposes T = "
+                 f"{float(out.x[-1] + out.step[-1]):.6g} from the guess {sh.T:.6g}): the guess "
+                 f"is not near a periodic orbit", Xc, Tc)
+        fail("no_progress", f"no Newton step (down to 1/128 of the full step) reduced the "
+             f"residual {res:.3e} at iteration {it}: the guess is not near a periodic orbit "
+             f"(or the orbit is at a grazing/sliding bifurcation)", Xc, Tc)
+    fail("budget", f"no convergence in {max_iter} Newton iterations (residual {res:.3e}, "
+         f"tolerance {tol:.1e}); residuals: " + " ".join(f"{h:.2e}" for h in history), Xc, Tc)
 
 
 def _fmt_sig(sig) -> str:

@@ -19,7 +19,8 @@ import sympy as sp
 
 from .. import _validate as V
 from ..errors import ArgumentError
-from ..integrate._kernel import REGULAR, SLIDE, STICK, state_field
+from ..integrate._load import kernel
+from ..integrate._start import REGULAR, SLIDE, STICK
 from ..integrate.simulate import kernel_tables
 from ..model import compile_model
 from ..model.codegen import W_F, W_G, W_GT, W_GX, W_H, W_HT, W_HX
@@ -121,9 +122,10 @@ class ModelContext:
     def field(self, t: float, x, state: DiscreteState, sliding_gain: float = 0.0) -> np.ndarray:
         """The vector field the kernel integrates in discrete state ``state``."""
         out = np.zeros(self.n)
-        state_field(self.cm.evaluate, self._pv, int(state.kind), int(state.index),
-                    int(state.mode), self.nm, float(t), np.ascontiguousarray(x, dtype=float),
-                    self.etab, self.stab, float(sliding_gain), out)
+        kernel().state_field(self.cm.evaluate, self._pv, int(state.kind), int(state.index),
+                             int(state.mode), self.nm, float(t),
+                             np.ascontiguousarray(x, dtype=float), self.etab, self.stab,
+                             float(sliding_gain), out)
         return out
 
     # ---- names ---------------------------------------------------------------------------

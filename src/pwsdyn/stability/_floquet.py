@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from .. import _validate as V
 from ..errors import ArgumentError
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 
 def _sorted(values) -> np.ndarray:
@@ -29,7 +34,8 @@ def section_basis(normal) -> np.ndarray:
     return q[:, 1:len(nv)]
 
 
-def floquet_multipliers(monodromy, *, flow_direction=None, section_normal=None) -> np.ndarray:
+def floquet_multipliers(monodromy: ArrayLike, *, flow_direction: ArrayLike | None = None,
+                        section_normal: ArrayLike | None = None) -> np.ndarray:
     """Nontrivial Floquet multipliers, sorted by decreasing modulus.
 
     Parameters

@@ -18,7 +18,9 @@ saltation matrices, no projection: the return time is fixed).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -28,6 +30,9 @@ from ..integrate.simulate import integrator_options, _simulate_compiled, state_v
 from ..integrate.trajectory import EVENT_KINDS
 from ._context import (DiscreteState, ModelContext, check_state_name, event_states,
                        forcing_period, initial_state, trajectory_start_state)
+
+if TYPE_CHECKING:
+    from .._typing import ModelLike, StateLike
 
 #: Kinds that count as a crossing of an event section / of a switch section.
 _EVENT_SECTION_KINDS = ("impact", "transition")
@@ -140,9 +145,10 @@ def section_spec(ctx: ModelContext, section: str):
     return mask, ref, surface, kinds
 
 
-def poincare_map(model, x0, section: str, *, params=None, t0: float = 0.0, returns: int = 1,
-                 side: str = "after", mode=None, t_max: float | None = None,
-                 **options) -> PoincareResult:
+def poincare_map(model: ModelLike, x0: StateLike, section: str, *,
+                 params: Mapping[str, float] | None = None, t0: float = 0.0,
+                 returns: int = 1, side: str = "after", mode: str | None = None,
+                 t_max: float | None = None, **options: Any) -> PoincareResult:
     """Evaluate a Poincaré map and its Jacobian (thesis eq. 2.25).
 
     Parameters

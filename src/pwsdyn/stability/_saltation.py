@@ -34,13 +34,20 @@ variational result is marked singular, never silently finite without its singula
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from .. import _validate as V
 from ..errors import ArgumentError
-from ..integrate._kernel import GRAZING_RTOL, REGULAR, SLIDE, chatter_saltation
+from ..integrate._load import kernel
+from ..integrate._start import REGULAR, SLIDE
 from ._context import (DiscreteState, ModelContext, check_state_name, event_states,
                        trajectory_start_state)
+
+if TYPE_CHECKING:
+    from .._typing import ModelLike, StateLike
 
 #: Event kinds that have a projected (eq. 2.36) saltation matrix.
 PROJECTABLE_KINDS = ("impact", "transition", "crossing", "slide_start")
@@ -68,9 +75,9 @@ def _chatter_full(ctx: ModelContext, name: str, t: float, x_before, mode: int,
     """Full saltation matrix of the complete-chattering map of impact event ``name`` entered
     from mode ``mode`` at ``(t, x_before)``: the kernel's function, the matrix it applies."""
     S = np.zeros((ctx.n, ctx.n))
-    chatter_saltation(ctx.cm.evaluate, ctx._pv, ctx.event_index(name), int(mode), ctx.nm,
-                      float(t), np.ascontiguousarray(x_before, dtype=float), ctx.etab, ctx.stab,
-                      float(sliding_gain), S)
+    kernel().chatter_saltation(ctx.cm.evaluate, ctx._pv, ctx.event_index(name), int(mode),
+                               ctx.nm, float(t), np.ascontiguousarray(x_before, dtype=float),
+                               ctx.etab, ctx.stab, float(sliding_gain), S)
     return S
 
 
@@ -100,7 +107,7 @@ def _saltation_pair(ctx: ModelContext, kind: str, name: str, t: float, x_before,
     hx = ctx.h_x(k, t, x_before)
     den = ctx.h_t(k, t, x_before) + hx @ f_in
     scale = np.linalg.norm(hx) * max(np.linalg.norm(f_in), 1e-300)
-    if not np.isfinite(den) or abs(den) <= GRAZING_RTOL * scale:
+    if not np.isfinite(den) or abs(den) <= kernel().GRAZING_RTOL * scale:
         raise ArgumentError(f"{kind} {name!r} at t={t:.17g} is grazing (h_t + h_x f = {den:.3e}, "
                             f"|h_x| |f| = {scale:.3e}): its saltation matrix is unbounded (a "
                             f"simulation with variational=True gives NaN there)")
@@ -109,7 +116,8 @@ def _saltation_pair(ctx: ModelContext, kind: str, name: str, t: float, x_before,
     return full, proj
 
 
-def saltation_matrix(model, event: str, t: float, x, *, params=None, mode=None,
+def saltation_matrix(model: ModelLike, event: str, t: float, x: StateLike, *,
+                     params: Mapping[str, float] | None = None, mode: str | None = None,
                      form: str = "full", sliding: str = "convex",
                      sliding_gain: float = 0.0, chatter: bool = False) -> np.ndarray:
     """Saltation matrix of a model event or switch at a point of its surface.

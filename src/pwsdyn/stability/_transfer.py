@@ -11,11 +11,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import reduce
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import ArgumentError
 from ._saltation import _check_form, _check_trajectory, event_saltations
+
+if TYPE_CHECKING:
+    from ..integrate.trajectory import Trajectory
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,7 +91,7 @@ def segments(traj) -> list:
     return out
 
 
-def monodromy(traj, form: str = "full") -> np.ndarray:
+def monodromy(traj: Trajectory, form: str = "full") -> np.ndarray:
     """Ordered product of the transfer matrices of a trajectory.
 
     Parameters
