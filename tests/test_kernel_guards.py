@@ -127,7 +127,11 @@ def test_nonfinite_input_does_not_hang(case):
     ("sqrt(x)", -1.0),                  # NaN
     ("exp(x) - exp(2*x)", 1000.0),      # inf - inf
     ("log(x) - log(2*x)", 0.0),         # -inf - -inf
-], ids=["div0", "log0", "sqrt-neg", "inf-inf", "log0-log0"])
+    # numba raises ZeroDivisionError for 0.0**-k whatever the error model: the generated code
+    # writes 1.0/x**k
+    ("x**-2", 0.0),
+    ("(x - a)**(-3) + 1", 0.0),
+], ids=["div0", "log0", "sqrt-neg", "inf-inf", "log0-log0", "pow-neg", "pow-neg-shift"])
 def test_nonfinite_field_at_start(field, x0):
     model = _model([field], params={"a": 0.0} if "a" in field else None)
     traj = _run(model, [x0], 0.0, 1.0)
@@ -441,3 +445,23 @@ def test_property_t_end_near_accumulation(y0, offset, ratio):
     _check_ball(ball, traj, t_end)
     if t_end < ball.t_acc:
         assert all(ev.t_after <= t_end for ev in traj.events)
+
+
+def test_surface_and_jacobian_singular_at_the_start_time():
+    """A surface ``atan(1/t)`` is pi/2 at t = 0 and its time derivative has ``t**-2`` terms
+    (inf * 0 there): the run goes on (the surface never reaches zero) instead of raising
+    ZeroDivisionError out of the kernel (found by the model fuzzer)."""
+    model = {"name": "singular-surface", "states": ["x"], "modes": {"m": {"x": "1"}},
+             "events": [{"name": "e", "surface": "atan(1/t)", "reset": {"x": "x"}}]}
+    traj = pwsdyn.simulate(model, {"x": 0.5}, (0.0, 0.5))
+    assert traj.status is Status.SUCCESS and len(traj.events) == 0
+    assert abs(traj.x[-1, 0] - 1.0) < 1e-12
+
+
+def test_map_with_a_negative_power_at_zero_stops_as_nonfinite():
+    """The same guard in generated map code: ``x**-2`` at x = 0 is inf, and the iteration
+    stops there (NaN afterwards) instead of raising ZeroDivisionError."""
+    m = pwsdyn.load_model({"name": "pow-map", "kind": "map", "states": ["x"],
+                           "pieces": [{"name": "a", "map": {"x": "x**-2"}}]})
+    xs, pieces = pwsdyn.model.maps.iterate(m, {"x": 0.0}, 3)
+    assert np.isinf(xs[1, 0]) or np.isnan(xs[1:, 0]).all()

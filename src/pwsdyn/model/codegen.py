@@ -68,7 +68,7 @@ EVALUATE_SIGNATURE = types.void(types.int64, types.int64, types.float64, types.f
                                 types.float64[::1], types.float64[::1])
 EVALUATE_TYPE = types.FunctionType(EVALUATE_SIGNATURE)
 
-_CODEGEN_VERSION = "6"
+_CODEGEN_VERSION = "7"
 
 #: Largest generated module (characters) handed to the compiler: numba's time grows faster
 #: than the source (40,000 characters, sixteen split modes, compile in about 7 s; the largest
@@ -117,6 +117,15 @@ class _Printer(PythonCodePrinter):
 
     def _print_BooleanFalse(self, expr):
         return "False"
+
+    # numba raises ZeroDivisionError for ``0.0 ** -k`` (a negative integer power) whatever the
+    # error model, where ``1.0 / 0.0 ** k`` is inf: a model that divides by zero somewhere
+    # must get a non-finite value the integrator reports, not an exception out of the kernel
+    def _print_Pow(self, expr, rational=False):
+        base, ex = expr.args
+        if ex.is_Integer and ex < -1:
+            return f"(1.0/({self._print(sp.Pow(base, -ex, evaluate=False))}))"
+        return super()._print_Pow(expr, rational=rational)
 
 
 def _clean(e):

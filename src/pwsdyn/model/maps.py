@@ -48,7 +48,7 @@ MAP_STEP_SIGNATURE = types.int64(types.float64[::1], types.float64[::1], types.f
                                  types.float64[::1], types.int64)
 MAP_STEP_TYPE = types.FunctionType(MAP_STEP_SIGNATURE)
 
-_MAP_CODEGEN_VERSION = "2"
+_MAP_CODEGEN_VERSION = "3"
 _NAME_OK = "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ_0123456789"
 _TOP_KEYS = {"name", "kind", "description", "source", "reference", "states", "parameters",
              "definitions", "map", "pieces", "defaults", "notes", "units", "descriptions"}
