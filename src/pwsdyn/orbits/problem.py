@@ -1018,7 +1018,7 @@ class OrbitProblem:
             vals = np.array([fn(tt, x) for tt, x in zip(ts, Y)])
             band = ADMISSIBILITY_RTOL * scale * fn.gscale
             if what == "side":
-                worst = _worst(fn, tr, ts, vals, rule, n)
+                worst = _worst(fn, tr, ts, vals, rule, n, limit=-band)
                 if rule * worst[1] < -band:
                     out.append(f"segment {i} ({self.state_names[i]}) leaves the {label}: "
                                f"value {worst[1]:.3e} at t = {worst[0]:.10g}")
@@ -1026,7 +1026,7 @@ class OrbitProblem:
             # an event of the model: does it fire inside the segment?
             e = m.events[rule]
             if e.kind == "impact":
-                worst = _worst(fn, tr, ts, vals, +1, n)
+                worst = _worst(fn, tr, ts, vals, +1, n, limit=-band)
                 if worst[1] < -band and _guard(ctx, rule, worst[0], tr(worst[0])[:n]):
                     out.append(f"segment {i} ({self.state_names[i]}) passes through the "
                                f"constraint of impact event {e.name!r}: h = {worst[1]:.3e} < 0 "
@@ -1647,9 +1647,33 @@ def _sample_times(tr) -> np.ndarray:
     return np.unique(np.append(inner, t[-1]))
 
 
-def _worst(fn, tr, ts, vals, sign, n):
+def _parabola_min(t3, g3, a, b) -> float:
+    """Minimum over ``[a, b]`` of the parabola through three samples ``(t3, g3)``."""
+    t0, t1, t2 = (float(v) for v in t3)
+    g0, g1, g2 = (float(v) for v in g3)
+    d1 = (g1 - g0) / (t1 - t0)
+    d2 = (g2 - g1) / (t2 - t1)
+    c = (d2 - d1) / (t2 - t0)                      # p(t) = g1 + m (t - t1) + c (t - t1)^2
+    m = d1 + c * (t1 - t0)
+
+    def p(t):
+        return g1 + m * (t - t1) + c * (t - t1) ** 2
+    vals = [p(a), p(b)]
+    if c > 0:
+        tv = t1 - m / (2 * c)
+        if a < tv < b:
+            vals.append(p(tv))
+    return min(vals)
+
+
+def _worst(fn, tr, ts, vals, sign, n, limit=None):
     """``(t, value)`` of the most negative ``sign * fn`` over the samples, each sampled local
-    minimum refined by golden-section search on the dense output."""
+    minimum refined by golden-section search on the dense output.
+
+    With ``limit``, only minima that could reach below it are refined: the parabola through
+    a sampled minimum and its neighbours predicts the minimum between them, and a minimum
+    whose prediction stays above ``limit`` by four times its own correction is left (the
+    refinement, 40 evaluations of the dense output, costs more than the rest of a check)."""
     g = sign * vals
     k = int(np.argmin(g))
     best = (float(ts[k]), float(vals[k]))
@@ -1659,6 +1683,12 @@ def _worst(fn, tr, ts, vals, sign, n):
         b = ts[min(i + 1, len(ts) - 1)]
         if b <= a:
             continue
+        if limit is not None and len(g) >= 3:
+            j = min(max(i, 1), len(g) - 2)
+            pred = _parabola_min(ts[j - 1:j + 2], g[j - 1:j + 2], a, b)
+            corr = abs(g[i] - pred)
+            if pred - 4.0 * corr - 1e-3 * (abs(g[i]) + corr) > limit:
+                continue
         phi = (math.sqrt(5.0) - 1.0) / 2.0
 
         def val(tt):
