@@ -123,3 +123,66 @@ def io_orbit(which: str, model: str = "impact-oscillator"):
     t_guess = cf["t0"] + 0.3 * cf["T"]
     guess = closed_form_state(cf, sigma, r, t_guess) + np.array([0.01, -0.01])
     return pwsdyn.find_periodic_orbit(model, guess, params=params, t0=t_guess)
+
+
+def io_one_impact(omega, root, eps=IO["eps"], sigma=IO["sigma"], r=IO["r"]):
+    """The one-impact orbit of the zoo impact oscillator on one root of the quadratic of the
+    module docstring (``root = +1``: the larger impact velocity -- the stable orbit of ``IO``
+    -- ``-1``: the smaller, the saddle), continuous in the parameters up to the fold where the
+    discriminant vanishes. Returns ``(v, t0, M, disc)``: impact velocity, impact time in
+    ``[0, T)``, the one-period matrix ``M = S E`` from just after the impact, and the
+    discriminant (its zero is the fold)."""
+    T = 2 * np.pi / omega
+    A = np.array([[0.0, 1.0], [-1.0, -eps]])
+    E = expm(A * T)
+    I2 = np.eye(2)
+    X, Y = np.linalg.solve(np.array([[1 - omega**2, -eps * omega],
+                                     [eps * omega, 1 - omega**2]]), [1.0, 0.0])
+    R2 = X * X + Y * Y
+    b = np.linalg.solve(I2 - E, (I2 + r * E) @ np.array([0.0, 1.0]))
+    qa, qb, qc = b[0] ** 2 + (b[1] / omega) ** 2, 2 * sigma * b[0], sigma**2 - R2
+    disc = qb * qb - 4 * qa * qc
+    v = (-qb + root * np.sqrt(max(disc, 0.0))) / (2 * qa)
+    a1, a2 = sigma + v * b[0], v * b[1] / omega
+    s, co = (X * a1 - Y * a2) / R2, (Y * a1 + X * a2) / R2
+    t0 = (np.arctan2(s, co) % (2 * np.pi)) / omega
+    F = np.sin(omega * t0)
+    f_in = np.array([v, F - sigma - eps * v])
+    f_out = np.array([-r * v, F - sigma + eps * r * v])
+    gx, hx = np.diag([1.0, -r]), np.array([-1.0, 0.0])
+    S = gx + np.outer(f_out - gx @ f_in, hx) / (hx @ f_in)
+    return float(v), float(t0), S @ E, float(disc)
+
+
+#: Zoo ``bouncing-ball`` at the table frequency of its defaults.
+BALL = dict(g=9.81, e=0.8, omega=2 * np.pi)
+
+
+def ball_period_one(A, g=BALL["g"], e=BALL["e"], omega=BALL["omega"]):
+    """The period-one orbit of a ball on a table ``s = A sin(omega t)`` (one impact per table
+    period ``T``, restitution ``v -> sdot - e (v - sdot)``) and the Jacobian of its
+    impact-to-impact map, in closed form.
+
+    The ball leaves the table with velocity ``u`` and meets it again after ``T`` at the same
+    phase: ``u T - g T^2 / 2 = 0``, ``u = g T / 2``, arriving with ``u - g T = -u``; the reset
+    gives ``u = (1 + e) sdot + e u``, so ``sdot = A omega cos(omega t) = g T (1 - e) /
+    (2 (1 + e))`` at impact -- the root with ``sin(omega t) > 0`` (the table above its mean
+    position, decelerating) is the one stable at small ``A``.
+
+    The map ``(t, u) -> (t', u')`` after one impact: ``t'`` the next zero of
+    ``A sin(omega t) + u (t' - t) - g (t' - t)^2 / 2 - A sin(omega t')``, ``u' = (1 + e)
+    sdot(t') - e (u - g (t' - t))``; its Jacobian by implicit differentiation. Returns
+    ``(t, u, J)``.
+    """
+    T = 2 * np.pi / omega
+    t = np.arccos(g * T * (1 - e) / (2 * (1 + e) * A * omega)) / omega
+    u = g * T / 2
+    tp, D = t + T, T
+    sd = lambda s: A * omega * np.cos(omega * s)          # noqa: E731
+    sdd = lambda s: -A * omega**2 * np.sin(omega * s)     # noqa: E731
+    G_tp = (u - g * D) - sd(tp)
+    G_t = sd(t) - u + g * D
+    dtp_dt, dtp_du = -G_t / G_tp, -D / G_tp
+    du_dt = (1 + e) * sdd(tp) * dtp_dt + e * g * (dtp_dt - 1)
+    du_du = (1 + e) * sdd(tp) * dtp_du - e * (1 - g * dtp_du)
+    return float(t), float(u), np.array([[dtp_dt, dtp_du], [du_dt, du_du]])

@@ -31,12 +31,17 @@ _LAZY = {
     "SectionNotReachedError": "stability", "floquet_multipliers": "stability",
     "monodromy": "stability", "poincare_map": "stability", "saltation_matrix": "stability",
     "basins": "explore", "lyapunov_spectrum": "explore", "sweep": "explore",
+    "Branch": "continuation", "continue_bifurcation": "continuation",
+    "continue_equilibrium": "continuation",
+    "continue_orbit": "continuation", "load_branch": "continuation",
 }
 
 __all__ = ["ArgumentError", "ExpressionError", "ModelError", "OutputExistsError", "PwsdynError",
            "StoreError", "SolveError", "Status", *_LAZY]
 
 if TYPE_CHECKING:  # what static checkers and IDEs see; at run time see __getattr__
+    from .continuation import (Branch, continue_bifurcation, continue_equilibrium,
+                               continue_orbit, load_branch)
     from .explore import basins, lyapunov_spectrum, sweep
     from .integrate import EventRecord, Trajectory, simulate
     from .model import Model, compile_model, load_model, zoo_names

@@ -962,6 +962,153 @@ def orbit_cmd(model, params, sets, x0, t0, period, periods, transient, mode, nod
             _fail(problem)
 
 
+@main.command("continue")
+@click.argument("model", metavar="MODEL|FILE")
+@_sweep_param_options
+@click.option("--from", "start", type=float, required=True,
+              help="Parameter value where the branch starts (the starting orbit is found "
+                   "there).")
+@click.option("--to", "stop", type=float, required=True,
+              help="Parameter value towards which the branch is followed (it may turn back at "
+                   "folds; it ends on the boundary of [--from, --to] or after --max-points).")
+@click.option("--x0", "x0", multiple=True, metavar="VALUES",
+              help="Guess of the starting orbit's state at t0 (or of the equilibrium): values "
+                   "in state order or NAME=VALUE pairs. Default: settle from the model's "
+                   "[defaults] x0 first, then shoot.")
+@click.option("--t0", type=float, default=None, help="Time of x0 (default the model's).")
+@click.option("--periods", type=int, default=None,
+              help="Forced models: the starting orbit's period in forcing periods (default: "
+                   "from the recurrence of a transient run, else 1).")
+@click.option("--period", type=float, default=None,
+              help="Autonomous models: a guess of the period.")
+@click.option("--transient", type=float, default=None,
+              help="Simulate this long before shooting (default: the model's t_end without "
+                   "--x0).")
+@click.option("--equilibrium", is_flag=True,
+              help="Continue an equilibrium of the initial mode instead of a periodic orbit.")
+@click.option("--ds", type=float, default=None,
+              help="First step in arclength (default min(0.02, |to - from| / 100)).")
+@click.option("--max-points", "max_points", type=int, default=200, show_default=True,
+              help="Most points on the branch.")
+@click.option("--rtol", type=float, default=None, help="Relative tolerance (default 1e-12).")
+@click.option("--atol", type=float, default=None, help="Absolute tolerance (default 1e-12).")
+@_method_option("DOP853")
+@click.option("--no-progress", "no_progress", is_flag=True, help="No progress bar.")
+@click.option("--out", "out", type=click.Path(dir_okay=False), default=None,
+              help="Write the branch to this NetCDF file.")
+@click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
+              help="Write the bifurcation diagram (stable solid, unstable dashed, not "
+                   "admissible dotted, special points labelled).")
+@click.option("--state", default=None, help="State plotted (default: the one that varies most).")
+@click.option("--force", is_flag=True, help=_FORCE_HELP)
+def continue_cmd(model, params, sets, start, stop, x0, t0, periods, period, transient,
+                 equilibrium, ds, max_points, rtol, atol, method, no_progress, out, plot, state,
+                 force):
+    """Follow a periodic orbit (or an equilibrium) of MODEL in the parameter --param NAME by
+    pseudo-arclength continuation, from --from towards --to.
+
+    Without --x0 the starting orbit is found as `pwsdyn orbit` finds it: a transient run
+    from the model's defaults, then Newton shooting. Folds (LP), period doublings (PD),
+    Neimark-Sacker points (NS), branch points (BP) and, for equilibria, Hopf points (HB) are
+    located and printed with their multipliers (eigenvalues).
+
+    \b
+    Examples:
+      pwsdyn continue impact-oscillator --param omega --from 2.8 --to 4.6 \\
+          -p eps=0.1 -p sigma=-0.5 --out branch.nc --plot branch.png
+      pwsdyn continue bouncing-ball --param A --from 0.224 --to 0.32 --plot ball.png
+    """
+    import numpy as np
+
+    import pwsdyn
+    from .errors import ModelError, PwsdynError
+    from .orbits import OrbitError, PeriodicOrbit, find_periodic_orbit
+
+    named = list(dict.fromkeys(v.strip() for v in params if "=" not in v))
+    if len(named) != 1:
+        raise click.UsageError("name the continued parameter once: --param NAME")
+    param = named[0]
+    params = [v for v in params if "=" in v]
+    if start == stop:
+        raise click.BadParameter("--from and --to must differ", param_hint="--to")
+    if max_points < 2:
+        raise click.BadParameter(f"must be at least 2, got {max_points}",
+                                 param_hint="--max-points")
+    _check_outputs(force, [("--out", out, "data"), ("--plot", plot, "figure")])
+    cli_params, hints = _all_params(params, sets)
+    cli_x0 = _parse_x0(x0)
+    try:
+        mdl = pwsdyn.load_model(model)
+    except ModelError as exc:
+        _fail(exc)
+    if param not in mdl.parameters:
+        raise click.BadParameter(f"unknown parameter {param!r} for model {mdl.name!r}; "
+                                 f"parameters are {list(mdl.parameters)}", param_hint="--param")
+    _check_params(mdl, cli_params, hints)
+    if cli_x0 is not None:
+        _check_x0(mdl, cli_x0)
+    all_params = {**mdl.parameters, **cli_params, param: start}
+    x0_val, t0, t_end = _run_defaults(mdl, cli_x0, t0, None)
+    span = (min(start, stop), max(start, stop))
+    step = ds if ds is not None else min(0.02, abs(stop - start) / 100.0)
+    step = abs(step) if stop > start else -abs(step)
+    options = {}
+    for key, val in (("rtol", rtol), ("atol", atol),
+                     ("method", _method_name(method) if method else None)):
+        if val is not None:
+            options[key] = val
+    try:
+        if equilibrium:
+            branch = pwsdyn.continue_equilibrium(mdl, x0_val, param, span=span, ds=step,
+                                                 max_points=max_points, params=all_params,
+                                                 progress=not no_progress)
+        else:
+            autonomous = mdl.forcing_period is None
+            if transient is None and period is None and (autonomous or not cli_x0):
+                transient = t_end - t0
+            if transient:
+                traj = pwsdyn.simulate(mdl, x0_val, (t0, t0 + transient), params=all_params,
+                                       **{k: v for k, v in options.items() if k != "method"})
+                orbit = PeriodicOrbit.from_trajectory(traj, period=period, periods=periods,
+                                                      **options)
+            else:
+                orbit = find_periodic_orbit(mdl, x0_val, params=all_params, period=period,
+                                            t0=t0, periods=periods or 1, **options)
+            _echo(f"start       orbit of period {_fmt(orbit.period)} at {param} = "
+                  f"{_fmt(start)}, {orbit.signature}, "
+                  f"{'stable' if orbit.stable else 'unstable'}")
+            branch = pwsdyn.continue_orbit(mdl, orbit, param, span=span, ds=step,
+                                           max_points=max_points, progress=not no_progress,
+                                           **options)
+    except OrbitError as exc:
+        _fail(f"no starting orbit ({exc.reason}): {exc}")
+    except (PwsdynError, ValueError, TypeError) as exc:
+        _fail(exc)
+    vals = branch.values
+    _echo(f"model       {mdl.name} (hash {mdl.hash})")
+    _echo(f"branch      {branch.kind}, {len(branch)} points, {param} in "
+          f"[{_fmt(vals.min())}, {_fmt(vals.max())}]; {int(np.sum(branch.stable))} stable, "
+          f"{int(np.sum(~branch.admissible))} not admissible")
+    for sp in branch.special_points:
+        if sp.kind == "EP":
+            continue
+        spec = sp.multipliers if sp.multipliers is not None else sp.eigenvalues
+        what = "multipliers" if sp.multipliers is not None else "eigenvalues"
+        _echo(f"{sp.kind:<11} {param} = {_fmt(sp.value)}; {what} "
+              + ", ".join(f"{complex(z).real:.6g}{complex(z).imag:+.6g}j" for z in spec))
+    _echo(f"stopped     {branch.stop_reason}")
+    if out is not None:
+        _save_data(branch.to_dataset(), out, force)
+    if plot is not None:
+        from .plot import plot_branch
+
+        problem = _write_figures([(plot, lambda: plot_branch(branch, y=state, path=plot,
+                                                             overwrite=force))],
+                                 out, branch.to_dataset)
+        if problem is not None:
+            _fail(problem)
+
+
 def _print_summary(traj):
     model = traj.model
     counts = traj.event_counts()

@@ -1136,3 +1136,113 @@ def plot_basins(ds: xr.Dataset, path: str | Path | None = None, *, overwrite: bo
     if path is not None:
         _save_figure(fig, path, overwrite)
     return fig
+
+
+# ======================================================================================
+# continuation: branches (pwsdyn.continuation)
+# ======================================================================================
+
+#: Line styles of a branch: stable solid, unstable dashed, not admissible dotted (AUTO/COCO).
+BRANCH_STYLES = {"stable": "-", "unstable": "--", "not admissible": ":"}
+#: Markers of special points.
+SPECIAL_MARKERS = {"LP": "s", "BP": "D", "PD": "o", "NS": "^", "HB": "*", "EP": "|"}
+
+
+def _branch_y(branch, y):
+    """The quantity plotted against the parameter and its axis label."""
+    names = list(branch.problem.state_names)
+    if y is None:
+        # the state that changes most along the branch (at an impact section the position
+        # is the wall's, the same at every point)
+        X = branch.states
+        y = names[int(np.argmax(np.ptp(X, axis=0)))] if len(X) else names[0]
+    if y == "period" and branch.kind == "orbit":
+        return np.array([p.data.get("period", np.nan) for p in branch.points]), "period"
+    if y == "norm":
+        return np.linalg.norm(branch.states, axis=1), "$\\|x\\|$ at the section"
+    if isinstance(y, (int, np.integer)):
+        if not 0 <= y < len(names):
+            raise ArgumentError(f"`y` index {y} out of range for states {names}")
+        y = names[y]
+    if y not in names:
+        raise ArgumentError(f"`y` must be a state {names}, 'norm' or 'period' (orbits), "
+                            f"got {y!r}")
+    where = "at the section" if branch.kind == "orbit" else "(equilibrium)"
+    return branch.states[:, names.index(y)], f"{_tex(y)} {where}"
+
+
+def plot_branch(branch, y=None, path: str | Path | None = None, *, ax: Axes | None = None,
+                labels: bool = True, sweep: xr.Dataset | None = None, color: str = "k",
+                overwrite: bool = False) -> Figure:
+    """Bifurcation diagram of a continued branch (:func:`pwsdyn.continue_orbit`,
+    :func:`pwsdyn.continue_equilibrium`), drawn as AUTO and COCO draw them: stable parts
+    solid, unstable dashed, parts that are not orbits of the hybrid model (past a grazing)
+    dotted; special points marked (fold square, period doubling circle, Neimark-Sacker
+    triangle, branch point diamond, Hopf star) and labelled with their kind.
+
+    Parameters
+    ----------
+    branch : Branch
+    y : str or int, optional
+        A state (at the section: the start of the orbit's first segment), ``"norm"`` or, for
+        orbits, ``"period"``. Default: the state that varies most along the branch.
+    path : str or Path, optional
+        Also save the figure there.
+    ax : matplotlib.axes.Axes, optional
+        Draw into this Axes (several branches on one diagram, or over a sweep).
+    labels : bool
+        Write the kind of each special point next to it.
+    sweep : xarray.Dataset, optional
+        A :func:`pwsdyn.sweep` result drawn first, in light colours, on the same axes (its
+        section is its own: a stroboscopic or an event section).
+    color : str
+        Colour of the branch.
+    overwrite : bool
+        Replace an existing file at ``path``.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    if path is not None:
+        _check_figure_path(path, overwrite)
+    if ax is None:
+        fig = Figure(figsize=(7.5, 4.8), layout="constrained")
+        ax = fig.subplots()
+    else:
+        axes, fig = _user_axes(ax, {1: "the diagram"})
+        ax = axes[0]
+    if sweep is not None:
+        plot_bifurcation(sweep, ax=ax, markersize=1.0)
+    lam = branch.values
+    yv, ylabel = _branch_y(branch, y)
+    stab = branch.stable
+    adm = branch.admissible
+    style = np.where(~adm, "not admissible", np.where(stab, "stable", "unstable"))
+    seen = set()
+    start = 0
+    for i in range(1, len(lam) + 1):
+        if i == len(lam) or style[i] != style[start]:
+            # each run of one style, joined to the next point so that the curve is unbroken
+            j = min(i + 1, len(lam))
+            st = str(style[start])
+            ax.plot(lam[start:j], yv[start:j], ls=BRANCH_STYLES[st], color=color, lw=1.4,
+                    label=st if st not in seen else None)
+            seen.add(st)
+            start = i
+    for sp in branch.special_points:
+        mk = SPECIAL_MARKERS.get(sp.kind, "o")
+        ax.plot([sp.value], [yv[sp.index]], marker=mk, ls="none", ms=7, mfc="white",
+                mec="#D55E00", mew=1.5, zorder=5)
+        if labels and sp.kind != "EP":
+            ax.annotate(sp.kind, (sp.value, yv[sp.index]), textcoords="offset points",
+                        xytext=(5, 5), fontsize=8, color="#D55E00")
+    ax.set_xlabel(_tex(branch.parameter))
+    ax.set_ylabel(ylabel)
+    ax.set_title(f"{branch.model.name}: {branch.kind} branch in {_tex(branch.parameter)}",
+                 fontsize="medium")
+    ax.legend(fontsize=8, loc="best")
+    ax.grid(True, lw=0.3)
+    if path is not None:
+        _save_figure(fig, path, overwrite)
+    return fig

@@ -1,0 +1,178 @@
+"""Benchmark: a 200-point branch of periodic orbits with their multipliers, pwsdyn against
+doing the same by hand with scipy.
+
+The branch: the one-impact orbit of the forced impact oscillator x'' + eps x' + x =
+sin(omega t), x <= sigma, v -> -r v at x = sigma (eps = 0.1, sigma = -0.5, r = 0.8), followed
+in omega from 2.8 (through its period doubling at omega = 4.32) -- its closed form is in
+``tests/_orbit_cases.py``.
+
+Contenders, timed in one process after a warm-up (compilation and caches excluded):
+
+* ``pwsdyn``: ``pwsdyn.continue_orbit`` from the orbit at omega = 2.8 with a fixed step
+  (``ds = ds_max = 0.02``, 200 points), its defaults otherwise (DOP853, rtol = atol = 1e-12,
+  multipliers, admissibility and test functions at every point, special points located).
+* ``scipy``: what a user writes by hand today: natural-parameter continuation on the same
+  omega values -- at each, ``scipy.optimize.fsolve`` (xtol 1e-10) on the stroboscopic map
+  ``x(0) -> x(T)`` computed by ``solve_ivp`` (DOP853, same tolerances) restarted at each
+  impact with a terminal event, started from the previous point's solution, then the
+  multipliers from a central finite-difference Jacobian of the map (relative step 1e-6).
+
+Reported: time per point (wall and CPU, best of ``--repeats``), the ratio scipy / pwsdyn, and
+the largest error of each against the closed form (orbit state and multipliers). Timings are
+never asserted; exit status 2 if an accuracy check fails (1e-8 pwsdyn, 1e-6 scipy).
+
+Run::
+
+    python benchmarks/bench_continuation.py [--repeats 3] [--points 200] [--save]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import numpy as np  # noqa: E402
+import scipy  # noqa: E402
+from scipy.integrate import solve_ivp  # noqa: E402
+from scipy.linalg import expm  # noqa: E402
+from scipy.optimize import fsolve  # noqa: E402
+
+import pwsdyn  # noqa: E402
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "tests"))
+from _orbit_cases import IO, io_one_impact, io_orbit  # noqa: E402
+
+RTOL = ATOL = 1e-12
+
+
+def scipy_branch(omegas, x_start):
+    """Natural-parameter continuation with fsolve on the stroboscopic map at t = 0."""
+    eps, sigma, r = IO["eps"], IO["sigma"], IO["r"]
+
+    def ev(t, y):
+        return sigma - y[0]
+    ev.terminal, ev.direction = True, -1
+    out, x = [], np.asarray(x_start, float)
+    for w in omegas:
+        T = 2 * np.pi / w
+
+        def rhs(t, y, w=w):
+            return [y[1], np.sin(w * t) - eps * y[1] - y[0]]
+
+        def P(z, T=T, rhs=rhs):
+            t, y = 0.0, np.asarray(z, float)
+            while t < T:
+                sol = solve_ivp(rhs, (t, T), y, method="DOP853", rtol=RTOL, atol=ATOL,
+                                events=[ev])
+                if sol.status != 1:
+                    return sol.y[:, -1]
+                t = sol.t_events[0][0]
+                y = sol.y_events[0][0] * np.array([1.0, -r])
+            return y
+
+        x = fsolve(lambda z: P(z) - z, x, xtol=1e-10)
+        h = 1e-6
+        J = np.column_stack([(P(x + h * e) - P(x - h * e)) / (2 * h) for e in np.eye(2)])
+        out.append((w, x.copy(), np.linalg.eigvals(J)))
+    return out
+
+
+def closed_form_at_zero(w):
+    """The closed-form orbit's state at t = 0 (mod T) and its multipliers."""
+    v, t0, M, _ = io_one_impact(w, 1)
+    T = 2 * np.pi / w
+    eps = IO["eps"]
+    A = np.array([[0.0, 1.0], [-1.0, -eps]])
+    X, Y = np.linalg.solve(np.array([[1 - w**2, -eps * w], [eps * w, 1 - w**2]]), [1.0, 0.0])
+
+    def zp(t):
+        return np.array([X * np.sin(w * t) + Y * np.cos(w * t),
+                         w * (X * np.cos(w * t) - Y * np.sin(w * t))])
+    z0 = np.array([IO["sigma"], -IO["r"] * v]) - zp(t0)
+    return expm(A * (T - t0)) @ z0 + zp(T), np.linalg.eigvals(M)
+
+
+def timed(fn, repeats):
+    best_w = best_c = np.inf
+    out = None
+    for _ in range(repeats):
+        w, c = time.perf_counter(), time.process_time()
+        out = fn()
+        best_w = min(best_w, time.perf_counter() - w)
+        best_c = min(best_c, time.process_time() - c)
+    return out, best_w, best_c
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--points", type=int, default=200)
+    ap.add_argument("--save", action="store_true", help="write results/continuation.json")
+    args = ap.parse_args(argv)
+    model = pwsdyn.load_model("impact-oscillator")
+    orb = io_orbit("stable")
+
+    def run_pwsdyn():
+        return pwsdyn.continue_orbit(model, orb, "omega", span=(2.0, 10.0), ds=0.02,
+                                     ds_max=0.02, max_points=args.points)
+
+    run_pwsdyn()                                      # warm-up: compilation, caches
+    br, wp, cp = timed(run_pwsdyn, args.repeats)
+    omegas = br.values
+    x_start = closed_form_at_zero(omegas[0])[0] + 1e-3
+    scipy_branch(omegas[:3], x_start)                 # warm-up
+    sc, ws, cs = timed(lambda: scipy_branch(omegas, x_start), max(1, args.repeats // 2))
+
+    err_pw = mult_pw = err_sc = mult_sc = 0.0
+    for p, x in zip(br.points, br.states):
+        v, _, M, _ = io_one_impact(p.lam, 1)
+        err_pw = max(err_pw, float(np.max(np.abs(x - [IO["sigma"], -IO["r"] * v]))))
+        mult_pw = max(mult_pw, float(np.max(np.abs(
+            np.sort_complex(p.data["multipliers"]) - np.sort_complex(np.linalg.eigvals(M))))))
+    for w, x, mu in sc:
+        ref, mref = closed_form_at_zero(w)
+        err_sc = max(err_sc, float(np.max(np.abs(x - ref))))
+        mult_sc = max(mult_sc, float(np.max(np.abs(np.sort_complex(mu) -
+                                                   np.sort_complex(mref)))))
+    n = len(br)
+    row = dict(points=n, omega_range=[float(omegas.min()), float(omegas.max())],
+               special_points=[f"{s.kind} {s.value:.12g}" for s in br.special_points],
+               pwsdyn_wall_s=wp, pwsdyn_cpu_s=cp, scipy_wall_s=ws, scipy_cpu_s=cs,
+               pwsdyn_ms_per_point=1e3 * wp / n, scipy_ms_per_point=1e3 * ws / n,
+               ratio_wall=ws / wp, ratio_cpu=cs / cp, orbit_err_pwsdyn=err_pw,
+               mult_err_pwsdyn=mult_pw, orbit_err_scipy=err_sc, mult_err_scipy=mult_sc)
+    print(f"{n} points, omega in [{omegas.min():.4f}, {omegas.max():.4f}], special points: "
+          f"{', '.join(row['special_points'])}")
+    print(f"{'':<8} {'ms/point':>9} {'ms/point CPU':>13} {'orbit err':>10} {'mult err':>9}")
+    print(f"{'pwsdyn':<8} {1e3 * wp / n:>9.2f} {1e3 * cp / n:>13.2f} {err_pw:>10.1e} "
+          f"{mult_pw:>9.1e}")
+    print(f"{'scipy':<8} {1e3 * ws / n:>9.2f} {1e3 * cs / n:>13.2f} {err_sc:>10.1e} "
+          f"{mult_sc:>9.1e}")
+    print(f"ratio scipy / pwsdyn: {ws / wp:.1f} (wall), {cs / cp:.1f} (CPU)")
+    meta = dict(date=datetime.now(timezone.utc).isoformat(timespec="seconds"),
+                machine=platform.machine(), python=platform.python_version(),
+                numpy=np.__version__, scipy=scipy.__version__, pwsdyn=pwsdyn.__version__,
+                cpus=os.cpu_count(), load=os.getloadavg(), repeats=args.repeats)
+    if args.save:
+        (HERE / "results").mkdir(exist_ok=True)
+        with open(HERE / "results" / "continuation.json", "w") as fh:
+            json.dump(dict(meta=meta, rows=[row]), fh, indent=1, default=str)
+    ok = err_pw < 1e-8 and mult_pw < 1e-6 and err_sc < 1e-6 and mult_sc < 1e-4
+    if not ok:
+        print("accuracy check FAILED", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

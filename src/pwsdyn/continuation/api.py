@@ -1,0 +1,430 @@
+"""The continuation functions of the public API: ``continue_orbit``, ``continue_equilibrium``,
+``load_branch``."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+
+from .. import _validate as V
+from ..errors import ArgumentError
+from .branch import Branch, SpecialPoint
+from .engine import Continuation, ContinuationSettings, null_space
+from .problems import (CURVE_KINDS, BifurcationCurveProblem, EquilibriumProblem,
+                       OrbitBranchProblem)
+
+_SETTING_NAMES = {f.name for f in dataclasses.fields(ContinuationSettings)}
+
+
+def _split_options(options: dict, span, ds, max_points):
+    """Continuation settings and the remaining (integrator) options."""
+    st = {k: options.pop(k) for k in list(options) if k in _SETTING_NAMES}
+    lo, hi = (-math.inf, math.inf) if span is None else span
+    if ds is None:
+        width = hi - lo if math.isfinite(hi - lo) else 10.0
+        ds = min(0.02, 0.01 * width)
+    st.setdefault("ds_max", max(abs(ds), 0.2))
+    st.setdefault("ds_min", min(1e-7, abs(ds)))
+    return ContinuationSettings(ds=ds, span=span, max_points=max_points, **st), options
+
+
+def _run(problem, u0, lam0, settings, *, tangent=None, correct_start=True, progress=False,
+         model=None, prefix=(), start_kind=""):
+    cont = Continuation(problem, u0, lam0, settings, tangent=tangent,
+                        correct_start=correct_start, progress=progress, start_kind=start_kind)
+    cont.run()
+    return Branch(problem, [*prefix, *cont.points], stop_reason=cont.stop_reason,
+                  settings=settings, model=model)
+
+
+def continue_orbit(model, orbit, param: str, *, span=None, ds: float | None = None,
+                   max_points: int = 200, params=None, progress: bool = False,
+                   **options) -> Branch:
+    """Follow a periodic orbit in a parameter by pseudo-arclength continuation.
+
+    The orbit keeps its signature (its sequence of events) along the branch; where that
+    stops being an orbit of the hybrid model (past a grazing, an impact with the flow
+    leaving the surface) the points are marked ``admissible = False`` with the reason, and
+    the branch goes on. Folds (``LP``), period doublings (``PD``), Neimark-Sacker points
+    (``NS``) and branch points (``BP``) are located on the way.
+
+    Parameters
+    ----------
+    model : Model, str, path or dict
+        The model (the orbit's).
+    orbit : PeriodicOrbit, SpecialPoint or Branch
+        Where to start: a converged orbit (:func:`pwsdyn.find_periodic_orbit`); a special
+        point of an orbit branch -- a ``PD`` starts the period-doubled branch born there, a
+        ``BP`` the other branch through it, any other kind the same branch from there; or a
+        branch (from a file too), continued from its last point.
+    param : str
+        The parameter continued.
+    span : (float, float), optional
+        The parameter's range; the branch ends on its boundary.
+    ds : float, optional
+        First step in arclength; negative to start towards smaller parameter values.
+        Default ``min(0.02, 0.01 (hi - lo))``.
+    max_points : int
+        Most points (the start and the special points included).
+    params : dict, optional
+        Other parameter values (default the orbit's).
+    progress : bool
+        Show a progress bar.
+    **options
+        :class:`~pwsdyn.continuation.ContinuationSettings` fields (``ds_min``, ``ds_max``,
+        ``tol``, ``locate``, ``locate_tol``, ``max_angle``, ``predictor``, ...), and
+        integrator options of the orbit problem (``rtol``, ``atol``, ``method``, ...).
+
+    Returns
+    -------
+    Branch
+
+    Examples
+    --------
+    >>> import pwsdyn
+    >>> orb = pwsdyn.find_periodic_orbit("impact-oscillator", [0.0, -0.5])
+    >>> br = pwsdyn.continue_orbit("impact-oscillator", orb, "omega", span=(2.3, 2.7))
+    """
+    from ..orbits.problem import OrbitProblem
+
+    model = V.model(model, kind="flow", caller="continue_orbit()")
+    param = _parameter(model, param)
+    settings, options = _split_options(dict(options), span, ds, max_points)
+    if isinstance(orbit, Branch):
+        return _resume(orbit, model, param, settings, progress)
+    if isinstance(orbit, SpecialPoint):
+        return _from_special(orbit, model, param, settings, progress, params, options)
+    from ..orbits import PeriodicOrbit
+
+    if not isinstance(orbit, PeriodicOrbit):
+        raise ArgumentError(f"`orbit` must be a PeriodicOrbit, a SpecialPoint or a Branch, got "
+                            f"{type(orbit).__name__}")
+    if orbit.model.name != model.name:
+        raise ArgumentError(f"the orbit is of model {orbit.model.name!r}, not {model.name!r}")
+    prob, u = OrbitProblem.from_orbit(orbit, parameters=[param], params=params)
+    if options:
+        prob = _with_options(prob, options)
+    u = _reduce_phase(prob, u)
+    return _run(OrbitBranchProblem(prob), u, float(prob.p0[0]), settings, progress=progress,
+                model=model)
+
+
+def _reduce_phase(prob, u):
+    """A forced orbit's start time ``t_0`` brought into ``[0, P)`` (``P`` its period, a
+    multiple of the forcing period: the same orbit). An orbit found after a long transient
+    starts at a large ``t_0``, whose derivative in the parameter (``k dP/dp`` for ``k``
+    periods) would dominate the arclength and shrink every step in the parameter."""
+    if not (prob.forced and prob.m):
+        return u
+    P = prob.period_value()
+    k = math.floor(u[0] / P)
+    if k:
+        u = np.array(u, dtype=float)
+        u[0] -= k * P
+    return u
+
+
+def _parameter(model, param):
+    if not isinstance(param, str) or param not in model.parameters:
+        raise ArgumentError(f"model {model.name!r} has no parameter {param!r}; its parameters: "
+                            f"{list(model.parameters)}")
+    return param
+
+
+def _with_options(prob, options):
+    from ..orbits.problem import OrbitProblem
+
+    u_keep = dict(prob.opts)
+    u_keep.update(options)
+    drop = ("variational", "dense", "throw", "mode", "sliding")
+    opts = {k: v for k, v in options.items() if k not in drop}
+    return OrbitProblem(prob.model, prob.signature, params=prob.params,
+                        parameters=list(prob.parameters), periods=prob.periods,
+                        t_ref=prob.t_ref, sliding=prob.sliding, **opts)
+
+
+def _from_special(sp: SpecialPoint, model, param, settings, progress, params, options):
+    from ..orbits.problem import OrbitProblem
+
+    br = sp.branch
+    if br.kind != "orbit":
+        raise ArgumentError(f"continue_orbit needs a special point of an orbit branch, got one "
+                            f"of a {br.kind} branch")
+    base: OrbitBranchProblem = br.problem
+    op = base.orbit_problem
+    pt = sp.point
+    all_params = dict(op.params)
+    all_params[base.parameter] = pt.lam
+    if params:
+        all_params.update(params)
+    if param != base.parameter or params:
+        # the same orbit, another parameter (or other values): a new problem, corrected there
+        prob = OrbitProblem(op.model, op.signature, params=all_params, parameters=[param],
+                            periods=op.periods, t_ref=op.t_ref, sliding=op.sliding,
+                            **_problem_options(op, options))
+        return _run(OrbitBranchProblem(prob), pt.u, all_params[param], settings,
+                    progress=progress, model=model)
+    if sp.kind == "PD":
+        return _switch_period_doubling(sp, model, settings, progress, options)
+    if sp.kind == "BP":
+        J = np.column_stack(base.evaluate(pt.u, pt.lam)[1:])
+        return _switch_branch_point(base, pt, J, model, settings, progress)
+    return _run(base, pt.u, pt.lam, dataclasses.replace(settings, ds=abs(settings.ds)),
+                tangent=pt.tangent * np.sign(settings.ds), correct_start=False,
+                progress=progress, model=model, start_kind=sp.kind)
+
+
+def _problem_options(op, options):
+    drop = ("variational", "dense", "throw", "mode", "sliding")
+    opts = {k: v for k, v in op.opts.items() if k not in drop}
+    opts.update(options or {})
+    from ..integrate.simulate import DEFAULTS
+
+    # only what differs from the integrator's defaults is passed on (validated again)
+    return {k: v for k, v in opts.items() if k in DEFAULTS}
+
+
+def _switch_period_doubling(sp, model, settings, progress, options):
+    """The period-doubled branch born at a period doubling: the orbit run twice solves the
+    problem of the doubled signature, whose Jacobian ``F_u`` is singular there (the
+    multiplier -1 of one period is +1 of two); the new branch leaves along its null vector,
+    the flip ``+w`` on the first period, ``-w`` on the second, at fixed parameter (a
+    pitchfork of the doubled problem; Kuznetsov, section 10.3.2)."""
+    from ..orbits.problem import OrbitProblem
+
+    base = sp.branch.problem
+    op = base.orbit_problem
+    pt = sp.point
+    params = dict(op.params)
+    params[base.parameter] = pt.lam
+    prob2 = OrbitProblem(op.model, op.signature.doubled(), params=params,
+                         parameters=[base.parameter], periods=2 * op.periods, t_ref=op.t_ref,
+                         sliding=op.sliding, **_problem_options(op, options))
+    t0, xs, Ts = op.unpack(pt.u)
+    u2 = prob2.pack(t0, list(xs) + list(xs), list(Ts) + list(Ts))
+    bp2 = OrbitBranchProblem(prob2)
+    # the doubled problem's [F_u F_lam] has a two-dimensional null space at the point: the
+    # tangent of the period-1 branch run twice, and the flip direction (w, -w); the new
+    # branch leaves along the null vector orthogonal to the period-1 branch, so that the
+    # corrector does not fall back onto it
+    dt0, dxs, dTs = op.unpack(pt.tangent[:-1])
+    t1 = np.append(prob2.pack(dt0, list(dxs) + list(dxs), list(dTs) + list(dTs)),
+                   pt.tangent[-1])
+    t1 /= np.linalg.norm(t1)
+    _, F_u, F_lam = bp2.evaluate(u2, pt.lam)
+    N = null_space(np.column_stack([F_u, F_lam]), 2)
+    cand = [n - (n @ t1) * t1 for n in N]
+    v = max(cand, key=np.linalg.norm)
+    v /= np.linalg.norm(v)
+    return _run(bp2, u2, pt.lam, dataclasses.replace(settings, ds=abs(settings.ds)),
+                tangent=v, correct_start=False, progress=progress, model=model,
+                start_kind="BP")
+
+
+def _switch_branch_point(problem, pt, J, model, settings, progress):
+    """The other branch through a branch point: ``[F_u F_lam]`` has a two-dimensional null
+    space there, spanned by the branch's tangent and the other branch's; leave along the
+    null vector orthogonal to the tangent (Allgower & Georg, section 8.2)."""
+    N = null_space(J, 2)
+    v = pt.tangent
+    cand = [n - (n @ v) * v for n in N]
+    w = max(cand, key=np.linalg.norm)
+    w = w / np.linalg.norm(w)
+    if settings.ds < 0:
+        w = -w
+    return _run(problem, pt.u, pt.lam, dataclasses.replace(settings, ds=abs(settings.ds)),
+                tangent=w, correct_start=False, progress=progress, model=model,
+                start_kind="BP")
+
+
+def _resume(branch: Branch, model, param, settings, progress):
+    if param != branch.parameter:
+        raise ArgumentError(f"the branch continues {branch.parameter!r}, not {param!r}")
+    last = branch.points[-1]
+    st = dataclasses.replace(settings, ds=math.copysign(
+        max(abs(last.ds), settings.ds_min) if last.ds else abs(settings.ds), settings.ds))
+    cont = Continuation(branch.problem, last.u, last.lam, st,
+                        tangent=last.tangent * (1.0 if st.ds > 0 else -1.0),
+                        correct_start=False, progress=progress, arclength0=last.arclength)
+    cont.run()
+    return Branch(branch.problem, branch.points[:-1] + cont.points,
+                  stop_reason=cont.stop_reason, settings=st, model=model)
+
+
+def continue_equilibrium(model, x0, param: str, *, span=None, ds: float | None = None,
+                         max_points: int = 200, params=None, mode: str | None = None,
+                         progress: bool = False, **options) -> Branch:
+    """Follow an equilibrium of one mode of an autonomous model in a parameter.
+
+    Folds (``LP``), Hopf points (``HB``) and branch points (``BP``) are located on the way.
+
+    Parameters
+    ----------
+    model : Model, str, path or dict
+    x0 : sequence, dict or SpecialPoint
+        A guess of the equilibrium (corrected first); or a special point of an equilibrium
+        branch: at a ``BP`` the other branch through it is followed, from any other kind the
+        same branch.
+    param : str
+    span, ds, max_points, params, progress, **options
+        As :func:`continue_orbit`.
+    mode : str, optional
+        The mode whose field vanishes (default the model's initial mode).
+
+    Returns
+    -------
+    Branch
+    """
+    from ..integrate.simulate import state_vector
+
+    model = V.model(model, kind="flow", caller="continue_equilibrium()")
+    param = _parameter(model, param)
+    settings, options = _split_options(dict(options), span, ds, max_points)
+    if options:
+        raise ArgumentError(f"unknown options for continue_equilibrium(): {sorted(options)}")
+    if isinstance(x0, SpecialPoint):
+        br = x0.branch
+        if br.kind != "equilibrium" or param != br.parameter:
+            raise ArgumentError(f"continue_equilibrium from a special point needs one of an "
+                                f"equilibrium branch in {param!r}")
+        pt = x0.point
+        if x0.kind == "BP":
+            J = np.column_stack(br.problem.evaluate(pt.u, pt.lam)[1:])
+            return _switch_branch_point(br.problem, pt, J, model, settings, progress)
+        return _run(br.problem, pt.u, pt.lam, dataclasses.replace(settings, ds=abs(settings.ds)),
+                    tangent=pt.tangent * np.sign(settings.ds), correct_start=False,
+                    progress=progress, model=model, start_kind=x0.kind)
+    prob = EquilibriumProblem(model, param, params=params, mode=mode)
+    x = state_vector(model, x0)
+    return _run(prob, x, prob.params[param], settings, progress=progress, model=model)
+
+
+def load_branch(path) -> Branch:
+    """Read a branch written by :meth:`Branch.save`: its points, special points and the
+    problem, so that it can be plotted, inspected and continued further
+    (``continue_orbit(model, branch, param)``)."""
+    from ..io import open_dataset
+    from ..model import load_model
+    from ..orbits.problem import OrbitProblem
+    from .engine import Point
+
+    ds = open_dataset(path)
+    if ds.attrs.get("pwsdyn_type") != "branch":
+        raise ArgumentError(f"{str(path)!r} is not a branch file (pwsdyn_type = "
+                            f"{ds.attrs.get('pwsdyn_type')!r})")
+    model = load_model(json.loads(ds.attrs["model_spec"]))
+    param = ds.attrs["parameter"]
+    params = json.loads(ds.attrs["params"])
+    st = json.loads(ds.attrs.get("settings", "{}"))
+    st = {k: (tuple(float(x) for x in v) if isinstance(v, list) and k == "span" else
+              tuple(v) if isinstance(v, list) else float(v) if v in ("inf", "-inf") else v)
+          for k, v in st.items()}
+    settings = ContinuationSettings(**st) if st else None
+    if ds.attrs["kind"] == "orbit":
+        opts = json.loads(ds.attrs.get("options", "{}"))
+        curve = ds.attrs.get("curve", "")
+        from ..integrate.simulate import DEFAULTS
+        opts = {k: v for k, v in opts.items() if k in DEFAULTS and
+                k not in ("variational", "dense", "throw", "mode", "sliding")}
+        names = [param, ds.attrs["parameter2"]] if curve else [param]
+        op = OrbitProblem(model, ds.attrs["signature"], params=params, parameters=names,
+                          periods=int(ds.attrs.get("periods", 1)), **opts)
+        problem = BifurcationCurveProblem(op, curve) if curve else OrbitBranchProblem(op)
+    else:
+        problem = EquilibriumProblem(model, param, params=params, mode=ds.attrs["mode"])
+    spectrum = "multipliers" if problem.kind == "orbit" else "eigenvalues"
+    points = []
+    for i in range(ds.sizes["point"]):
+        u = np.asarray(ds["u"].values[i], dtype=float)
+        lam = float(ds[param].values[i])
+        z = ds[f"{spectrum}_real"].values[i] + 1j * ds[f"{spectrum}_imag"].values[i]
+        data = {spectrum: z[np.isfinite(z)], "stable": bool(ds["stable"].values[i]),
+                "admissible": bool(ds["admissible"].values[i]),
+                "reason": str(ds["reason"].values[i])}
+        if "period" in ds:
+            data["period"] = float(ds["period"].values[i])
+        if getattr(problem, "parameter2", None):
+            data[problem.parameter2] = float(ds[problem.parameter2].values[i])
+        tests = {k[5:]: float(ds[k].values[i]) for k in ds.data_vars if k.startswith("test_")}
+        points.append(Point(u=u, lam=lam, tangent=np.asarray(ds["tangent"].values[i]),
+                            ds=float(ds["ds"].values[i]),
+                            iterations=int(ds["iterations"].values[i]),
+                            arclength=float(ds["arclength"].values[i]), data=data,
+                            tests=tests, special=str(ds["special"].values[i])))
+    return Branch(problem, points, stop_reason=ds.attrs.get("stop_reason", ""),
+                  settings=settings, model=model)
+
+
+def continue_bifurcation(model, special_point: SpecialPoint, params, *, span=None, span2=None,
+                         ds: float | None = None, max_points: int = 200,
+                         progress: bool = False, **options) -> Branch:
+    """Follow a fold (``LP``), period doubling (``PD``) or Neimark-Sacker point (``NS``) of a
+    periodic orbit in two parameters: the curve of that bifurcation in the parameter plane.
+
+    Each point is an orbit at which the bifurcation's test function of the multipliers
+    vanishes (the orbit problem bordered by the defining condition;
+    :class:`~pwsdyn.continuation.problems.BifurcationCurveProblem`).
+
+    Parameters
+    ----------
+    model : Model, str, path or dict
+    special_point : SpecialPoint
+        A located ``LP``, ``PD`` or ``NS`` of an orbit branch (:attr:`Branch.special_points`).
+    params : (str, str)
+        The two parameters; the branch's parameter must be one of them. The first is the
+        continuation parameter of the curve (``Branch.values``), the second is solved for
+        along it (``Branch.values_of(name)``).
+    span : (float, float), optional
+        Range of the first parameter; the curve ends on its boundary.
+    span2 : (float, float), optional
+        Range of the second; the curve stops when it leaves it.
+    ds, max_points, progress, **options
+        As :func:`continue_orbit`.
+
+    Returns
+    -------
+    Branch
+        ``kind`` ``"orbit"``, ``curve`` the bifurcation's kind.
+    """
+    from ..orbits.problem import OrbitProblem
+
+    model = V.model(model, kind="flow", caller="continue_bifurcation()")
+    if not isinstance(special_point, SpecialPoint):
+        raise ArgumentError(f"`special_point` must be a SpecialPoint of an orbit branch, got "
+                            f"{type(special_point).__name__}")
+    sp = special_point
+    if sp.branch.kind != "orbit" or sp.kind not in CURVE_KINDS:
+        raise ArgumentError(f"two-parameter continuation follows {list(CURVE_KINDS)} points "
+                            f"of orbit branches, got {sp.kind!r} of a {sp.branch.kind} branch")
+    try:
+        p1, p2 = params
+    except (TypeError, ValueError):
+        raise ArgumentError(f"`params` must be two parameter names, got {params!r}") from None
+    p1, p2 = _parameter(model, p1), _parameter(model, p2)
+    if p1 == p2:
+        raise ArgumentError("`params` must be two different parameters")
+    base = sp.branch.problem
+    if base.parameter not in (p1, p2):
+        raise ArgumentError(f"the special point lies on a branch in {base.parameter!r}; it must "
+                            f"be one of `params` {params!r}")
+    settings, options = _split_options(dict(options), span, ds, max_points)
+    settings = dataclasses.replace(settings, locate=())
+    op = base.orbit_problem
+    all_params = dict(op.params)
+    all_params[base.parameter] = sp.value
+    prob = OrbitProblem(op.model, op.signature, params=all_params, parameters=[p1, p2],
+                        periods=op.periods, t_ref=op.t_ref, sliding=op.sliding,
+                        **_problem_options(op, options))
+    curve = BifurcationCurveProblem(prob, sp.kind)
+    U0 = np.append(sp.point.u, all_params[p2])
+    cont = Continuation(curve, U0, all_params[p1], settings, progress=progress)
+    lo2, hi2 = (-math.inf, math.inf) if span2 is None else span2
+    for pt in cont:
+        if not lo2 <= pt.u[-1] <= hi2:
+            cont.stop_reason = f"{p2} left span2 ({lo2:.10g}, {hi2:.10g})"
+            break
+    return Branch(curve, cont.points, stop_reason=cont.stop_reason, settings=settings,
+                  model=model)

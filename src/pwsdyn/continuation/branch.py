@@ -1,0 +1,287 @@
+"""A continued branch: its points as an xarray Dataset, its special points, its figure."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import ArgumentError
+
+#: Kinds of special points, in words (the labels of AUTO, MatCont and BifurcationKit).
+KINDS = {
+    "LP": "fold (limit point): the branch turns back in the parameter",
+    "BP": "branch point: another branch crosses this one",
+    "PD": "period doubling: a Floquet multiplier passes through -1",
+    "NS": "Neimark-Sacker: a complex pair of Floquet multipliers crosses the unit circle",
+    "HB": "Hopf: a complex pair of eigenvalues crosses the imaginary axis",
+    "EP": "end point of the branch",
+}
+
+
+@dataclass
+class SpecialPoint:
+    """A located special point of a :class:`Branch`.
+
+    Attributes
+    ----------
+    kind : str
+        ``"LP"``, ``"BP"``, ``"PD"``, ``"NS"``, ``"HB"`` or ``"EP"`` (see :data:`KINDS`).
+    index : int
+        Its index among the branch's points.
+    value : float
+        The parameter value.
+    branch : Branch
+    """
+
+    kind: str
+    index: int
+    value: float
+    branch: "Branch"
+
+    @property
+    def point(self):
+        return self.branch.points[self.index]
+
+    @property
+    def parameter(self) -> str:
+        return self.branch.parameter
+
+    @property
+    def tests(self) -> dict:
+        """Test-function values at the point (the located one is zero to the tolerance)."""
+        return dict(self.point.tests)
+
+    @property
+    def multipliers(self) -> np.ndarray | None:
+        return self.point.data.get("multipliers")
+
+    @property
+    def eigenvalues(self) -> np.ndarray | None:
+        return self.point.data.get("eigenvalues")
+
+    @property
+    def state(self) -> np.ndarray:
+        """The state at the section (orbits) or the equilibrium."""
+        return self.branch.problem.section_state(self.point.u)
+
+    @property
+    def orbit(self):
+        """The periodic orbit at the point (orbit branches)."""
+        if self.branch.kind != "orbit":
+            raise ArgumentError(f"a {self.branch.kind} branch has no orbit")
+        return self.branch.problem.orbit(self.point.u, self.point.lam)
+
+    def __repr__(self):
+        extra = ""
+        if self.multipliers is not None:
+            extra = ", multipliers=" + np.array2string(np.asarray(self.multipliers),
+                                                       precision=6)
+        return (f"SpecialPoint({self.kind} at {self.parameter} = {self.value:.12g}, "
+                f"index {self.index}{extra})")
+
+
+class Branch:
+    """A branch followed by :func:`pwsdyn.continue_orbit` or
+    :func:`pwsdyn.continue_equilibrium`.
+
+    Attributes
+    ----------
+    points : list of Point
+        In the order of the arclength; located special points are points of their own.
+    parameter : str
+    kind : str
+        ``"orbit"`` or ``"equilibrium"``.
+    problem : object
+        What was continued (an :class:`~pwsdyn.continuation.problems.OrbitBranchProblem` or
+        :class:`~pwsdyn.continuation.problems.EquilibriumProblem`).
+    stop_reason : str
+        Why the branch ended.
+    settings : ContinuationSettings
+    """
+
+    def __init__(self, problem, points, *, stop_reason="", settings=None, model=None):
+        self.problem = problem
+        self.points = list(points)
+        self.parameter = problem.parameter
+        self.kind = problem.kind
+        self.stop_reason = stop_reason
+        self.settings = settings
+        self.model = model if model is not None else getattr(
+            getattr(problem, "orbit_problem", problem), "model", None)
+
+    def __len__(self):
+        return len(self.points)
+
+    def __repr__(self):
+        sp = ", ".join(f"{p.kind} {p.value:.6g}" for p in self.special_points
+                       if p.kind != "EP")
+        lam = self.values
+        what = (f"{self.curve} curve of {self.model.name!r} in ({self.parameter}, "
+                f"{self.parameter2})" if self.curve else
+                f"{self.kind} of {self.model.name!r} in {self.parameter}")
+        return (f"Branch({what}: {len(self)} points, {self.parameter} in "
+                f"[{lam.min():.6g}, {lam.max():.6g}]{'; ' + sp if sp else ''}; "
+                f"{self.stop_reason})")
+
+    # ---- the points as arrays --------------------------------------------------------
+    @property
+    def values(self) -> np.ndarray:
+        """The parameter at each point."""
+        return np.array([p.lam for p in self.points])
+
+    @property
+    def curve(self) -> str:
+        """The bifurcation followed in two parameters (``""`` for a branch of solutions)."""
+        return getattr(self.problem, "curve", "")
+
+    @property
+    def parameter2(self) -> str | None:
+        """The second parameter of a two-parameter curve (``None`` otherwise)."""
+        return getattr(self.problem, "parameter2", None)
+
+    def values_of(self, name: str) -> np.ndarray:
+        """The values of parameter ``name`` along the branch: the continued one, or the second
+        parameter of a two-parameter curve."""
+        if name == self.parameter:
+            return self.values
+        if name == self.parameter2:
+            return np.array([p.u[-1] for p in self.points])
+        raise ArgumentError(f"the branch varies {self.parameter!r}"
+                            + (f" and {self.parameter2!r}" if self.parameter2 else "")
+                            + f", not {name!r}")
+
+    @property
+    def states(self) -> np.ndarray:
+        """The state at the section (orbits) or the equilibrium, one row per point."""
+        return np.array([self.problem.section_state(p.u) for p in self.points])
+
+    @property
+    def stable(self) -> np.ndarray:
+        return np.array([bool(p.data.get("stable", False)) for p in self.points])
+
+    @property
+    def admissible(self) -> np.ndarray:
+        return np.array([bool(p.data.get("admissible", True)) for p in self.points])
+
+    @property
+    def special_points(self) -> list[SpecialPoint]:
+        return [SpecialPoint(p.special, i, p.lam, self) for i, p in enumerate(self.points)
+                if p.special]
+
+    def special(self, kind: str) -> list[SpecialPoint]:
+        """The special points of one kind."""
+        return [s for s in self.special_points if s.kind == kind]
+
+    # ---- files -----------------------------------------------------------------------
+    def to_dataset(self):
+        """The branch as an :class:`xarray.Dataset` (dimension ``point``)."""
+        import xarray as xr
+
+        from ..io import _str_array, cf_global_attrs, quantity_attrs, state_attrs, state_coords
+
+        m = self.model
+        names = list(self.problem.state_names)
+        pts = self.points
+        spectrum = "multipliers" if self.kind == "orbit" else "eigenvalues"
+        nm = max((len(p.data.get(spectrum, ())) for p in pts), default=0)
+        mu = np.full((len(pts), nm), np.nan + 0j)
+        for i, p in enumerate(pts):
+            z = np.asarray(p.data.get(spectrum, ()), dtype=complex)
+            mu[i, :z.size] = z
+        nu = pts[0].u.size if pts else 0
+        kinds = sorted({k for p in pts for k in p.tests})
+        ds = xr.Dataset(
+            {
+                self.parameter: ("point", self.values, quantity_attrs(m, self.parameter)),
+                "x": (("point", "state"), self.states if pts else np.zeros((0, len(names))),
+                      state_attrs(m, "state at the Poincare section (start of segment 0)"
+                                  if self.kind == "orbit" else "equilibrium")),
+                f"{spectrum}_real": (("point", "index"), mu.real),
+                f"{spectrum}_imag": (("point", "index"), mu.imag),
+                "stable": ("point", self.stable.astype(np.int8),
+                           {"flag_values": np.array([0, 1], dtype=np.int8),
+                            "flag_meanings": "unstable stable"}),
+                "admissible": ("point", self.admissible.astype(np.int8),
+                               {"flag_values": np.array([0, 1], dtype=np.int8),
+                                "flag_meanings": "not_admissible admissible"}),
+                "reason": ("point", _str_array(p.data.get("reason", "") for p in pts),
+                           {"long_name": "why the point is not admissible (empty: it is)"}),
+                "special": ("point", _str_array(p.special for p in pts),
+                            {"long_name": "kind of special point (empty: regular)"}),
+                "ds": ("point", np.array([p.ds for p in pts]),
+                       {"long_name": "arclength step that reached the point"}),
+                "arclength": ("point", np.array([p.arclength for p in pts])),
+                "iterations": ("point", np.array([p.iterations for p in pts], dtype=np.int32)),
+                "u": (("point", "unknown"), np.array([p.u for p in pts]).reshape(-1, nu),
+                      {"long_name": "unknowns of the problem"}),
+                "tangent": (("point", "unknown_and_parameter"),
+                            np.array([p.tangent for p in pts]).reshape(-1, nu + 1)),
+            },
+            coords={"point": np.arange(len(pts)), **state_coords(m)},
+        )
+        for k in kinds:
+            ds[f"test_{k}"] = ("point", np.array([p.tests.get(k, np.nan) for p in pts]),
+                               {"long_name": KINDS.get(k, k) + " (test function)"})
+        if self.kind == "orbit":
+            ds["period"] = ("point", np.array([p.data.get("period", np.nan) for p in pts]))
+        if self.curve:
+            ds[self.parameter2] = ("point", self.values_of(self.parameter2),
+                                   quantity_attrs(m, self.parameter2))
+        attrs = {
+            **cf_global_attrs(m, "branch", f"{self.kind} branch of {m.name} in "
+                              f"{self.parameter}", "pseudo-arclength continuation"),
+            "kind": self.kind,
+            "parameter": self.parameter,
+            "stop_reason": self.stop_reason,
+            "params": json.dumps(getattr(self.problem, "params", None) or
+                                 getattr(self.problem.orbit_problem, "params", {})),
+        }
+        if self.settings is not None:
+            from dataclasses import asdict
+            attrs["settings"] = json.dumps({k: (list(v) if isinstance(v, tuple) else v)
+                                            for k, v in asdict(self.settings).items()},
+                                           default=_json_float)
+        if self.curve:
+            attrs["curve"] = self.curve
+            attrs["parameter2"] = self.parameter2
+        if self.kind == "orbit":
+            op = self.problem.orbit_problem
+            attrs["signature"] = str(op.signature)
+            attrs["periods"] = int(op.periods)
+            attrs["options"] = json.dumps(_plain(op.opts), default=_json_float)
+        else:
+            attrs["mode"] = self.problem.mode
+        ds.attrs.update(attrs)
+        return ds
+
+    def save(self, path, *, overwrite: bool = False):
+        """Write the branch to a NetCDF file (:func:`pwsdyn.load_branch` reads it back)."""
+        from ..io import save_dataset
+
+        return save_dataset(self.to_dataset(), path, overwrite=overwrite)
+
+    # ---- the figure ------------------------------------------------------------------
+    def plot(self, y=None, *, ax=None, labels: bool = True, **kw):
+        """Bifurcation diagram: the parameter against ``y`` (a state name, ``"period"``, or
+        ``"norm"``, default the first state at the section), stable parts solid, unstable
+        dashed, non-admissible dotted, special points marked and labelled."""
+        from ..plot import plot_branch
+
+        return plot_branch(self, y=y, ax=ax, labels=labels, **kw)
+
+
+def _json_float(v):
+    if isinstance(v, float) and not math.isfinite(v):
+        return str(v)
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    return str(v)
+
+
+def _plain(d):
+    return {k: v for k, v in dict(d).items() if isinstance(v, (int, float, str, bool, type(None)))}

@@ -1,0 +1,319 @@
+"""What is continued: periodic orbits on a fixed signature, and equilibria of a mode.
+
+Each problem gives the engine (:mod:`pwsdyn.continuation.engine`) ``F(u, lam)`` with its
+Jacobians, the data of a point and its own test functions:
+
+* periodic orbits (:class:`OrbitBranchProblem`, on :class:`~pwsdyn.orbits.OrbitProblem`):
+  Floquet multipliers ``mu`` (the trivial one of an autonomous orbit left out), stability,
+  admissibility; period doubling ``PD: prod (mu_i + 1)`` (a real multiplier through -1;
+  a complex pair contributes ``|mu + 1|^2 > 0``) and Neimark-Sacker
+  ``NS: prod_{i<j} (mu_i mu_j - 1)`` (a pair with ``mu_i mu_j = 1``: a complex pair on the
+  unit circle, or a real pair ``mu, 1/mu`` -- a neutral saddle, which :meth:`confirm`
+  refuses); Kuznetsov, *Elements of Applied Bifurcation Theory*, 3rd ed., section 10.3.
+* equilibria (:class:`EquilibriumProblem`): ``f(x, p) = 0`` in one mode, eigenvalues of
+  ``f_x``, Hopf ``HB: prod_{i<j} (l_i + l_j)`` (the bialternate product; zero for a pair
+  ``+-i w``, and for a real pair ``l, -l`` -- a neutral saddle, refused), Kuznetsov section
+  10.2.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import ArgumentError
+from ..newton import TrialRejected
+
+#: A located zero is the bifurcation its test function stands for when the critical
+#: multipliers (eigenvalues) are this close to the critical set.
+CONFIRM_TOL = 1e-5
+
+
+def _pair_product(z, op):
+    """Real part of ``prod_{i<j} op(z_i, z_j)`` (real for a set closed under conjugation)."""
+    out = 1.0 + 0.0j
+    for i in range(len(z)):
+        for j in range(i + 1, len(z)):
+            out *= op(z[i], z[j])
+    return float(out.real)
+
+
+class OrbitBranchProblem:
+    """A periodic orbit on a fixed signature, ``F(u, lam)`` with ``lam`` one parameter.
+
+    Parameters
+    ----------
+    problem : OrbitProblem
+        Built with ``parameters=[parameter]``.
+    """
+
+    kind = "orbit"
+
+    def __init__(self, problem):
+        if problem.q != 1:
+            raise ArgumentError("an orbit branch continues one parameter: build the "
+                                "OrbitProblem with parameters=[name]")
+        self.orbit_problem = problem
+        self.parameter = problem.parameters[0]
+        self.size = problem.size
+        self._last = None
+
+    def _evaluation(self, u, lam, jacobian=True):
+        from ..orbits.problem import SegmentFailed
+
+        key = (np.asarray(u, dtype=float).tobytes(), float(lam))
+        if self._last is not None and self._last[0] == key and (
+                self._last[1].F_u is not None or not jacobian):
+            return self._last[1]
+        try:
+            ev = self.orbit_problem.evaluate(np.asarray(u, dtype=float), np.array([lam]),
+                                             jacobian=jacobian)
+        except SegmentFailed as exc:
+            raise TrialRejected(str(exc), "simulation") from None
+        self._last = (key, ev)
+        return ev
+
+    def evaluate(self, u, lam):
+        ev = self._evaluation(u, lam)
+        return ev.F, ev.F_u, ev.F_p[:, 0]
+
+    def analyse(self, u, lam, _evaluation=None) -> dict:
+        prob = self.orbit_problem
+        ev = self._evaluation(u, lam)
+        mu = np.asarray(prob.multipliers(ev), dtype=complex)
+        adm = prob.admissibility(u, np.array([lam]), evaluation=ev)
+        stable = bool(mu.size == 0 or np.max(np.abs(mu)) < 1.0)
+        return {"multipliers": mu, "stable": stable, "admissible": bool(adm),
+                "reason": adm.reason or "", "period": float(ev.period)}
+
+    def test_functions(self, data) -> dict:
+        mu = data["multipliers"]
+        out = {"PD": float(np.prod(mu + 1.0).real) if mu.size else 1.0}
+        if mu.size >= 2:
+            out["NS"] = _pair_product(mu, lambda a, b: a * b - 1.0)
+        return out
+
+    def confirm(self, kind, data) -> bool:
+        mu = data["multipliers"]
+        if kind == "PD":
+            return bool(mu.size and np.min(np.abs(mu + 1.0)) < CONFIRM_TOL ** 0.5)
+        if kind == "NS":
+            cx = mu[np.abs(mu.imag) > CONFIRM_TOL]
+            return bool(cx.size and np.min(np.abs(np.abs(cx) - 1.0)) < CONFIRM_TOL ** 0.5)
+        return True
+
+    # ---- what a point is -------------------------------------------------------------
+    def orbit(self, u, lam):
+        """The :class:`~pwsdyn.PeriodicOrbit` at a point."""
+        return self.orbit_problem.orbit(np.asarray(u, dtype=float), np.array([lam]))
+
+    def section_state(self, u) -> np.ndarray:
+        """The state at the start of segment 0 (after the last event of the period)."""
+        _, xs, _ = self.orbit_problem.unpack(np.asarray(u, dtype=float))
+        return np.asarray(xs[0], dtype=float)
+
+    @property
+    def state_names(self):
+        return tuple(self.orbit_problem.model.states)
+
+
+class EquilibriumProblem:
+    """Equilibria ``f(x, p) = 0`` of one mode of an autonomous model.
+
+    ``f_x`` and ``f_p`` come from the generated code of the model with the parameter made a
+    state (:func:`pwsdyn.model.augment.with_parameters_as_states`): the last column of its
+    ``f_x`` is ``f_p``.
+    """
+
+    kind = "equilibrium"
+
+    def __init__(self, model, parameter: str, *, params=None, mode=None):
+        from .. import _validate as V
+        from ..model import compile_model
+        from ..model.augment import with_parameters_as_states
+
+        model = V.model(model, kind="flow", caller="continue_equilibrium()")
+        if parameter not in model.parameters:
+            raise ArgumentError(f"model {model.name!r} has no parameter {parameter!r}; its "
+                                f"parameters: {list(model.parameters)}")
+        if model.forcing_period is not None:
+            raise ArgumentError(f"model {model.name!r} is forced (time-periodic): it has "
+                                f"periodic orbits, not equilibria; use continue_orbit")
+        self.model = model
+        self.parameter = parameter
+        self.params = dict(zip(model.parameters, model.parameter_vector(params)))
+        if mode is None:
+            mode = model.mode_names[model.initial_mode]
+        if mode not in model.mode_names:
+            raise ArgumentError(f"model {model.name!r} has no mode {mode!r}; its modes: "
+                                f"{list(model.mode_names)}")
+        self.mode = mode
+        self._mode = model.mode_names.index(mode)
+        self.size = model.n_states
+        ext = with_parameters_as_states(model, [parameter])
+        self._cm = compile_model(ext)
+        self._pv = ext.parameter_vector({k: v for k, v in self.params.items()
+                                         if k != parameter})
+        if not self._pv.size:
+            self._pv = np.zeros(1)
+        self._n = model.n_states
+        self._buf = np.zeros((self._n + 1) ** 2)
+
+    @property
+    def state_names(self):
+        return tuple(self.model.states)
+
+    def _call(self, which, u, lam):
+        from ..model.codegen import W_F, W_FX
+
+        z = np.append(np.asarray(u, dtype=float), lam)
+        n1 = self._n + 1
+        out = np.zeros(n1 if which == W_F else n1 * n1)
+        self._cm.evaluate(which, self._mode, 0.0, z, self._pv, out)
+        return out
+
+    def evaluate(self, u, lam):
+        from ..model.codegen import W_F, W_FX
+
+        n = self._n
+        F = self._call(W_F, u, lam)[:n]
+        J = self._call(W_FX, u, lam).reshape(n + 1, n + 1)
+        if not (np.all(np.isfinite(F)) and np.all(np.isfinite(J))):
+            raise TrialRejected("the vector field is not finite here", "nonfinite")
+        return F, J[:n, :n], J[:n, n]
+
+    def analyse(self, u, lam, _evaluation=None) -> dict:
+        _, A, _ = self.evaluate(u, lam)
+        ev = np.linalg.eigvals(A)
+        return {"eigenvalues": ev, "stable": bool(np.max(ev.real) < 0.0), "admissible": True,
+                "reason": ""}
+
+    def test_functions(self, data) -> dict:
+        ev = data["eigenvalues"]
+        return {"HB": _pair_product(ev, lambda a, b: a + b)} if ev.size >= 2 else {}
+
+    def confirm(self, kind, data) -> bool:
+        if kind == "HB":
+            ev = data["eigenvalues"]
+            cx = ev[np.abs(ev.imag) > CONFIRM_TOL]
+            return bool(cx.size and np.min(np.abs(cx.real)) < CONFIRM_TOL ** 0.5)
+        return True
+
+    def section_state(self, u):
+        return np.asarray(u, dtype=float)
+
+
+#: Test functions of the bifurcations of periodic orbits followed in two parameters.
+CURVE_KINDS = ("LP", "PD", "NS")
+
+
+def orbit_test_function(kind: str, mu) -> float:
+    """The defining function of a bifurcation of a periodic orbit from its nontrivial
+    multipliers ``mu``: ``LP`` ``prod (mu_i - 1)``, ``PD`` ``prod (mu_i + 1)``, ``NS``
+    ``prod_{i<j} (mu_i mu_j - 1)`` (real for a set closed under conjugation)."""
+    mu = np.asarray(mu, dtype=complex)
+    if kind == "LP":
+        return float(np.prod(mu - 1.0).real)
+    if kind == "PD":
+        return float(np.prod(mu + 1.0).real)
+    if kind == "NS":
+        return _pair_product(mu, lambda a, b: a * b - 1.0)
+    raise ArgumentError(f"no curve of kind {kind!r}; kinds: {CURVE_KINDS}")
+
+
+class BifurcationCurveProblem:
+    """A fold, period-doubling or Neimark-Sacker point of a periodic orbit followed in two
+    parameters: unknowns ``U = (u, p2)``, continued parameter ``lam = p1``, and
+
+        G(U, lam) = ( F(u, p1, p2), psi(u, p1, p2) ) = 0
+
+    with ``F`` the orbit problem and ``psi`` the bifurcation's test function of the
+    multipliers (:func:`orbit_test_function`) -- the orbit problem bordered by its defining
+    condition, the augmented system of two-parameter continuation (Kuznetsov, section 10.3;
+    the slides' "two-parameter continuation" of bifurcation curves). ``F_u``, ``F_p`` are the
+    problem's own; the row of ``psi``'s derivatives is a central difference (its accuracy
+    decides how fast Newton converges, not where: the curve is where ``psi = 0``)."""
+
+    kind = "orbit"
+
+    def __init__(self, problem, curve: str, *, fd_step: float = 1e-6):
+        if curve not in CURVE_KINDS:
+            raise ArgumentError(f"no two-parameter curve of kind {curve!r}; kinds: "
+                                f"{CURVE_KINDS}")
+        if problem.q != 2:
+            raise ArgumentError("a bifurcation curve needs the OrbitProblem of two parameters")
+        self.orbit_problem = problem
+        self.curve = curve
+        self.parameter, self.parameter2 = problem.parameters
+        self.size = problem.size + 1
+        self.fd_step = fd_step
+        self._last = None
+
+    def _ev(self, u, p, jacobian=True):
+        from ..orbits.problem import SegmentFailed
+
+        try:
+            return self.orbit_problem.evaluate(u, p, jacobian=jacobian)
+        except SegmentFailed as exc:
+            raise TrialRejected(str(exc), "simulation") from None
+
+    def _psi(self, ev) -> float:
+        return orbit_test_function(self.curve, self.orbit_problem.multipliers(ev))
+
+    def evaluate(self, U, lam):
+        U = np.asarray(U, dtype=float)
+        u, p2 = U[:-1], float(U[-1])
+        p = np.array([lam, p2])
+        ev = self._ev(u, p)
+        psi = self._psi(ev)
+        # central differences of psi over (u, p1, p2)
+        w = np.append(u, p)
+        grad = np.zeros(w.size)
+        for k in range(w.size):
+            h = self.fd_step * (1.0 + abs(w[k]))
+            wp, wm = w.copy(), w.copy()
+            wp[k] += h
+            wm[k] -= h
+            fp = self._psi(self._ev(wp[:-2], wp[-2:]))
+            fm = self._psi(self._ev(wm[:-2], wm[-2:]))
+            grad[k] = (fp - fm) / (2 * h)
+        n = u.size
+        G = np.append(ev.F, psi)
+        G_U = np.zeros((n + 1, n + 1))
+        G_U[:n, :n] = ev.F_u
+        G_U[:n, n] = ev.F_p[:, 1]
+        G_U[n, :n] = grad[:n]
+        G_U[n, n] = grad[n + 1]
+        G_lam = np.append(ev.F_p[:, 0], grad[n])
+        self._last = (U.tobytes(), float(lam), ev)
+        return G, G_U, G_lam
+
+    def analyse(self, U, lam, _evaluation=None) -> dict:
+        U = np.asarray(U, dtype=float)
+        if self._last is not None and self._last[0] == U.tobytes() and self._last[1] == lam:
+            ev = self._last[2]
+        else:
+            ev = self._ev(U[:-1], np.array([lam, U[-1]]))
+        prob = self.orbit_problem
+        mu = np.asarray(prob.multipliers(ev), dtype=complex)
+        adm = prob.admissibility(U[:-1], np.array([lam, U[-1]]), evaluation=ev)
+        return {"multipliers": mu, "stable": bool(mu.size == 0 or np.max(np.abs(mu)) < 1.0),
+                "admissible": bool(adm), "reason": adm.reason or "",
+                "period": float(ev.period), self.parameter2: float(U[-1])}
+
+    def test_functions(self, data) -> dict:
+        return {}
+
+    def confirm(self, kind, data) -> bool:
+        return True
+
+    def orbit(self, U, lam):
+        U = np.asarray(U, dtype=float)
+        return self.orbit_problem.orbit(U[:-1], np.array([lam, U[-1]]))
+
+    def section_state(self, U) -> np.ndarray:
+        _, xs, _ = self.orbit_problem.unpack(np.asarray(U, dtype=float)[:-1])
+        return np.asarray(xs[0], dtype=float)
+
+    @property
+    def state_names(self):
+        return tuple(self.orbit_problem.model.states)
