@@ -361,3 +361,88 @@ def test_two_parameter_fold_and_period_doubling_curves(io_up, io_down, tmp_path)
     assert back.curve == "PD" and np.array_equal(back.values_of("omega"), pd.values_of("omega"))
     with pytest.raises(ArgumentError, match="one of `params`"):
         pwsdyn.continue_bifurcation(IO_MODEL, io_up.special("PD")[0], ("sigma", "eps"))
+
+
+def test_followed_in_the_stop_position_past_the_graze():
+    """In sigma the impact velocity falls to zero where the wall reaches the amplitude R of the
+    forced response (the graze); on the locked signature the branch goes on, reported not
+    admissible beyond it, with the reason."""
+    br = pwsdyn.continue_orbit(IO_MODEL, io_orbit("stable"), "sigma", span=(-0.6, 0.3),
+                               ds=0.05)
+    w, eps = IO["omega"], IO["eps"]
+    R = 1.0 / math.hypot(1 - w**2, eps * w)
+    sig = br.values
+    assert sig.min() < R - 0.05 and sig.max() == pytest.approx(0.3)
+    below, above = sig < R - 1e-3, sig > R + 1e-3
+    assert below.sum() > 5 and above.sum() >= 2
+    assert br.admissible[below].all() and not br.admissible[above].any()
+    for p in np.array(br.points, dtype=object)[above]:
+        assert "passes through the constraint" in p.data["reason"]
+    for p, x in zip(br.points, br.states):
+        if p.lam < R - 1e-3:
+            vs = [io_one_impact(w, root, sigma=p.lam)[0] for root in (1, -1)]
+            assert min(abs(-x[1] / IO["r"] - v) for v in vs) < 1e-8
+
+
+def test_autonomous_limit_cycle_followed_in_a_parameter():
+    """A Van der Pol oscillator against a wall (an impacting limit cycle, period unknown)
+    followed in mu: every point is the orbit free-running shooting finds from it, period and
+    multiplier to 1e-9."""
+    vdp = {"name": "vdp-wall", "states": ["x", "v"],
+           "parameters": {"mu": 1.0, "sigma": 1.5, "r": 0.7},
+           "modes": {"free": {"x": "v", "v": "mu*(1 - x**2)*v - x"}},
+           "events": [{"name": "wall", "kind": "impact", "surface": "sigma - x",
+                       "reset": {"v": "-r*v"}}]}
+    m = pwsdyn.load_model(vdp)
+    orb = pwsdyn.PeriodicOrbit.from_trajectory(pwsdyn.simulate(m, [0.1, 0.0], (0, 40)))
+    br = pwsdyn.continue_orbit(m, orb, "mu", span=(0.5, 2.0), ds=0.05)
+    assert br.values.max() == pytest.approx(2.0) and len(br) > 5
+    periods = [p.data["period"] for p in br.points]
+    assert np.all(np.diff(periods) > 0)          # the cycle slows down as mu grows
+    for i in (3, len(br) - 2):
+        p = br.points[i]
+        ref = pwsdyn.find_periodic_orbit(m, br.states[i], period=1.001 * p.data["period"],
+                                         params={"mu": p.lam})
+        assert abs(ref.period - p.data["period"]) < 1e-9
+        assert abs(ref.multipliers[0] - p.data["multipliers"][0]) < 1e-9
+        sp_orbit = br.problem.orbit(p.u, p.lam)
+        assert abs(sp_orbit.period - p.data["period"]) < 1e-12
+
+
+def test_special_point_carries_its_orbit(io_up):
+    pd = io_up.special("PD")[0]
+    orb = pd.orbit
+    assert abs(orb.params["omega"] - pd.value) < 1e-15
+    assert np.min(np.abs(orb.multipliers + 1.0)) < 1e-6
+
+
+def test_a_start_that_is_not_an_orbit_is_refused():
+    from pwsdyn.continuation import ContinuationError
+
+    # the orbit at sigma = -0.5 taken as the guess at sigma = 5: no impacting orbit there
+    with pytest.raises(ContinuationError, match="not a solution"):
+        pwsdyn.continue_orbit(IO_MODEL, io_orbit("stable"), "sigma", params={"sigma": 5.0})
+
+
+def test_pseudo_equilibria_of_a_filippov_switch_and_their_fold():
+    """x' = -x^2 + p (1 + sign y)/2, y' = -sign y: both fields point into y = 0, alpha = 1/2
+    and the sliding field is -x^2 + p/2: pseudo-equilibria x = +-sqrt(p/2), a fold at p = 0,
+    stable (eigenvalue -2x on the surface) for x > 0."""
+    m = pwsdyn.load_model({"name": "pseudo-fold", "states": ["x", "y"],
+                           "parameters": {"p": 2.0},
+                           "modes": {"m": {"x": "-x**2 + p*(1 + sign(y))/2",
+                                           "y": "-sign(y)"}}})
+    sw = m.switches[0].name
+    br = pwsdyn.continue_equilibrium(m, [1.0, 0.0], "p", mode=f"slide:{sw}", span=(-1, 3),
+                                     ds=-0.05)
+    lp = br.special("LP")
+    assert len(lp) == 1 and abs(lp[0].value) < 1e-9
+    x = br.states
+    assert np.allclose(x[:, 0] ** 2, br.values / 2, atol=1e-10) and np.allclose(x[:, 1], 0.0)
+    assert all(abs(p.data["alpha"] - 0.5) < 1e-12 for p in br.points)
+    ev = np.array([p.data["eigenvalues"][0].real for p in br.points])
+    assert np.allclose(ev, -2 * x[:, 0], atol=1e-5)
+    assert (br.stable == (x[:, 0] > 0)).sum() >= len(br) - 1    # all but the fold itself
+    assert br.admissible.all()
+    with pytest.raises(ArgumentError, match="no Filippov switch"):
+        pwsdyn.continue_equilibrium(m, [1.0, 0.0], "p", mode="slide:nope")

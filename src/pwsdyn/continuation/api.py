@@ -13,8 +13,8 @@ from .. import _validate as V
 from ..errors import ArgumentError
 from .branch import Branch, SpecialPoint
 from .engine import Continuation, ContinuationSettings, null_space
-from .problems import (CURVE_KINDS, BifurcationCurveProblem, EquilibriumProblem,
-                       OrbitBranchProblem)
+from .problems import (CURVE_KINDS, BifurcationCurveProblem, OrbitBranchProblem,
+                       equilibrium_problem)
 
 _SETTING_NAMES = {f.name for f in dataclasses.fields(ContinuationSettings)}
 
@@ -257,7 +257,8 @@ def _resume(branch: Branch, model, param, settings, progress):
 def continue_equilibrium(model, x0, param: str, *, span=None, ds: float | None = None,
                          max_points: int = 200, params=None, mode: str | None = None,
                          progress: bool = False, **options) -> Branch:
-    """Follow an equilibrium of one mode of an autonomous model in a parameter.
+    """Follow an equilibrium of one mode of an autonomous model, or a pseudo-equilibrium of a
+    Filippov switch, in a parameter.
 
     Folds (``LP``), Hopf points (``HB``) and branch points (``BP``) are located on the way.
 
@@ -272,7 +273,9 @@ def continue_equilibrium(model, x0, param: str, *, span=None, ds: float | None =
     span, ds, max_points, params, progress, **options
         As :func:`continue_orbit`.
     mode : str, optional
-        The mode whose field vanishes (default the model's initial mode).
+        The mode whose field vanishes (default the model's initial mode); ``"slide:<switch>"``
+        for pseudo-equilibria of a Filippov switch (the sliding field vanishes on the surface;
+        not admissible where the point leaves the sliding region).
 
     Returns
     -------
@@ -287,7 +290,7 @@ def continue_equilibrium(model, x0, param: str, *, span=None, ds: float | None =
         raise ArgumentError(f"unknown options for continue_equilibrium(): {sorted(options)}")
     if isinstance(x0, SpecialPoint):
         br = x0.branch
-        if br.kind != "equilibrium" or param != br.parameter:
+        if br.kind == "orbit" or param != br.parameter:
             raise ArgumentError(f"continue_equilibrium from a special point needs one of an "
                                 f"equilibrium branch in {param!r}")
         pt = x0.point
@@ -297,8 +300,14 @@ def continue_equilibrium(model, x0, param: str, *, span=None, ds: float | None =
         return _run(br.problem, pt.u, pt.lam, dataclasses.replace(settings, ds=abs(settings.ds)),
                     tangent=pt.tangent * np.sign(settings.ds), correct_start=False,
                     progress=progress, model=model, start_kind=x0.kind)
-    prob = EquilibriumProblem(model, param, params=params, mode=mode)
+    prob = equilibrium_problem(model, param, params=params, mode=mode)
     x = state_vector(model, x0)
+    if prob.kind == "pseudo-equilibrium":
+        # alpha from the fields at the guess (corrected with x)
+        fp, fm, _, _, _, hx = prob._fields(x, prob.params[param])
+        g = hx[:model.n_states]
+        den = g @ (fm - fp)
+        x = np.append(x, (g @ fm) / den if den != 0 else 0.5)
     return _run(prob, x, prob.params[param], settings, progress=progress, model=model)
 
 
@@ -334,7 +343,7 @@ def load_branch(path) -> Branch:
                           periods=int(ds.attrs.get("periods", 1)), **opts)
         problem = BifurcationCurveProblem(op, curve) if curve else OrbitBranchProblem(op)
     else:
-        problem = EquilibriumProblem(model, param, params=params, mode=ds.attrs["mode"])
+        problem = equilibrium_problem(model, param, params=params, mode=ds.attrs["mode"])
     spectrum = "multipliers" if problem.kind == "orbit" else "eigenvalues"
     points = []
     for i in range(ds.sizes["point"]):

@@ -317,3 +317,153 @@ class BifurcationCurveProblem:
     @property
     def state_names(self):
         return tuple(self.orbit_problem.model.states)
+
+
+class PseudoEquilibriumProblem:
+    """Pseudo-equilibria of a Filippov switching surface: points on ``h(x) = 0`` where the
+    sliding vector field vanishes, followed in a parameter.
+
+    Unknowns ``u = (x, alpha)``; with ``f_+`` (``f_-``) the field above (below) the surface,
+
+        (1 - alpha) f_-(x) + alpha f_+(x) = 0,    h(x) = 0
+
+    (``n + 1`` equations: Filippov's convex combination, thesis eq. 2.7, vanishing on the
+    surface; Kuznetsov, Rinaldi & Gragnani, Int. J. Bifurcation and Chaos 13 (2003) 2157-2188,
+    section 3). It is a solution of the Filippov system while ``0 <= alpha <= 1`` (the point
+    lies in the sliding region); where ``alpha`` leaves ``[0, 1]`` it meets an equilibrium of
+    one of the two modes (a boundary equilibrium), and the points beyond are reported not
+    admissible. Stability: the eigenvalues of the sliding field's Jacobian on the tangent
+    space of the surface (``alpha(x) = h_x f_- / h_x (f_- - f_+)``, by central differences),
+    and Hopf points from them.
+    """
+
+    kind = "pseudo-equilibrium"
+
+    def __init__(self, model, parameter: str, *, params=None, switch=None,
+                 fd_step: float = 1e-7):
+        from .. import _validate as V
+        from ..model import compile_model
+        from ..model.augment import with_parameters_as_states
+
+        model = V.model(model, kind="flow", caller="continue_equilibrium()")
+        if parameter not in model.parameters:
+            raise ArgumentError(f"model {model.name!r} has no parameter {parameter!r}; its "
+                                f"parameters: {list(model.parameters)}")
+        sws = [s for s in model.switches if s.kind == "filippov"]
+        if not sws:
+            raise ArgumentError(f"model {model.name!r} has no Filippov switching surface")
+        if switch is None:
+            sw = sws[0]
+        else:
+            match = [s for s in sws if s.name == switch]
+            if not match:
+                raise ArgumentError(f"model {model.name!r} has no Filippov switch {switch!r}; "
+                                    f"its switches: {[s.name for s in sws]}")
+            sw = match[0]
+        self.model = model
+        self.parameter = parameter
+        self.switch = sw.name
+        self.mode = f"slide:{sw.name}"
+        self._sw = sw
+        self.params = dict(zip(model.parameters, model.parameter_vector(params)))
+        ext = with_parameters_as_states(model, [parameter])
+        self._cm = compile_model(ext)
+        self._pv = ext.parameter_vector({k: v for k, v in self.params.items()
+                                         if k != parameter})
+        if not self._pv.size:
+            self._pv = np.zeros(1)
+        self._n = model.n_states
+        self.size = self._n + 1
+        self.fd_step = fd_step
+
+    @property
+    def state_names(self):
+        return tuple(self.model.states)
+
+    def _call(self, which, idx, x, lam, size):
+        z = np.append(np.asarray(x, dtype=float), lam)
+        out = np.zeros(size)
+        self._cm.evaluate(which, idx, 0.0, z, self._pv, out)
+        return out
+
+    def _fields(self, x, lam):
+        from ..model.codegen import W_F, W_FX, W_H, W_HX
+
+        n1 = self._n + 1
+        sw = self._sw
+        fp = self._call(W_F, sw.above, x, lam, n1)[:self._n]
+        fm = self._call(W_F, sw.below, x, lam, n1)[:self._n]
+        Jp = self._call(W_FX, sw.above, x, lam, n1 * n1).reshape(n1, n1)[:self._n]
+        Jm = self._call(W_FX, sw.below, x, lam, n1 * n1).reshape(n1, n1)[:self._n]
+        h = self._call(W_H, sw.surface, x, lam, 1)[0]
+        hx = self._call(W_HX, sw.surface, x, lam, n1)
+        return fp, fm, Jp, Jm, h, hx
+
+    def evaluate(self, u, lam):
+        u = np.asarray(u, dtype=float)
+        n = self._n
+        x, a = u[:n], float(u[n])
+        fp, fm, Jp, Jm, h, hx = self._fields(x, lam)
+        F = np.append((1 - a) * fm + a * fp, h)
+        F_u = np.zeros((n + 1, n + 1))
+        F_u[:n, :n] = (1 - a) * Jm[:, :n] + a * Jp[:, :n]
+        F_u[:n, n] = fp - fm
+        F_u[n, :n] = hx[:n]
+        F_lam = np.append((1 - a) * Jm[:, n] + a * Jp[:, n], hx[n])
+        if not (np.all(np.isfinite(F)) and np.all(np.isfinite(F_u))):
+            raise TrialRejected("the vector field is not finite here", "nonfinite")
+        return F, F_u, F_lam
+
+    def sliding_field(self, x, lam) -> np.ndarray:
+        """Filippov's sliding field at ``x`` (``alpha`` from the fields, not an unknown)."""
+        fp, fm, _, _, _, hx = self._fields(x, lam)
+        g = hx[:self._n]
+        den = g @ (fm - fp)
+        a = (g @ fm) / den if den != 0 else 0.5
+        return (1 - a) * fm + a * fp
+
+    def analyse(self, u, lam, _evaluation=None) -> dict:
+        u = np.asarray(u, dtype=float)
+        n = self._n
+        x, a = u[:n], float(u[n])
+        _, _, _, _, _, hx = self._fields(x, lam)
+        g = hx[:n]
+        # orthonormal basis of the surface's tangent space
+        _, _, Vt = np.linalg.svd(g[None, :])
+        T = Vt[1:].T
+        J = np.zeros((n, n))
+        for k in range(n):
+            h = self.fd_step * (1.0 + abs(x[k]))
+            e = np.zeros(n)
+            e[k] = h
+            J[:, k] = (self.sliding_field(x + e, lam) - self.sliding_field(x - e, lam)) / (2 * h)
+        ev = np.linalg.eigvals(T.T @ J @ T) if n > 1 else np.zeros(0)
+        inside = -1e-12 <= a <= 1 + 1e-12
+        reason = "" if inside else (f"alpha = {a:.6g} outside [0, 1]: the point is not in the "
+                                    f"sliding region (past a boundary equilibrium)")
+        return {"eigenvalues": ev, "alpha": a,
+                "stable": bool(ev.size == 0 or np.max(ev.real) < 0.0),
+                "admissible": bool(inside), "reason": reason}
+
+    def test_functions(self, data) -> dict:
+        ev = data["eigenvalues"]
+        return {"HB": _pair_product(ev, lambda a, b: a + b)} if ev.size >= 2 else {}
+
+    def confirm(self, kind, data) -> bool:
+        if kind == "HB":
+            ev = data["eigenvalues"]
+            cx = ev[np.abs(ev.imag) > CONFIRM_TOL]
+            return bool(cx.size and np.min(np.abs(cx.real)) < CONFIRM_TOL ** 0.5)
+        return True
+
+    def section_state(self, u):
+        return np.asarray(u, dtype=float)[:self._n]
+
+
+def equilibrium_problem(model, parameter, *, params=None, mode=None):
+    """The problem of equilibria of ``mode`` (a mode name), or of pseudo-equilibria of the
+    switch ``name`` for ``mode = "slide:<name>"``."""
+    if isinstance(mode, str) and mode.startswith("slide:"):
+        return PseudoEquilibriumProblem(model, parameter, params=params,
+                                        switch=mode.split(":", 1)[1])
+    return EquilibriumProblem(model, parameter, params=params, mode=mode)
