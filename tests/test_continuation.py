@@ -446,3 +446,17 @@ def test_pseudo_equilibria_of_a_filippov_switch_and_their_fold():
     assert br.admissible.all()
     with pytest.raises(ArgumentError, match="no Filippov switch"):
         pwsdyn.continue_equilibrium(m, [1.0, 0.0], "p", mode="slide:nope")
+
+
+def test_branch_drawn_over_a_sweep(io_up):
+    import matplotlib
+    matplotlib.use("Agg")
+
+    sw = pwsdyn.sweep(IO_MODEL, "omega", np.linspace(3.0, 4.0, 5), {"x": -1.0, "v": 0.0},
+                      params={k: v for k, v in IO.items() if k != "omega"}, transient=20,
+                      samples=2, direction="up", workers=1,
+                      progress=False)
+    fig = io_up.plot(y="x", sweep=sw)
+    ax = fig.axes[0]
+    labels = [ln.get_label() for ln in ax.get_lines()]
+    assert any("sweep" in lb for lb in labels) and "stable" in labels
