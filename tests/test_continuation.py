@@ -368,7 +368,7 @@ def test_followed_in_the_stop_position_past_the_graze():
     forced response (the graze); on the locked signature the branch goes on, reported not
     admissible beyond it, with the reason."""
     br = pwsdyn.continue_orbit(IO_MODEL, io_orbit("stable"), "sigma", span=(-0.6, 0.3),
-                               ds=0.05)
+                               ds=0.05, on_dib="continue")
     w, eps = IO["omega"], IO["eps"]
     R = 1.0 / math.hypot(1 - w**2, eps * w)
     sig = br.values
@@ -460,3 +460,54 @@ def test_branch_drawn_over_a_sweep(io_up):
     ax = fig.axes[0]
     labels = [ln.get_label() for ln in ax.get_lines()]
     assert any("sweep" in lb for lb in labels) and "stable" in labels
+
+
+# ---- grazing -----------------------------------------------------------------------------
+
+def _non_impacting_orbit(omega, sigma):
+    """The forced response x_p = X sin(omega t) + Y cos(omega t) of the impact oscillator, a
+    periodic orbit without impacts while sigma > R = sqrt(X^2 + Y^2)."""
+    eps = IO["eps"]
+    X, Y = np.linalg.solve(np.array([[1 - omega**2, -eps * omega],
+                                     [eps * omega, 1 - omega**2]]), [1.0, 0.0])
+    return pwsdyn.find_periodic_orbit(IO_MODEL, [Y, omega * X], t0=0.0,
+                                      params={**IO, "omega": omega, "sigma": sigma})
+
+
+@pytest.mark.parametrize("omega", [2.0, 2.8, 3.5])
+def test_graze_of_the_non_impacting_orbit_and_the_impacting_branch_born_there(omega):
+    """Followed down in the stop position, the non-impacting orbit grazes the stop where
+    sigma equals the amplitude R of the forced response (closed form); the branch goes on
+    with the one-impact orbit born there, whose points match its closed form."""
+    R = 1.0 / math.hypot(1 - omega**2, IO["eps"] * omega)
+    orb = _non_impacting_orbit(omega, R + 0.3)
+    assert len(orb.signature) == 0
+    br = pwsdyn.continue_orbit(IO_MODEL, orb, "sigma", span=(R - 0.3, R + 0.3), ds=-0.05)
+    gr = br.special("GR")
+    assert len(gr) == 1 and abs(gr[0].value - R) < 1e-10
+    assert gr[0].key == "GR/impact/0" and abs(gr[0].monitor.x[0] - R) < 1e-10
+    assert [len(s) for s in br.signatures] == [0, 1]
+    assert br.admissible.all()
+    new = [(p, x) for p, x in zip(br.points, br.states) if p.signature_index == 1]
+    assert len(new) >= 4 and br.values.min() == pytest.approx(R - 0.3)
+    for p, x in new:
+        vs = [io_one_impact(omega, root, sigma=p.lam)[0] for root in (1, -1)]
+        assert abs(x[0] - p.lam) < 1e-12
+        assert min(abs(-x[1] / IO["r"] - v) for v in vs) < 1e-8
+
+
+@pytest.mark.parametrize("ds", [0.01, 0.1])
+def test_impact_velocity_to_zero_ends_the_impacting_branch_once(ds):
+    """Up in sigma the one-impact orbit's impact velocity falls to zero at sigma = R: one
+    graze, and the branch goes on without the impact (or stops there, on_dib="stop")."""
+    w = IO["omega"]
+    R = 1.0 / math.hypot(1 - w**2, IO["eps"] * w)
+    br = pwsdyn.continue_orbit(IO_MODEL, io_orbit("stable"), "sigma", span=(-0.6, 0.4), ds=ds,
+                               ds_max=10 * ds, max_points=400)
+    gr = br.special("GR")
+    assert len(gr) == 1 and abs(gr[0].value - R) < 1e-10 and gr[0].key == "GR/impact@0"
+    assert [len(s) for s in br.signatures] == [1, 0]
+    assert br.values.max() == pytest.approx(0.4) and br.admissible.all()
+    stop = pwsdyn.continue_orbit(IO_MODEL, io_orbit("stable"), "sigma", span=(-0.6, 0.4),
+                                 ds=ds, on_dib="stop")
+    assert stop.points[-1].special == "GR" and "GR located" in stop.stop_reason

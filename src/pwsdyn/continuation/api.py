@@ -12,7 +12,7 @@ import numpy as np
 from .. import _validate as V
 from ..errors import ArgumentError
 from .branch import Branch, SpecialPoint
-from .engine import Continuation, ContinuationSettings, null_space
+from .engine import Continuation, ContinuationError, ContinuationSettings, null_space
 from .problems import (CURVE_KINDS, BifurcationCurveProblem, OrbitBranchProblem,
                        equilibrium_problem)
 
@@ -31,25 +31,89 @@ def _split_options(options: dict, span, ds, max_points):
     return ContinuationSettings(ds=ds, span=span, max_points=max_points, **st), options
 
 
+#: Kinds of discontinuity-induced bifurcations at which an orbit branch changes signature.
+DIB_KINDS = ("GR",)
+ON_DIB = ("switch", "stop", "continue")
+
+
 def _run(problem, u0, lam0, settings, *, tangent=None, correct_start=True, progress=False,
-         model=None, prefix=(), start_kind=""):
-    cont = Continuation(problem, u0, lam0, settings, tangent=tangent,
-                        correct_start=correct_start, progress=progress, start_kind=start_kind)
+         model=None, start_kind="", on_dib="continue", options=None):
+    """Follow a branch; on an orbit branch with ``on_dib="switch"`` go on past each graze
+    with the orbit's new signature, ``"stop"`` end there, ``"continue"`` keep the signature
+    (points past the graze are not admissible)."""
+    orbit = getattr(problem, "kind", "") == "orbit" and hasattr(problem, "orbit_problem")
+    st = settings
+    if orbit and on_dib in ("switch", "stop"):
+        st = dataclasses.replace(settings, stop_at=tuple(settings.stop_at) + DIB_KINDS)
+    cont = Continuation(problem, u0, lam0, st, tangent=tangent, correct_start=correct_start,
+                        progress=progress, start_kind=start_kind)
     cont.run()
-    return Branch(problem, [*prefix, *cont.points], stop_reason=cont.stop_reason,
-                  settings=settings, model=model)
+    points, problems = list(cont.points), [problem]
+    reason = cont.stop_reason
+    while (orbit and on_dib == "switch" and cont.stop_point is not None
+           and len(points) < settings.max_points):
+        nxt = _after_graze(problems[-1], cont.stop_point, st, options or {})
+        if isinstance(nxt, str):
+            reason = f"{reason}; no orbit on the other side of the graze: {nxt}"
+            break
+        prob2, u1, lam1, ds = nxt
+        problems.append(prob2)
+        st2 = dataclasses.replace(st, ds=ds, max_points=settings.max_points - len(points))
+        try:
+            cont = Continuation(prob2, u1, lam1, st2, progress=progress,
+                                arclength0=points[-1].arclength)
+            cont.run()
+        except ContinuationError as exc:
+            reason = f"{reason}; the orbit past the graze could not be followed: {exc}"
+            break
+        for q in cont.points:
+            q.signature_index = len(problems) - 1
+        points += cont.points
+        reason = cont.stop_reason
+    return Branch(problem, points, stop_reason=reason, settings=settings, model=model,
+                  problems=problems)
+
+
+def _after_graze(bp, pt, settings, options):
+    """The orbit just past the graze ``pt`` (a point of ``bp``) with the signature it has
+    there (:func:`pwsdyn.continuation.dib.past_graze`): ``(problem, u, lam, ds)``, or why
+    there is none. The restart is a short step ``delta`` past the graze in the direction of
+    travel: far enough for the new orbit's Newton to be regular (its new impact's velocity
+    grows like ``sqrt(delta)``), near enough to lose nothing of the branch that matters."""
+    from .dib import past_graze
+
+    op = bp.orbit_problem
+    key = pt.data.get("located", "")
+    direction = float(np.sign(pt.tangent[-1])) or float(np.sign(settings.ds)) or 1.0
+    lo, hi = settings.span
+    delta = 1e-4 * (1.0 + abs(pt.lam))
+    lam1 = pt.lam + direction * delta
+    if not lo <= lam1 <= hi:
+        return "the span ends at the graze"
+    # the old signature past the graze (regular: it crosses the surface there)
+    res = op.solve(pt.u, np.array([lam1]))
+    if not res.converged:
+        return f"the old signature past the graze: Newton {res.reason}"
+    made = past_graze(op, key, res.x, lam1)
+    if isinstance(made, str):
+        return made
+    prob1, u1 = made
+    u1 = _reduce_phase(prob1, u1)
+    return OrbitBranchProblem(prob1), u1, lam1, direction * abs(settings.ds)
 
 
 def continue_orbit(model, orbit, param: str, *, span=None, ds: float | None = None,
-                   max_points: int = 200, params=None, progress: bool = False,
-                   **options) -> Branch:
+                   max_points: int = 200, params=None, on_dib: str = "switch",
+                   progress: bool = False, **options) -> Branch:
     """Follow a periodic orbit in a parameter by pseudo-arclength continuation.
 
-    The orbit keeps its signature (its sequence of events) along the branch; where that
-    stops being an orbit of the hybrid model (past a grazing, an impact with the flow
-    leaving the surface) the points are marked ``admissible = False`` with the reason, and
-    the branch goes on. Folds (``LP``), period doublings (``PD``), Neimark-Sacker points
-    (``NS``) and branch points (``BP``) are located on the way.
+    Folds (``LP``), period doublings (``PD``), Neimark-Sacker points (``NS``), branch points
+    (``BP``) and grazings (``GR``: a segment touching an impact or switching surface, or an
+    impact whose velocity goes to zero) are located on the way. At a graze the orbit's
+    signature (its sequence of events) changes: by default the branch goes on with the new
+    one (``on_dib="switch"``: an impact added or removed), or it ends there (``"stop"``), or
+    it keeps the old signature (``"continue"``), whose points past the graze are not orbits
+    of the hybrid model and are marked ``admissible = False`` with the reason.
 
     Parameters
     ----------
@@ -71,6 +135,8 @@ def continue_orbit(model, orbit, param: str, *, span=None, ds: float | None = No
         Most points (the start and the special points included).
     params : dict, optional
         Other parameter values (default the orbit's).
+    on_dib : {'switch', 'stop', 'continue'}
+        What happens at a discontinuity-induced bifurcation (a graze).
     progress : bool
         Show a progress bar.
     **options
@@ -92,11 +158,12 @@ def continue_orbit(model, orbit, param: str, *, span=None, ds: float | None = No
 
     model = V.model(model, kind="flow", caller="continue_orbit()")
     param = _parameter(model, param)
+    on_dib = V.choice("on_dib", on_dib, ON_DIB)
     settings, options = _split_options(dict(options), span, ds, max_points)
     if isinstance(orbit, Branch):
         return _resume(orbit, model, param, settings, progress)
     if isinstance(orbit, SpecialPoint):
-        return _from_special(orbit, model, param, settings, progress, params, options)
+        return _from_special(orbit, model, param, settings, progress, params, options, on_dib)
     from ..orbits import PeriodicOrbit
 
     if not isinstance(orbit, PeriodicOrbit):
@@ -109,7 +176,7 @@ def continue_orbit(model, orbit, param: str, *, span=None, ds: float | None = No
         prob = _with_options(prob, options)
     u = _reduce_phase(prob, u)
     return _run(OrbitBranchProblem(prob), u, float(prob.p0[0]), settings, progress=progress,
-                model=model)
+                model=model, on_dib=on_dib, options=options)
 
 
 def _reduce_phase(prob, u):
@@ -146,14 +213,15 @@ def _with_options(prob, options):
                         t_ref=prob.t_ref, sliding=prob.sliding, **opts)
 
 
-def _from_special(sp: SpecialPoint, model, param, settings, progress, params, options):
+def _from_special(sp: SpecialPoint, model, param, settings, progress, params, options,
+                  on_dib="switch"):
     from ..orbits.problem import OrbitProblem
 
     br = sp.branch
     if br.kind != "orbit":
         raise ArgumentError(f"continue_orbit needs a special point of an orbit branch, got one "
                             f"of a {br.kind} branch")
-    base: OrbitBranchProblem = br.problem
+    base: OrbitBranchProblem = sp.problem
     op = base.orbit_problem
     pt = sp.point
     all_params = dict(op.params)
@@ -166,15 +234,16 @@ def _from_special(sp: SpecialPoint, model, param, settings, progress, params, op
                             periods=op.periods, t_ref=op.t_ref, sliding=op.sliding,
                             **_problem_options(op, options))
         return _run(OrbitBranchProblem(prob), pt.u, all_params[param], settings,
-                    progress=progress, model=model)
+                    progress=progress, model=model, on_dib=on_dib, options=options)
     if sp.kind == "PD":
-        return _switch_period_doubling(sp, model, settings, progress, options)
+        return _switch_period_doubling(sp, model, settings, progress, options, on_dib)
     if sp.kind == "BP":
         J = np.column_stack(base.evaluate(pt.u, pt.lam)[1:])
-        return _switch_branch_point(base, pt, J, model, settings, progress)
+        return _switch_branch_point(base, pt, J, model, settings, progress, on_dib)
     return _run(base, pt.u, pt.lam, dataclasses.replace(settings, ds=abs(settings.ds)),
                 tangent=pt.tangent * np.sign(settings.ds), correct_start=False,
-                progress=progress, model=model, start_kind=sp.kind)
+                progress=progress, model=model, start_kind=sp.kind, on_dib=on_dib,
+                options=options)
 
 
 def _problem_options(op, options):
@@ -187,7 +256,7 @@ def _problem_options(op, options):
     return {k: v for k, v in opts.items() if k in DEFAULTS}
 
 
-def _switch_period_doubling(sp, model, settings, progress, options):
+def _switch_period_doubling(sp, model, settings, progress, options, on_dib="switch"):
     """The period-doubled branch born at a period doubling: the orbit run twice solves the
     problem of the doubled signature, whose Jacobian ``F_u`` is singular there (the
     multiplier -1 of one period is +1 of two); the new branch leaves along its null vector,
@@ -195,7 +264,7 @@ def _switch_period_doubling(sp, model, settings, progress, options):
     pitchfork of the doubled problem; Kuznetsov, section 10.3.2)."""
     from ..orbits.problem import OrbitProblem
 
-    base = sp.branch.problem
+    base = sp.problem
     op = base.orbit_problem
     pt = sp.point
     params = dict(op.params)
@@ -221,10 +290,10 @@ def _switch_period_doubling(sp, model, settings, progress, options):
     v /= np.linalg.norm(v)
     return _run(bp2, u2, pt.lam, dataclasses.replace(settings, ds=abs(settings.ds)),
                 tangent=v, correct_start=False, progress=progress, model=model,
-                start_kind="BP")
+                start_kind="BP", on_dib=on_dib, options=options)
 
 
-def _switch_branch_point(problem, pt, J, model, settings, progress):
+def _switch_branch_point(problem, pt, J, model, settings, progress, on_dib="continue"):
     """The other branch through a branch point: ``[F_u F_lam]`` has a two-dimensional null
     space there, spanned by the branch's tangent and the other branch's; leave along the
     null vector orthogonal to the tangent (Allgower & Georg, section 8.2)."""
@@ -237,21 +306,25 @@ def _switch_branch_point(problem, pt, J, model, settings, progress):
         w = -w
     return _run(problem, pt.u, pt.lam, dataclasses.replace(settings, ds=abs(settings.ds)),
                 tangent=w, correct_start=False, progress=progress, model=model,
-                start_kind="BP")
+                start_kind="BP", on_dib=on_dib)
 
 
 def _resume(branch: Branch, model, param, settings, progress):
     if param != branch.parameter:
         raise ArgumentError(f"the branch continues {branch.parameter!r}, not {param!r}")
     last = branch.points[-1]
+    problem = branch.problem_of(last)
     st = dataclasses.replace(settings, ds=math.copysign(
         max(abs(last.ds), settings.ds_min) if last.ds else abs(settings.ds), settings.ds))
-    cont = Continuation(branch.problem, last.u, last.lam, st,
+    cont = Continuation(problem, last.u, last.lam, st,
                         tangent=last.tangent * (1.0 if st.ds > 0 else -1.0),
                         correct_start=False, progress=progress, arclength0=last.arclength)
     cont.run()
+    for q in cont.points:
+        q.signature_index = last.signature_index
     return Branch(branch.problem, branch.points[:-1] + cont.points,
-                  stop_reason=cont.stop_reason, settings=st, model=model)
+                  stop_reason=cont.stop_reason, settings=st, model=model,
+                  problems=branch.problems)
 
 
 def continue_equilibrium(model, x0, param: str, *, span=None, ds: float | None = None,
@@ -339,15 +412,30 @@ def load_branch(path) -> Branch:
         opts = {k: v for k, v in opts.items() if k in DEFAULTS and
                 k not in ("variational", "dense", "throw", "mode", "sliding")}
         names = [param, ds.attrs["parameter2"]] if curve else [param]
-        op = OrbitProblem(model, ds.attrs["signature"], params=params, parameters=names,
-                          periods=int(ds.attrs.get("periods", 1)), **opts)
-        problem = BifurcationCurveProblem(op, curve) if curve else OrbitBranchProblem(op)
+        sigs = json.loads(ds.attrs.get("signatures", json.dumps([ds.attrs["signature"]])))
+        pers = json.loads(ds.attrs.get("periods_of_signatures",
+                                       json.dumps([int(ds.attrs.get("periods", 1))])))
+        trefs = json.loads(ds.attrs.get("t_refs", json.dumps([0.0] * len(sigs))))
+        states0 = json.loads(ds.attrs.get("states0", json.dumps([None] * len(sigs))))
+        problems = []
+        for sig, per, tref, st0 in zip(sigs, pers, trefs, states0):
+            kw = {} if sig.strip() and sig != "()" else {"state": st0}
+            op = OrbitProblem(model, sig if sig != "()" else (), params=params,
+                              parameters=names, periods=per, t_ref=tref, **kw, **opts)
+            problems.append(BifurcationCurveProblem(op, curve) if curve
+                            else OrbitBranchProblem(op))
+        problem = problems[0]
     else:
         problem = equilibrium_problem(model, param, params=params, mode=ds.attrs["mode"])
+        problems = [problem]
     spectrum = "multipliers" if problem.kind == "orbit" else "eigenvalues"
     points = []
+    sig_index = (ds["signature_index"].values if "signature_index" in ds
+                 else np.zeros(ds.sizes["point"], dtype=int))
     for i in range(ds.sizes["point"]):
-        u = np.asarray(ds["u"].values[i], dtype=float)
+        k = int(sig_index[i])
+        size = problems[k].size
+        u = np.asarray(ds["u"].values[i][:size], dtype=float)
         lam = float(ds[param].values[i])
         z = ds[f"{spectrum}_real"].values[i] + 1j * ds[f"{spectrum}_imag"].values[i]
         data = {spectrum: z[np.isfinite(z)], "stable": bool(ds["stable"].values[i]),
@@ -357,14 +445,16 @@ def load_branch(path) -> Branch:
             data["period"] = float(ds["period"].values[i])
         if getattr(problem, "parameter2", None):
             data[problem.parameter2] = float(ds[problem.parameter2].values[i])
-        tests = {k[5:]: float(ds[k].values[i]) for k in ds.data_vars if k.startswith("test_")}
-        points.append(Point(u=u, lam=lam, tangent=np.asarray(ds["tangent"].values[i]),
+        tests = {k[5:].replace(":", "/"): float(ds[k].values[i]) for k in ds.data_vars
+                 if k.startswith("test_") and np.isfinite(ds[k].values[i])}
+        points.append(Point(u=u, lam=lam, tangent=np.asarray(ds["tangent"].values[i][:size + 1]),
                             ds=float(ds["ds"].values[i]),
                             iterations=int(ds["iterations"].values[i]),
                             arclength=float(ds["arclength"].values[i]), data=data,
-                            tests=tests, special=str(ds["special"].values[i])))
+                            tests=tests, special=str(ds["special"].values[i]),
+                            signature_index=k))
     return Branch(problem, points, stop_reason=ds.attrs.get("stop_reason", ""),
-                  settings=settings, model=model)
+                  settings=settings, model=model, problems=problems)
 
 
 def continue_bifurcation(model, special_point: SpecialPoint, params, *, span=None, span2=None,

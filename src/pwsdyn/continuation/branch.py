@@ -17,6 +17,8 @@ KINDS = {
     "PD": "period doubling: a Floquet multiplier passes through -1",
     "NS": "Neimark-Sacker: a complex pair of Floquet multipliers crosses the unit circle",
     "HB": "Hopf: a complex pair of eigenvalues crosses the imaginary axis",
+    "GR": "grazing: the orbit touches a surface tangentially (a segment's interior minimum of "
+          "h, or an impact's normal velocity, reaches zero)",
     "EP": "end point of the branch",
 }
 
@@ -63,16 +65,33 @@ class SpecialPoint:
         return self.point.data.get("eigenvalues")
 
     @property
+    def key(self) -> str:
+        """The test function located here (``"GR/<surface>/<segment>"`` for one monitor of
+        several of a kind; the kind otherwise)."""
+        return self.point.data.get("located", self.kind)
+
+    @property
+    def monitor(self):
+        """For a discontinuity-induced bifurcation: the monitor located here, with the segment,
+        the surface and the point of tangency (``.t``, ``.x``); ``None`` otherwise."""
+        return self.point.data.get("monitors", {}).get(self.key)
+
+    @property
     def state(self) -> np.ndarray:
         """The state at the section (orbits) or the equilibrium."""
-        return self.branch.problem.section_state(self.point.u)
+        return self.branch.problem_of(self.point).section_state(self.point.u)
+
+    @property
+    def problem(self):
+        """The problem the point solves (its signature's, on a branch that switched)."""
+        return self.branch.problem_of(self.point)
 
     @property
     def orbit(self):
         """The periodic orbit at the point (orbit branches)."""
         if self.branch.kind != "orbit":
             raise ArgumentError(f"a {self.branch.kind} branch has no orbit")
-        return self.branch.problem.orbit(self.point.u, self.point.lam)
+        return self.problem.orbit(self.point.u, self.point.lam)
 
     def __repr__(self):
         extra = ""
@@ -95,15 +114,21 @@ class Branch:
     kind : str
         ``"orbit"`` or ``"equilibrium"``.
     problem : object
-        What was continued (an :class:`~pwsdyn.continuation.problems.OrbitBranchProblem` or
-        :class:`~pwsdyn.continuation.problems.EquilibriumProblem`).
+        What was continued first (an
+        :class:`~pwsdyn.continuation.problems.OrbitBranchProblem`, an
+        :class:`~pwsdyn.continuation.problems.EquilibriumProblem`, ...).
+    problems : list
+        Every problem of the branch: after a graze the branch goes on with the orbit's new
+        signature (``Point.signature_index`` says which problem a point solves).
     stop_reason : str
         Why the branch ended.
     settings : ContinuationSettings
     """
 
-    def __init__(self, problem, points, *, stop_reason="", settings=None, model=None):
+    def __init__(self, problem, points, *, stop_reason="", settings=None, model=None,
+                 problems=None):
         self.problem = problem
+        self.problems = list(problems) if problems else [problem]
         self.points = list(points)
         self.parameter = problem.parameter
         self.kind = problem.kind
@@ -153,10 +178,20 @@ class Branch:
                             + (f" and {self.parameter2!r}" if self.parameter2 else "")
                             + f", not {name!r}")
 
+    def problem_of(self, point):
+        """The problem ``point`` solves."""
+        return self.problems[getattr(point, "signature_index", 0)]
+
+    @property
+    def signatures(self) -> list:
+        """The signature of each problem (orbit branches)."""
+        return [p.orbit_problem.signature for p in self.problems
+                if hasattr(p, "orbit_problem")]
+
     @property
     def states(self) -> np.ndarray:
         """The state at the section (orbits) or the equilibrium, one row per point."""
-        return np.array([self.problem.section_state(p.u) for p in self.points])
+        return np.array([self.problem_of(p).section_state(p.u) for p in self.points])
 
     @property
     def stable(self) -> np.ndarray:
@@ -191,7 +226,13 @@ class Branch:
         for i, p in enumerate(pts):
             z = np.asarray(p.data.get(spectrum, ()), dtype=complex)
             mu[i, :z.size] = z
-        nu = pts[0].u.size if pts else 0
+        nu = max((p.u.size for p in pts), default=0)
+
+        def padded(vectors, size):
+            out = np.full((len(vectors), size), np.nan)
+            for i, v in enumerate(vectors):
+                out[i, :v.size] = v
+            return out
         kinds = sorted({k for p in pts for k in p.tests})
         ds = xr.Dataset(
             {
@@ -215,16 +256,22 @@ class Branch:
                        {"long_name": "arclength step that reached the point"}),
                 "arclength": ("point", np.array([p.arclength for p in pts])),
                 "iterations": ("point", np.array([p.iterations for p in pts], dtype=np.int32)),
-                "u": (("point", "unknown"), np.array([p.u for p in pts]).reshape(-1, nu),
-                      {"long_name": "unknowns of the problem"}),
+                "u": (("point", "unknown"), padded([p.u for p in pts], nu),
+                      {"long_name": "unknowns of the problem (NaN beyond its size)"}),
                 "tangent": (("point", "unknown_and_parameter"),
-                            np.array([p.tangent for p in pts]).reshape(-1, nu + 1)),
+                            padded([p.tangent for p in pts], nu + 1)),
+                "signature_index": ("point", np.array([p.signature_index for p in pts],
+                                                      dtype=np.int32),
+                                    {"long_name": "index of the point's signature in the "
+                                                  "signatures attribute"}),
             },
             coords={"point": np.arange(len(pts)), **state_coords(m)},
         )
         for k in kinds:
-            ds[f"test_{k}"] = ("point", np.array([p.tests.get(k, np.nan) for p in pts]),
-                               {"long_name": KINDS.get(k, k) + " (test function)"})
+            # "GR/<surface>/<segment>": '/' is not allowed in a NetCDF name
+            ds[f"test_{k.replace('/', ':')}"] = (
+                "point", np.array([p.tests.get(k, np.nan) for p in pts]),
+                {"long_name": KINDS.get(k.split("/")[0], k) + f" (test function {k})"})
         if self.kind == "orbit":
             ds["period"] = ("point", np.array([p.data.get("period", np.nan) for p in pts]))
         if self.curve:
@@ -250,7 +297,16 @@ class Branch:
         if self.kind == "orbit":
             op = self.problem.orbit_problem
             attrs["signature"] = str(op.signature)
+            attrs["signatures"] = json.dumps([str(q.orbit_problem.signature)
+                                              for q in self.problems])
             attrs["periods"] = int(op.periods)
+            attrs["periods_of_signatures"] = json.dumps([int(q.orbit_problem.periods)
+                                                         for q in self.problems])
+            # what an orbit problem needs besides its signature: the start time and discrete
+            # state of an orbit without events
+            attrs["t_refs"] = json.dumps([float(q.orbit_problem.t_ref) for q in self.problems])
+            attrs["states0"] = json.dumps([str(q.orbit_problem.state_names[0])
+                                           for q in self.problems])
             attrs["options"] = json.dumps(_plain(op.opts), default=_json_float)
         else:
             attrs["mode"] = self.problem.mode

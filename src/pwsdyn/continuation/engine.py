@@ -82,6 +82,10 @@ class ContinuationSettings:
     locate_tol : float
         Arclength to which a special point is located.
     predictor : {'tangent', 'secant'}
+    stop_at : tuple of str
+        Kinds of special points at which the branch ends once located (the point is its
+        last): a caller that switches to another problem there (a new signature after a
+        graze) goes on from it.
     """
 
     ds: float = 0.02
@@ -94,9 +98,10 @@ class ContinuationSettings:
     max_iter: int = 10
     target_iter: int = 3
     max_angle: float = 0.35
-    locate: tuple = ("LP", "BP", "PD", "NS", "HB")
+    locate: tuple = ("LP", "BP", "PD", "NS", "HB", "GR")
     locate_tol: float = 1e-11
     predictor: str = "tangent"
+    stop_at: tuple = ()
 
     def __post_init__(self):
         from .. import _validate as V
@@ -119,9 +124,9 @@ class ContinuationSettings:
         V.positive("max_angle", self.max_angle)
         V.positive("locate_tol", self.locate_tol)
         V.choice("predictor", self.predictor, ("tangent", "secant"))
-        if isinstance(self.locate, str):
-            object.__setattr__(self, "locate", (self.locate,))
-        object.__setattr__(self, "locate", tuple(self.locate))
+        for name in ("locate", "stop_at"):
+            val = getattr(self, name)
+            object.__setattr__(self, name, (val,) if isinstance(val, str) else tuple(val))
 
 
 def _span(span):
@@ -164,6 +169,9 @@ class Point:
     special : str
         ``""`` for a regular point, or the kind of special point located here (``"LP"``,
         ``"PD"``, ..., ``"EP"`` for an end point).
+    signature_index : int
+        Which problem of its branch the point solves (``Branch.problems``): a branch that
+        switched to a new signature at a graze holds points of several.
     """
 
     u: np.ndarray
@@ -175,6 +183,7 @@ class Point:
     data: dict = field(default_factory=dict)
     tests: dict = field(default_factory=dict)
     special: str = ""
+    signature_index: int = 0
 
     @property
     def X(self) -> np.ndarray:
@@ -233,6 +242,7 @@ class Continuation:
         self._start_kind = start_kind
         self._ds = float(self.settings.ds)
         self._ev = None   # the last evaluation (F, F_u, F_lam) and where it was taken
+        self.stop_point = None   # the special point of `stop_at` the branch ended at
         if self._u0.shape != (problem.size,):
             raise ArgumentError(f"the start has {self._u0.size} unknowns, the problem "
                                 f"{problem.size}")
@@ -365,7 +375,9 @@ class Continuation:
             scale = np.sum(np.log(np.linalg.norm(B, axis=1) + 1e-300))
             tests["BP"] = float(sign * math.exp(min(logdet - scale, 700.0)))
         for k, val in self.problem.test_functions(data).items():
-            if k in want:
+            # a key "KIND/detail" is one of several monitors of a kind (one per surface and
+            # segment): located on its own, reported as KIND
+            if k.split("/", 1)[0] in want:
                 tests[k] = float(val)
         return tests
 
@@ -471,6 +483,11 @@ class Continuation:
             # leaving a special point (a branch switch, a restart there), the test functions
             # are zero at the start: its own zero is not located again
             out.extend(self._located(prev, new))
+        for k, q in enumerate(out):
+            if q.special in st.stop_at:
+                self.stop_point = q
+                return out[:k + 1] + self._stop(f"{q.special} located at "
+                                                f"{self._lam_name()} = {q.lam:.12g}")
         out.append(new)
         # the next step: from the Newton iterations and the turn of the tangent
         it = res.iterations
@@ -508,13 +525,15 @@ class Continuation:
     def _located(self, a: Point, b: Point) -> list[Point]:
         """Special points between ``a`` and ``b``, located, in the order of the arclength."""
         found = []
-        for kind, vb in b.tests.items():
-            va = a.tests.get(kind)
+        for key, vb in b.tests.items():
+            va = a.tests.get(key)
             if va is None or not (va * vb < 0.0):
                 continue
-            p = self._locate(kind, a, b)
+            kind = key.split("/", 1)[0]
+            p = self._locate(key, a, b)
             if p is not None and self.problem_confirms(kind, p):
                 p.special = kind
+                p.data["located"] = key
                 found.append(p)
         found.sort(key=lambda q: q.arclength)
         return found

@@ -48,7 +48,8 @@ class OrbitBranchProblem:
 
     kind = "orbit"
 
-    def __init__(self, problem):
+    def __init__(self, problem, *, monitors: bool = True):
+        self.monitors = monitors
         if problem.q != 1:
             raise ArgumentError("an orbit branch continues one parameter: build the "
                                 "OrbitProblem with parameters=[name]")
@@ -82,14 +83,19 @@ class OrbitBranchProblem:
         mu = np.asarray(prob.multipliers(ev), dtype=complex)
         adm = prob.admissibility(u, np.array([lam]), evaluation=ev)
         stable = bool(mu.size == 0 or np.max(np.abs(mu)) < 1.0)
-        return {"multipliers": mu, "stable": stable, "admissible": bool(adm),
-                "reason": adm.reason or "", "period": float(ev.period)}
+        out = {"multipliers": mu, "stable": stable, "admissible": bool(adm),
+               "reason": adm.reason or "", "period": float(ev.period)}
+        if self.monitors:
+            out["monitors"] = prob.grazing_monitors(u, np.array([lam]), evaluation=ev)
+        return out
 
     def test_functions(self, data) -> dict:
         mu = data["multipliers"]
         out = {"PD": float(np.prod(mu + 1.0).real) if mu.size else 1.0}
         if mu.size >= 2:
             out["NS"] = _pair_product(mu, lambda a, b: a * b - 1.0)
+        for key, mon in data.get("monitors", {}).items():
+            out[key] = mon.value
         return out
 
     def confirm(self, kind, data) -> bool:

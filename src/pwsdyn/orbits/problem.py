@@ -73,6 +73,19 @@ _SAMPLES = 8
 _SYSTEMS: dict = {}
 
 
+@dataclass(frozen=True)
+class Monitor:
+    """A monitor of a discontinuity-induced bifurcation on an orbit: ``value`` (zero at the
+    bifurcation, positive on the side where the orbit keeps its signature), the ``segment``
+    and ``surface`` (or event) it watches, and where: time ``t`` and state ``x``."""
+
+    value: float
+    segment: int
+    surface: str
+    t: float
+    x: np.ndarray
+
+
 class SegmentFailed(Exception):
     """A segment could not be integrated (the kernel stopped)."""
 
@@ -1093,6 +1106,67 @@ class OrbitProblem:
         return out
 
     # ==================================================================================
+    # monitors of discontinuity-induced bifurcations
+    # ==================================================================================
+    def grazing_monitors(self, u, p=None, evaluation: ProblemEvaluation | None = None
+                         ) -> dict:
+        """Monitors of grazing on a solution: ``{key: Monitor}``, each a signed distance from
+        a graze, positive on the side where the orbit keeps its signature.
+
+        * ``"GR/<surface>/<i>"``: the smallest interior local minimum of ``h`` (or ``-h``
+          below a switching surface) along segment ``i`` in a mode -- a graze of the surface
+          inside the segment where it reaches zero: ``h = 0`` and ``h_t + h_x f = 0`` at an
+          interior point (thesis conditions 2.30-2.31), refined by golden-section search on
+          the dense output;
+        * ``"GR/<event>@<i>"``: ``-(h_t + h_x f)`` at the impact ending segment ``i`` -- the
+          impact's normal velocity going to zero (the end of a branch of impacting orbits
+          at a graze).
+
+        A segment with no interior local minimum of a surface gives no monitor for it.
+        """
+        p = self._p(p)
+        ev = evaluation if evaluation is not None else self.evaluate(u, p, jacobian=False)
+        ctx = _context(self.model, self.param_dict(p), self.sliding)
+        opts = self._seg_opts(p, dense=True, variational=False)
+        m, n = self.model, self.n
+        out = {}
+        for i, s in enumerate(ev.segs):
+            fk = self.fields[i]
+            if fk.kind == "mode" and s.T > 0:
+                _, _, tr = self._flow(i, s.t, s.z, s.T, opts)
+                if tr is None:
+                    continue
+                ts = _sample_times(tr)[1:-1]
+                if len(ts) < 3:
+                    continue
+                Y = np.asarray(tr(ts))[:, :n]
+                watched = []
+                for e in m.events:
+                    if e.kind == "impact" and fk.index in e.modes:
+                        watched.append((m.surfaces[e.surface].name, e.surface, 1.0))
+                for sw in m.switches:
+                    if fk.index in (sw.above, sw.below):
+                        watched.append((m.surfaces[sw.surface].name, sw.surface,
+                                        1.0 if fk.index == sw.above else -1.0))
+                for name, k, sign in dict.fromkeys(watched):
+                    fn = _h(ctx, k)
+                    vals = sign * np.array([fn(tt, x) for tt, x in zip(ts, Y)])
+                    found = _interior_minimum(lambda tt: sign * fn(tt, tr(tt)[:n]), ts, vals)
+                    if found is not None:
+                        tg, hg = found
+                        out[f"GR/{name}/{i}"] = Monitor(float(hg), i, name, float(tg),
+                                                        np.asarray(tr(tg)[:n], dtype=float))
+            if i < len(self.bounds) and self.bounds[i].kind == "impact":
+                b = self.bounds[i]
+                e = m.events[b.ref]
+                te, y = s.te, s.y[:n]
+                f_in = _state_field(ctx, fk, te, y)
+                rate = ctx.h_t(b.surface, te, y) + ctx.h_x(b.surface, te, y) @ f_in
+                out[f"GR/{e.name}@{i}"] = Monitor(float(-rate), i, e.name, float(te),
+                                                  np.asarray(y, dtype=float))
+        return out
+
+    # ==================================================================================
     # results
     # ==================================================================================
     def monodromy(self, ev: ProblemEvaluation) -> np.ndarray:
@@ -1645,6 +1719,37 @@ def _sample_times(tr) -> np.ndarray:
     th = np.arange(_SAMPLES) / _SAMPLES
     inner = (t[:-1, None] + np.diff(t)[:, None] * th[None, :]).reshape(-1)
     return np.unique(np.append(inner, t[-1]))
+
+
+def _interior_minimum(val, ts, g):
+    """``(t, value)`` of the smallest local minimum of the samples ``g`` at ``ts`` strictly
+    inside the range (not at its ends), refined by golden-section search of ``val`` between
+    the neighbouring samples; ``None`` when the samples have no interior local minimum."""
+    cands = [i for i in range(1, len(g) - 1) if g[i] <= g[i - 1] and g[i] <= g[i + 1]]
+    if not cands:
+        return None
+    best = None
+    phi = (math.sqrt(5.0) - 1.0) / 2.0
+    for i in sorted(cands, key=lambda k: g[k])[:8]:
+        a, b = ts[i - 1], ts[i + 1]
+        x1, x2 = b - phi * (b - a), a + phi * (b - a)
+        f1, f2 = val(x1), val(x2)
+        for _ in range(60):
+            if b - a <= 4e-16 * max(1.0, abs(b)):
+                break
+            if f1 < f2:
+                b, x2, f2 = x2, x1, f1
+                x1 = b - phi * (b - a)
+                f1 = val(x1)
+            else:
+                a, x1, f1 = x1, x2, f2
+                x2 = a + phi * (b - a)
+                f2 = val(x2)
+        tm, fm = (x1, f1) if f1 < f2 else (x2, f2)
+        fm = min(fm, g[i])
+        if best is None or fm < best[1]:
+            best = (float(tm), float(fm))
+    return best
 
 
 def _parabola_min(t3, g3, a, b) -> float:

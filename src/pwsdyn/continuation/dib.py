@@ -1,0 +1,156 @@
+"""Past a discontinuity-induced bifurcation: the orbit's new signature and a start on it.
+
+At a graze located on an orbit branch (monitor ``GR`` of
+:meth:`pwsdyn.orbits.OrbitProblem.grazing_monitors`) the orbit's sequence of events changes:
+
+* a segment touching an impact surface inside it (``GR/<surface>/<i>``): past the graze it
+  hits the surface -- an impact is added, splitting segment ``i``;
+* an impact whose normal velocity goes to zero (``GR/<event>@<i>``): past it the orbit no
+  longer reaches the surface -- the impact is removed, joining segments ``i`` and ``i + 1``.
+
+The new problem is singular at the graze itself (its event condition's derivative
+``h_x f`` vanishes there) and the new orbit lies a square root of the parameter distance
+away (the new impact's velocity; thesis Paper A). So the start is taken a short step
+``delta`` past the graze: the old signature is solved there (a regular problem: it only
+crosses the surface), and its crossing of the surface gives the new signature's guess -- the
+impact where the old orbit enters the constraint, or the old impact removed -- which Newton
+on the new problem corrects (its Jacobian is regular there: the crossing is transversal).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import brentq
+
+from ..newton import TrialRejected
+
+
+def _solve_old(op, u, lam):
+    res = op.solve(u, np.array([lam]))
+    return res.x if res.converged else None
+
+
+def insert_impact(op, u, lam, seg: int, surface_name: str):
+    """The problem with an impact on ``surface_name`` added inside segment ``seg`` and its
+    ``u`` at ``lam`` from the old signature's solution there (which crosses the surface):
+    ``(problem, u)`` or a reason string."""
+    from ..orbits.problem import OrbitProblem, _context
+    from ..orbits.signature import Signature, SignatureEvent
+
+    m = op.model
+    n = op.n
+    if len(op.bounds) != len(op.signature) or op.fields[seg].kind != "mode":
+        return "only segments in a mode ending in single events are re-segmented"
+    mode = op.fields[seg].index
+    events = [(j, e) for j, e in enumerate(m.events)
+              if e.kind == "impact" and mode in e.modes
+              and m.surfaces[e.surface].name == surface_name]
+    if not events:
+        return f"no impact event on surface {surface_name!r} in the segment's mode"
+    j, e = events[0]
+    p = np.array([lam])
+    ev = op.evaluate(u, p, jacobian=False)
+    s = ev.segs[seg]
+    opts = op._seg_opts(p, dense=True, variational=False)
+    _, _, tr = op._flow(seg, s.t, s.z, s.T, opts)
+    ctx = _context(m, op.param_dict(p), op.sliding)
+
+    def h(t):
+        return ctx.h(e.surface, t, tr(t)[:n])
+    ts = np.linspace(s.t, s.t + s.T, 400)[1:-1]
+    hv = np.array([h(t) for t in ts])
+    k = np.flatnonzero((hv[:-1] > 0) & (hv[1:] <= 0))
+    if not k.size:
+        return "the orbit past the graze does not cross the surface"
+    ta = brentq(h, ts[k[0]], ts[k[0] + 1], xtol=1e-14)
+    xa = tr(ta)[:n]
+    xr = ctx.g(j, ta, xa)
+    t0, xs, Ts = op.unpack(u)
+    xs, Ts = [np.asarray(x, dtype=float) for x in xs], list(Ts)
+    mname = op.state_names[seg]
+    new_ev = SignatureEvent("impact", e.name, mname, mname)
+    if not op.m:
+        sig = Signature([new_ev])
+        prob = OrbitProblem(m, sig, params=op.params, parameters=list(op.parameters),
+                            periods=op.periods, sliding=op.sliding, **_opts(op))
+        P = op.period_value(p)
+        return prob, prob.pack(ta, [xr], [P])
+    sig = Signature(list(op.signature[:seg]) + [new_ev] + list(op.signature[seg:]))
+    prob = OrbitProblem(m, sig, params=op.params, parameters=list(op.parameters),
+                        periods=op.periods, t_ref=op.t_ref, sliding=op.sliding, **_opts(op))
+    xs2 = xs[:seg + 1] + [xr] + xs[seg + 1:]
+    Ts2 = Ts[:seg] + [ta - s.t, s.t + s.T - ta] + Ts[seg + 1:]
+    return prob, prob.pack(t0, xs2, Ts2)
+
+
+def remove_impact(op, u, lam, seg: int):
+    """The problem with the impact ending segment ``seg`` removed (its velocity went to zero)
+    and its ``u`` at ``lam`` from the old solution there: ``(problem, u)`` or a reason."""
+    from ..orbits.problem import OrbitProblem
+    from ..orbits.signature import Signature
+
+    m = op.model
+    if len(op.bounds) != len(op.signature):
+        return "only orbits whose boundaries are single events are re-segmented"
+    p = np.array([lam])
+    ev = op.evaluate(u, p, jacobian=False)
+    t0, xs, Ts = op.unpack(u)
+    xs, Ts = [np.asarray(x, dtype=float) for x in xs], list(Ts)
+    mm = op.m
+    if mm == 1:
+        s = ev.segs[0]
+        if op.fields[0].kind != "mode":
+            return "the segment is not in a mode"
+        prob = OrbitProblem(m, Signature([]), params=op.params, parameters=list(op.parameters),
+                            periods=op.periods, t_ref=float(s.te), state=op.state_names[0],
+                            sliding=op.sliding, **_opts(op))
+        return prob, prob.pack(float(s.te), [np.asarray(s.y[:op.n], dtype=float)],
+                               [op.period_value(p)])
+    nxt = (seg + 1) % mm
+    if op.fields[seg] != op.fields[nxt]:
+        return "the segments on either side of the impact are in different states"
+    sig = Signature([e for k, e in enumerate(op.signature) if k != seg])
+    if nxt == 0:
+        # the removed impact ends the last segment: the first segment now starts where the
+        # last one did
+        t0 = t0 - Ts[-1]
+        xs2 = [xs[-1]] + xs[1:-1]
+        Ts2 = [Ts[-1] + Ts[0]] + Ts[1:-1]
+    else:
+        xs2 = xs[:nxt] + xs[nxt + 1:]
+        Ts2 = Ts[:seg] + [Ts[seg] + Ts[nxt]] + Ts[nxt + 1:]
+    prob = OrbitProblem(m, sig, params=op.params, parameters=list(op.parameters),
+                        periods=op.periods, t_ref=op.t_ref, sliding=op.sliding, **_opts(op))
+    return prob, prob.pack(t0, xs2, Ts2)
+
+
+def _opts(op):
+    from ..integrate.simulate import DEFAULTS
+
+    drop = ("variational", "dense", "throw", "mode", "sliding")
+    return {k: v for k, v in op.opts.items() if k in DEFAULTS and k not in drop}
+
+
+def past_graze(op, key: str, u, lam):
+    """The new signature's problem and solution just past the graze ``key`` at ``lam``:
+    ``(problem, u)``, or a reason string. ``u`` solves the old signature at ``lam``."""
+    body = key.split("/", 1)[1]
+    try:
+        if "@" in body:
+            seg = int(body.rsplit("@", 1)[1])
+            made = remove_impact(op, u, lam, seg)
+        else:
+            surface, seg = body.rsplit("/", 1)
+            made = insert_impact(op, u, lam, int(seg), surface)
+    except TrialRejected as exc:
+        return exc.message
+    if isinstance(made, str):
+        return made
+    prob, u2 = made
+    res = prob.solve(u2, np.array([lam]))
+    if not res.converged:
+        return f"Newton on the new signature {prob.signature}: {res.reason} ({res.message})"
+    adm = prob.admissibility(res.x, np.array([lam]))
+    if not adm:
+        return f"the orbit of the new signature {prob.signature} is not admissible: {adm.reason}"
+    return prob, res.x
