@@ -34,6 +34,7 @@ _LAZY = {
     "Branch": "continuation", "continue_bifurcation": "continuation",
     "continue_equilibrium": "continuation",
     "continue_orbit": "continuation", "load_branch": "continuation",
+    "discontinuity_map": "grazing",
 }
 
 __all__ = ["ArgumentError", "ExpressionError", "ModelError", "OutputExistsError", "PwsdynError",
@@ -43,6 +44,7 @@ if TYPE_CHECKING:  # what static checkers and IDEs see; at run time see __getatt
     from .continuation import (Branch, continue_bifurcation, continue_equilibrium,
                                continue_orbit, load_branch)
     from .explore import basins, lyapunov_spectrum, sweep
+    from .grazing import discontinuity_map
     from .integrate import EventRecord, Trajectory, simulate
     from .model import Model, compile_model, load_model, zoo_names
     from .orbits import OrbitError, PeriodicOrbit, RecurrenceWarning, find_periodic_orbit

@@ -1,0 +1,211 @@
+"""Nordmark's discontinuity map at a grazing orbit, and the persistence test.
+
+At a graze of an impact surface ``h = 0`` by a periodic orbit at ``x*`` (thesis eq. 2.30-2.32:
+``h(x*) = 0``, ``h_x f = 0`` and ``a* = (h_x f)_x f > 0``), the effect of a low-velocity impact
+is a correction applied on the section ``h_turning = h_x f = 0`` (the points of zero normal
+velocity) to the smooth flow that ignores the surface. To lowest order (eq. 2.33-2.34)
+
+    x -> x                                   where h(x) >= 0,
+    x -> x + beta sqrt(-h_x(x*) . (x - x*))  where h(x) < 0,
+
+    beta = sqrt(2 / a*) ( f(x*) h_turning,x(x*) / a* - I ) g_x(x*) f(x*),
+
+with ``g`` the impact's reset. The square root makes the composition with the smooth
+Poincaré map ``P`` singular at the graze; whether a local attractor persists through the
+grazing bifurcation is decided (eq. 2.35; the thesis's ref. [19]) by the signs of
+
+    h_x(x*) . P^n beta,   n = 1, 2, ...
+
+all positive: persistence; otherwise loss of the local attractor (typically hysteresis).
+
+A forced system is written autonomously in ``(x, t)`` with ``t' = 1`` (the surfaces, fields
+and resets may depend on time; the map shifts the time of an impacting orbit at first order:
+for the impact oscillator ``beta`` has only a time component, ``-(1 + r) sqrt(2 / a*)``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import ArgumentError
+
+#: Scenarios of a grazing bifurcation (thesis section 2.6.1).
+SCENARIOS = ("persistence", "loss")
+
+
+@dataclass
+class DiscontinuityMap:
+    """The discontinuity map at a grazing point (module docstring).
+
+    Attributes
+    ----------
+    x_star : numpy.ndarray
+        The grazing point ``x*`` (with the time last, for a forced model).
+    a_star : float
+        ``a* = (h_x f)_x f`` at ``x*`` (> 0: the grazing orbit is a parabola with its minimum
+        of ``h`` at ``x*``).
+    beta : numpy.ndarray
+        The direction of the square-root correction (eq. 2.34).
+    P : numpy.ndarray
+        Jacobian of the smooth Poincaré map on the section ``h_turning = 0`` at ``x*``.
+    h_x : numpy.ndarray
+        Gradient of the impact surface at ``x*``.
+    names : tuple of str
+        The coordinates (states, then ``t`` for a forced model).
+    event : str
+        The impact event.
+    """
+
+    x_star: np.ndarray
+    a_star: float
+    beta: np.ndarray
+    P: np.ndarray
+    h_x: np.ndarray
+    names: tuple
+    event: str
+    f_star: np.ndarray = field(repr=False, default=None)
+
+    def __call__(self, x) -> np.ndarray:
+        """The map at ``x`` (a point of the section, same coordinates as ``x_star``)."""
+        x = np.asarray(x, dtype=float)
+        if x.shape != self.x_star.shape:
+            raise ArgumentError(f"`x` must have the {self.x_star.size} coordinates "
+                                f"{list(self.names)}")
+        d = float(self.h_x @ (x - self.x_star))
+        return x.copy() if d >= 0.0 else x + self.beta * np.sqrt(-d)
+
+    def persistence(self, n: int = 50) -> np.ndarray:
+        """The sequence ``h_x(x*) . P^k beta`` for ``k = 1..n`` (eq. 2.35)."""
+        from .. import _validate as V
+
+        n = V.integer("n", n, lo=1)
+        out = np.empty(n)
+        v = self.beta.copy()
+        for k in range(n):
+            v = self.P @ v
+            out[k] = self.h_x @ v
+        return out
+
+    @property
+    def scenario(self) -> str:
+        """``"persistence"`` when every term of :meth:`persistence` (50 terms, or until they
+        have decayed below 1e-12 of the first) is positive, ``"loss"`` otherwise."""
+        seq = self.persistence(50)
+        scale = np.max(np.abs(seq)) or 1.0
+        significant = np.abs(seq) > 1e-12 * scale
+        return "persistence" if np.all(seq[significant] > 0.0) else "loss"
+
+
+def _tangency(point):
+    """``(problem, u, p, monitor)`` of a GR special point of an orbit branch."""
+    mon = getattr(point, "monitor", None)
+    if getattr(point, "kind", None) != "GR" or mon is None or "@" in point.key:
+        raise ArgumentError("discontinuity_map needs a GR special point where a segment "
+                            "grazes a surface inside it (pwsdyn.continue_orbit; not the end "
+                            "of an impacting branch)")
+    prob = point.problem.orbit_problem
+    return prob, point.point.u, np.array([point.value]), mon
+
+
+def discontinuity_map(point) -> DiscontinuityMap:
+    """Nordmark's discontinuity map (thesis eq. 2.33-2.34) at a grazing point.
+
+    Parameters
+    ----------
+    point : SpecialPoint
+        A ``GR`` point of an orbit branch where a segment touches an impact surface inside it
+        (``Branch.special("GR")``).
+
+    Returns
+    -------
+    DiscontinuityMap
+        With ``a_star``, ``beta``, ``x_star``, the map itself (``__call__``), the persistence
+        sequence (eq. 2.35) and the predicted ``scenario``.
+    """
+    from ..model.codegen import W_HDT, W_HDX
+    from ..orbits.problem import _context
+
+    prob, u, p, mon = _tangency(point)
+    m, n = prob.model, prob.n
+    seg = mon.segment
+    fk = prob.fields[seg]
+    if fk.kind != "mode":
+        raise ArgumentError("the grazing segment is not in a mode")
+    mode = fk.index
+    events = [(j, e) for j, e in enumerate(m.events) if e.kind == "impact" and mode in e.modes
+              and m.surfaces[e.surface].name == mon.surface]
+    if not events:
+        raise ArgumentError(f"no impact event on surface {mon.surface!r}: the discontinuity map "
+                            f"is that of an impact")
+    j, e = events[0]
+    k = e.surface
+    ctx = _context(m, prob.param_dict(p), prob.sliding)
+    ts, xs = float(mon.t), np.asarray(mon.x, dtype=float)
+    f = ctx.mode_field(mode, ts, xs)
+    nm = ctx.nm
+    hT_x = ctx._eval(W_HDX, k * nm + mode, ts, xs, n)        # h_turning = h_t + h_x f
+    hT_t = float(ctx._eval(W_HDT, k * nm + mode, ts, xs, 1)[0])
+    h_x = ctx.h_x(k, ts, xs)
+    h_t = ctx.h_t(k, ts, xs)
+    g_x = ctx.g_x(j, ts, xs)
+    g_t = ctx.g_t(j, ts, xs)
+    a_star = float(hT_x @ f + hT_t)
+    if not a_star > 0.0:
+        raise ArgumentError(f"a* = {a_star:.3e} is not positive: not a grazing minimum of h")
+    M = _monodromy_at(prob, u, p, seg, ts)
+    forced = prob.forced
+    if forced:
+        N = n + 1
+        f_e = np.append(f, 1.0)
+        hT_e = np.append(hT_x, hT_t)
+        h_e = np.append(h_x, h_t)
+        G = np.zeros((N, N))
+        G[:n, :n] = g_x
+        G[:n, n] = g_t
+        G[n, n] = 1.0
+        Phi = np.zeros((N, N))
+        Phi[:n, :n] = M
+        # the time-T flow of (x, t): d phi / d t0 = f(t + T, x_T) - M f(t, x) = (I - M) f on a
+        # periodic orbit
+        Phi[:n, n] = (np.eye(n) - M) @ f
+        Phi[n, n] = 1.0
+        x_star = np.append(xs, ts)
+        names = tuple(m.states) + ("t",)
+    else:
+        N = n
+        f_e, hT_e, h_e, G, Phi = f, hT_x, h_x, g_x, M
+        x_star = xs
+        names = tuple(m.states)
+    I = np.eye(N)
+    beta = np.sqrt(2.0 / a_star) * ((np.outer(f_e, hT_e) / a_star - I) @ (G @ f_e))
+    # the smooth Poincare map on h_turning = 0: the period map projected along the flow
+    P = (I - np.outer(f_e, hT_e) / a_star) @ Phi
+    return DiscontinuityMap(x_star=x_star, a_star=a_star, beta=beta, P=P, h_x=h_e,
+                            names=names, event=e.name, f_star=f_e)
+
+
+def _monodromy_at(prob, u, p, seg, t_star):
+    """The one-period Jacobian of the smooth flow (the grazing segment integrated through,
+    the orbit's other events with their saltation matrices) at the grazing time."""
+    ev = prob.evaluate(u, p)
+    n = prob.n
+    m = len(ev.segs)
+    # transfer of each segment: S_i Phi_i (Phi over the whole segment)
+    T = []
+    for i, s in enumerate(ev.segs):
+        A = s.Phi[:n, :n]
+        if i < len(prob.bounds):
+            A = prob._saltation(i, s) @ A
+        T.append(A)
+    s = ev.segs[seg]
+    opts = prob._seg_opts(p)
+    _, Phi_a, _ = prob._flow(seg, s.t, s.z, t_star - s.t, opts)
+    Pa = Phi_a[:n, :n]
+    # from x*: the rest of segment seg, then the others, then segment seg up to t*
+    rest = T[seg] @ np.linalg.inv(Pa)
+    acc = rest
+    for i in list(range(seg + 1, m)) + list(range(0, seg)):
+        acc = T[i] @ acc
+    return Pa @ acc

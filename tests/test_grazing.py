@@ -1,0 +1,101 @@
+"""Nordmark's discontinuity map at a graze and the persistence test (thesis eq. 2.30-2.35),
+against the closed form of the impact oscillator's grazing orbit and against brute-force
+sweeps up and down through the graze.
+
+The impact oscillator x'' + eps x' + x = sin(omega t), x <= sigma, v -> -r v: its
+non-impacting orbit is the forced response x_p = X sin + Y cos of amplitude R; it grazes the
+stop at sigma = R, at the maximum of x_p, where (h = sigma - x)
+
+    a* = h'' = -x_p'' = omega^2 R,
+
+and, in the coordinates (x, v, t) of the forced system (g = (x, -r v, t), h_turning = -v),
+eq. 2.34 reduces to beta = (0, 0, -(1 + r) sqrt(2 / a*)): to first order a low-velocity
+impact only shifts the phase of the orbit (the rebound reaches zero velocity
+(1 + r) sqrt(2 d / a*) earlier than the virtual orbit that passed through the stop, d its
+depth).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import pwsdyn
+from pwsdyn.errors import ArgumentError
+
+R_COEF = 0.8
+
+
+def _grazing_point(omega, eps):
+    X, Y = np.linalg.solve(np.array([[1 - omega**2, -eps * omega],
+                                     [eps * omega, 1 - omega**2]]), [1.0, 0.0])
+    R = math.hypot(X, Y)
+    params = {"omega": omega, "eps": eps, "r": R_COEF, "sigma": R + 0.3}
+    orb = pwsdyn.find_periodic_orbit("impact-oscillator", [Y, omega * X], t0=0.0,
+                                     params=params)
+    br = pwsdyn.continue_orbit("impact-oscillator", orb, "sigma", span=(R - 0.3, R + 0.3),
+                               ds=-0.05, on_dib="stop")
+    return br.special("GR")[0], R, (X, Y)
+
+
+@pytest.mark.parametrize("omega, eps", [(2.8, 0.1), (0.5, 3.0), (1.2, 1.5)])
+def test_a_star_and_beta_match_the_closed_form(omega, eps):
+    gr, R, _ = _grazing_point(omega, eps)
+    dm = pwsdyn.discontinuity_map(gr)
+    a_star = omega**2 * R
+    assert abs(dm.a_star - a_star) < 1e-9 * a_star
+    beta = np.array([0.0, 0.0, -(1 + R_COEF) * math.sqrt(2 / a_star)])
+    # the x component is the tangency time's error times the slope: ~1e-8
+    assert np.max(np.abs(dm.beta - beta)) < 1e-6 * abs(beta[2])
+    assert dm.names == ("x", "v", "t")
+    assert abs(dm.x_star[0] - R) < 1e-10 and abs(dm.x_star[1]) < 1e-7
+    # the map: the identity on the admissible side, the square-root phase shift beyond
+    x_ok = dm.x_star + np.array([-1e-3, 0.0, 0.0])
+    assert np.array_equal(dm(x_ok), x_ok)
+    d = 1e-4
+    x_in = dm.x_star + np.array([d, 0.0, 0.0])
+    assert np.allclose(dm(x_in) - x_in, dm.beta * math.sqrt(d), rtol=1e-12, atol=1e-15)
+    # the smooth Poincare map carries the orbit's multipliers (and 0 across the section)
+    eig = np.sort_complex(np.linalg.eigvals(dm.P))
+    mu = np.sort_complex(np.append(gr.multipliers, 0.0))
+    assert np.allclose(eig, mu, atol=1e-8)
+
+
+def _hysteresis(omega, eps, R, XY):
+    """Up and down sweeps of sigma through the graze: coexisting impacting and non-impacting
+    attractors at some sigma (the events per period differ)."""
+    X, Y = XY
+    vals = np.linspace(0.95 * R, 1.05 * R, 21)
+    ds = pwsdyn.sweep("impact-oscillator", "sigma", vals, {"x": Y, "v": omega * X},
+                      params={"omega": omega, "eps": eps, "r": R_COEF}, transient=100,
+                      samples=10, direction="both", workers=1, progress=False)
+    epp = ds.events_per_period
+    up, down = epp.sel(direction="up").values, epp.sel(direction="down").values
+    return bool(np.any((up == 0) != (down == 0)))
+
+
+@pytest.mark.parametrize("omega, eps, scenario", [(2.8, 0.1, "loss"),
+                                                  (0.5, 3.0, "persistence")])
+def test_persistence_test_predicts_the_hysteresis_of_sweeps(omega, eps, scenario):
+    gr, R, XY = _grazing_point(omega, eps)
+    dm = pwsdyn.discontinuity_map(gr)
+    seq = dm.persistence(20)
+    assert dm.scenario == scenario
+    if scenario == "persistence":
+        assert np.all(seq[np.abs(seq) > 1e-12 * np.abs(seq).max()] > 0)
+    else:
+        assert np.any(seq < 0)
+    assert _hysteresis(omega, eps, R, XY) == (scenario == "loss")
+
+
+def test_discontinuity_map_needs_an_interior_graze():
+    from _orbit_cases import io_orbit
+
+    br = pwsdyn.continue_orbit("impact-oscillator", io_orbit("stable"), "sigma",
+                               span=(-0.6, 0.4), ds=0.05, on_dib="stop")
+    with pytest.raises(ArgumentError, match="GR special point"):
+        pwsdyn.discontinuity_map(br.special("GR")[0])      # the impact velocity's zero
+    with pytest.raises(ArgumentError, match="GR special point"):
+        pwsdyn.discontinuity_map(br.points[0])
