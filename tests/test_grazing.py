@@ -99,3 +99,21 @@ def test_discontinuity_map_needs_an_interior_graze():
         pwsdyn.discontinuity_map(br.special("GR")[0])      # the impact velocity's zero
     with pytest.raises(ArgumentError, match="GR special point"):
         pwsdyn.discontinuity_map(br.points[0])
+
+
+def test_cli_grazing_prints_the_map_and_the_scenario():
+    from click.testing import CliRunner
+
+    from pwsdyn.cli import main
+
+    args = ["grazing", "impact-oscillator", "--param", "sigma", "--from", "0.45", "--to", "0.0",
+            "-p", "omega=2.8", "-p", "eps=0.1", "--x0", "x=-0.006,v=-0.41", "--t0", "0"]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 0, res.output
+    R = 1.0 / math.hypot(1 - 2.8**2, 0.1 * 2.8)
+    assert f"sigma = {R:.10g}"[:17] in res.output
+    assert "a*          1.14523967" in res.output and "scenario    loss" in res.output
+    cont = CliRunner().invoke(main, ["continue", *args[1:], "--no-progress"])
+    assert cont.exit_code == 0, cont.output
+    assert "GR" in cont.output and "grazing on 'impact'" in cont.output
+    assert "signatures  ()  ->  (free) impact:impact (free)" in cont.output

@@ -1000,10 +1000,14 @@ def orbit_cmd(model, params, sets, x0, t0, period, periods, transient, mode, nod
               help="Write the bifurcation diagram (stable solid, unstable dashed, not "
                    "admissible dotted, special points labelled).")
 @click.option("--state", default=None, help="State plotted (default: the one that varies most).")
+@click.option("--on-dib", "on_dib", type=click.Choice(["switch", "stop", "continue"]),
+              default="switch", show_default=True,
+              help="At a graze: go on with the orbit's new event sequence, stop there, or keep "
+                   "the old one (its points past the graze are not admissible).")
 @click.option("--force", is_flag=True, help=_FORCE_HELP)
 def continue_cmd(model, params, sets, start, stop, x0, t0, periods, period, transient,
                  equilibrium, ds, max_points, rtol, atol, method, no_progress, out, plot, state,
-                 force):
+                 on_dib, force):
     """Follow a periodic orbit (or an equilibrium) of MODEL in the parameter --param NAME by
     pseudo-arclength continuation, from --from towards --to.
 
@@ -1063,23 +1067,14 @@ def continue_cmd(model, params, sets, start, stop, x0, t0, periods, period, tran
                                                  max_points=max_points, params=all_params,
                                                  progress=not no_progress)
         else:
-            autonomous = mdl.forcing_period is None
-            if transient is None and period is None and (autonomous or not cli_x0):
-                transient = t_end - t0
-            if transient:
-                traj = pwsdyn.simulate(mdl, x0_val, (t0, t0 + transient), params=all_params,
-                                       **{k: v for k, v in options.items() if k != "method"})
-                orbit = PeriodicOrbit.from_trajectory(traj, period=period, periods=periods,
-                                                      **options)
-            else:
-                orbit = find_periodic_orbit(mdl, x0_val, params=all_params, period=period,
-                                            t0=t0, periods=periods or 1, **options)
+            orbit = _start_orbit(mdl, x0_val, t0, t_end, all_params, cli_x0, transient, period,
+                                 periods, options)
             _echo(f"start       orbit of period {_fmt(orbit.period)} at {param} = "
                   f"{_fmt(start)}, {orbit.signature}, "
                   f"{'stable' if orbit.stable else 'unstable'}")
             branch = pwsdyn.continue_orbit(mdl, orbit, param, span=span, ds=step,
                                            max_points=max_points, progress=not no_progress,
-                                           **options)
+                                           on_dib=on_dib, **options)
     except OrbitError as exc:
         _fail(f"no starting orbit ({exc.reason}): {exc}")
     except (PwsdynError, ValueError, TypeError) as exc:
@@ -1089,13 +1084,9 @@ def continue_cmd(model, params, sets, start, stop, x0, t0, periods, period, tran
     _echo(f"branch      {branch.kind}, {len(branch)} points, {param} in "
           f"[{_fmt(vals.min())}, {_fmt(vals.max())}]; {int(np.sum(branch.stable))} stable, "
           f"{int(np.sum(~branch.admissible))} not admissible")
-    for sp in branch.special_points:
-        if sp.kind == "EP":
-            continue
-        spec = sp.multipliers if sp.multipliers is not None else sp.eigenvalues
-        what = "multipliers" if sp.multipliers is not None else "eigenvalues"
-        _echo(f"{sp.kind:<11} {param} = {_fmt(sp.value)}; {what} "
-              + ", ".join(f"{complex(z).real:.6g}{complex(z).imag:+.6g}j" for z in spec))
+    _print_special_points(branch, param)
+    if len(branch.problems) > 1:
+        _echo("signatures  " + "  ->  ".join(str(s_) for s_ in branch.signatures))
     _echo(f"stopped     {branch.stop_reason}")
     if out is not None:
         _save_data(branch.to_dataset(), out, force)
@@ -1107,6 +1098,132 @@ def continue_cmd(model, params, sets, start, stop, x0, t0, periods, period, tran
                                  out, branch.to_dataset)
         if problem is not None:
             _fail(problem)
+
+
+def _start_orbit(mdl, x0_val, t0, t_end, all_params, cli_x0, transient, period, periods,
+                 options):
+    """The starting orbit of `continue` and `grazing`, found as `orbit` finds it: after a
+    transient run from the defaults when no --x0 is given, else by shooting from --x0."""
+    import pwsdyn
+    from .orbits import PeriodicOrbit, find_periodic_orbit
+
+    autonomous = mdl.forcing_period is None
+    if transient is None and period is None and (autonomous or not cli_x0):
+        transient = t_end - t0
+    if transient:
+        traj = pwsdyn.simulate(mdl, x0_val, (t0, t0 + transient), params=all_params,
+                               **{k: v for k, v in options.items() if k != "method"})
+        return PeriodicOrbit.from_trajectory(traj, period=period, periods=periods, **options)
+    return find_periodic_orbit(mdl, x0_val, params=all_params, period=period, t0=t0,
+                               periods=periods or 1, **options)
+
+
+def _print_special_points(branch, param):
+    for sp in branch.special_points:
+        if sp.kind == "EP":
+            continue
+        spec = sp.multipliers if sp.multipliers is not None else sp.eigenvalues
+        what = "multipliers" if sp.multipliers is not None else "eigenvalues"
+        where = ""
+        if sp.monitor is not None:
+            mon = sp.monitor
+            where = (f" ({'impact velocity zero' if '@' in sp.key else 'grazing'} on "
+                     f"{mon.surface!r}, segment {mon.segment}, t = {_fmt(mon.t)})")
+        _echo(f"{sp.kind:<11} {param} = {_fmt(sp.value)}{where}; {what} "
+              + ", ".join(f"{complex(z).real:.6g}{complex(z).imag:+.6g}j" for z in spec))
+
+
+@main.command("grazing")
+@click.argument("model", metavar="MODEL|FILE")
+@_sweep_param_options
+@click.option("--from", "start", type=float, required=True,
+              help="Parameter value where the search starts (the starting orbit is found "
+                   "there).")
+@click.option("--to", "stop", type=float, required=True,
+              help="Parameter value towards which the orbit is followed to its first graze.")
+@click.option("--x0", "x0", multiple=True, metavar="VALUES",
+              help="Guess of the starting orbit's state at t0 (default: settle from the "
+                   "model's [defaults], then shoot).")
+@click.option("--t0", type=float, default=None, help="Time of x0 (default the model's).")
+@click.option("--periods", type=int, default=None,
+              help="Forced models: the starting orbit's period in forcing periods.")
+@click.option("--period", type=float, default=None,
+              help="Autonomous models: a guess of the period.")
+@click.option("--transient", type=float, default=None,
+              help="Simulate this long before shooting (default: the model's t_end without "
+                   "--x0).")
+@click.option("--terms", type=int, default=10, show_default=True,
+              help="Terms of the persistence sequence printed.")
+def grazing_cmd(model, params, sets, start, stop, x0, t0, periods, period, transient, terms):
+    """Follow a periodic orbit of MODEL in --param NAME from --from towards --to to its first
+    graze of an impact surface, and print Nordmark's discontinuity map there (x*, a*, beta),
+    the persistence sequence h_x P^n beta and the predicted scenario: persistence of a local
+    attractor, or its loss (with hysteresis).
+
+    \b
+    Example:
+      pwsdyn grazing impact-oscillator --param sigma --from 0.45 --to 0.0 \\
+          -p omega=2.8 -p eps=0.1 --x0 x=-0.006,v=-0.41 --t0 0
+    """
+    import numpy as np
+
+    import pwsdyn
+    from .errors import ModelError, PwsdynError
+    from .orbits import OrbitError
+
+    named = list(dict.fromkeys(v.strip() for v in params if "=" not in v))
+    if len(named) != 1:
+        raise click.UsageError("name the parameter once: --param NAME")
+    param = named[0]
+    params = [v for v in params if "=" in v]
+    if start == stop:
+        raise click.BadParameter("--from and --to must differ", param_hint="--to")
+    cli_params, hints = _all_params(params, sets)
+    cli_x0 = _parse_x0(x0)
+    try:
+        mdl = pwsdyn.load_model(model)
+    except ModelError as exc:
+        _fail(exc)
+    if param not in mdl.parameters:
+        raise click.BadParameter(f"unknown parameter {param!r} for model {mdl.name!r}; "
+                                 f"parameters are {list(mdl.parameters)}", param_hint="--param")
+    _check_params(mdl, cli_params, hints)
+    if cli_x0 is not None:
+        _check_x0(mdl, cli_x0)
+    all_params = {**mdl.parameters, **cli_params, param: start}
+    x0_val, t0, t_end = _run_defaults(mdl, cli_x0, t0, None)
+    span = (min(start, stop), max(start, stop))
+    step = min(0.02, abs(stop - start) / 100.0) * (1 if stop > start else -1)
+    try:
+        orbit = _start_orbit(mdl, x0_val, t0, t_end, all_params, cli_x0, transient, period,
+                             periods, {})
+        branch = pwsdyn.continue_orbit(mdl, orbit, param, span=span, ds=step, on_dib="stop",
+                                       locate=("GR",))
+        grazes = [sp for sp in branch.special("GR") if "@" not in sp.key]
+        if not grazes:
+            _fail(f"no graze inside a segment between {param} = {_fmt(start)} and "
+                  f"{_fmt(stop)} ({branch.stop_reason})")
+        gr = grazes[0]
+        dm = pwsdyn.discontinuity_map(gr)
+    except OrbitError as exc:
+        _fail(f"no starting orbit ({exc.reason}): {exc}")
+    except (PwsdynError, ValueError, TypeError) as exc:
+        _fail(exc)
+    seq = dm.persistence(max(terms, 1))
+    vec = ", ".join(f"{n_}={_fmt(v)}" for n_, v in zip(dm.names, dm.x_star))
+    _echo(f"model       {mdl.name} (hash {mdl.hash})")
+    _echo(f"graze       {param} = {_fmt(gr.value)}: orbit {gr.problem.orbit_problem.signature} "
+          f"touches {gr.monitor.surface!r} (event {dm.event!r}) in segment "
+          f"{gr.monitor.segment}")
+    _echo(f"x*          {vec}")
+    _echo(f"a*          {_fmt(dm.a_star)}")
+    _echo("beta        " + ", ".join(f"{n_}={_fmt(v)}" for n_, v in zip(dm.names, dm.beta)))
+    _echo("multipliers " + ", ".join(f"{complex(z).real:.6g}{complex(z).imag:+.6g}j"
+                                     for z in gr.multipliers))
+    _echo("h_x P^n beta " + " ".join(f"{v:.3e}" for v in seq))
+    _echo(f"scenario    {dm.scenario}"
+          + (" of a local attractor" if dm.scenario == "persistence" else
+             " of the local attractor (a jump to a distant one, hysteresis)"))
 
 
 def _print_summary(traj):
