@@ -117,3 +117,14 @@ def test_cli_grazing_prints_the_map_and_the_scenario():
     assert cont.exit_code == 0, cont.output
     assert "GR" in cont.output and "grazing on 'impact'" in cont.output
     assert "signatures  ()  ->  (free) impact:impact (free)" in cont.output
+
+
+def test_grazing_curve_in_two_parameters():
+    """The graze followed in (omega, sigma): sigma = R(omega) = 1/|1 - omega^2 + i eps omega|
+    at every point of the curve."""
+    gr, R, _ = _grazing_point(2.8, 0.1)
+    cur = pwsdyn.continue_bifurcation("impact-oscillator", gr, ("omega", "sigma"),
+                                      span=(2.2, 3.5), ds=0.05, max_points=12)
+    assert cur.curve == "GR" and len(cur) >= 6 and cur.values.max() == pytest.approx(3.5)
+    for w, s in zip(cur.values, cur.values_of("sigma")):
+        assert abs(s - 1.0 / math.hypot(1 - w * w, 0.1 * w)) < 1e-8

@@ -460,18 +460,20 @@ def load_branch(path) -> Branch:
 def continue_bifurcation(model, special_point: SpecialPoint, params, *, span=None, span2=None,
                          ds: float | None = None, max_points: int = 200,
                          progress: bool = False, **options) -> Branch:
-    """Follow a fold (``LP``), period doubling (``PD``) or Neimark-Sacker point (``NS``) of a
-    periodic orbit in two parameters: the curve of that bifurcation in the parameter plane.
+    """Follow a fold (``LP``), period doubling (``PD``), Neimark-Sacker point (``NS``) or
+    graze (``GR``) of a periodic orbit in two parameters: the curve of that bifurcation in the
+    parameter plane.
 
-    Each point is an orbit at which the bifurcation's test function of the multipliers
-    vanishes (the orbit problem bordered by the defining condition;
+    Each point is an orbit at which the bifurcation's test function (of the multipliers, or
+    the grazing monitor) vanishes (the orbit problem bordered by the defining condition;
     :class:`~pwsdyn.continuation.problems.BifurcationCurveProblem`).
 
     Parameters
     ----------
     model : Model, str, path or dict
     special_point : SpecialPoint
-        A located ``LP``, ``PD`` or ``NS`` of an orbit branch (:attr:`Branch.special_points`).
+        A located ``LP``, ``PD``, ``NS`` or ``GR`` of an orbit branch
+        (:attr:`Branch.special_points`).
     params : (str, str)
         The two parameters; the branch's parameter must be one of them. The first is the
         continuation parameter of the curve (``Branch.values``), the second is solved for
@@ -505,7 +507,7 @@ def continue_bifurcation(model, special_point: SpecialPoint, params, *, span=Non
     p1, p2 = _parameter(model, p1), _parameter(model, p2)
     if p1 == p2:
         raise ArgumentError("`params` must be two different parameters")
-    base = sp.branch.problem
+    base = sp.problem
     if base.parameter not in (p1, p2):
         raise ArgumentError(f"the special point lies on a branch in {base.parameter!r}; it must "
                             f"be one of `params` {params!r}")
@@ -517,7 +519,7 @@ def continue_bifurcation(model, special_point: SpecialPoint, params, *, span=Non
     prob = OrbitProblem(op.model, op.signature, params=all_params, parameters=[p1, p2],
                         periods=op.periods, t_ref=op.t_ref, sliding=op.sliding,
                         **_problem_options(op, options))
-    curve = BifurcationCurveProblem(prob, sp.kind)
+    curve = BifurcationCurveProblem(prob, sp.kind, key=sp.key if sp.kind == "GR" else "")
     U0 = np.append(sp.point.u, all_params[p2])
     cont = Continuation(curve, U0, all_params[p1], settings, progress=progress)
     lo2, hi2 = (-math.inf, math.inf) if span2 is None else span2

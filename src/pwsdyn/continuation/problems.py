@@ -209,7 +209,7 @@ class EquilibriumProblem:
 
 
 #: Test functions of the bifurcations of periodic orbits followed in two parameters.
-CURVE_KINDS = ("LP", "PD", "NS")
+CURVE_KINDS = ("LP", "PD", "NS", "GR")
 
 
 def orbit_test_function(kind: str, mu) -> float:
@@ -241,7 +241,10 @@ class BifurcationCurveProblem:
 
     kind = "orbit"
 
-    def __init__(self, problem, curve: str, *, fd_step: float = 1e-6):
+    def __init__(self, problem, curve: str, *, fd_step: float = 1e-6, key: str = ""):
+        if curve == "GR" and not key.startswith("GR/"):
+            raise ArgumentError("a grazing curve needs the key of its monitor (GR/...)")
+        self.key = key
         if curve not in CURVE_KINDS:
             raise ArgumentError(f"no two-parameter curve of kind {curve!r}; kinds: "
                                 f"{CURVE_KINDS}")
@@ -262,7 +265,15 @@ class BifurcationCurveProblem:
         except SegmentFailed as exc:
             raise TrialRejected(str(exc), "simulation") from None
 
-    def _psi(self, ev) -> float:
+    def _psi(self, u, p, ev) -> float:
+        if self.curve == "GR":
+            # the grazing monitor itself: the segment's interior minimum of h (or an impact's
+            # normal velocity) is zero on the grazing curve
+            mon = self.orbit_problem.grazing_monitors(u, p, evaluation=ev).get(self.key)
+            if mon is None:
+                raise TrialRejected(f"the graze {self.key} is no longer an interior minimum",
+                                    "monitor")
+            return mon.value
         return orbit_test_function(self.curve, self.orbit_problem.multipliers(ev))
 
     def evaluate(self, U, lam):
@@ -270,7 +281,7 @@ class BifurcationCurveProblem:
         u, p2 = U[:-1], float(U[-1])
         p = np.array([lam, p2])
         ev = self._ev(u, p)
-        psi = self._psi(ev)
+        psi = self._psi(u, p, ev)
         # central differences of psi over (u, p1, p2)
         w = np.append(u, p)
         grad = np.zeros(w.size)
@@ -279,8 +290,8 @@ class BifurcationCurveProblem:
             wp, wm = w.copy(), w.copy()
             wp[k] += h
             wm[k] -= h
-            fp = self._psi(self._ev(wp[:-2], wp[-2:]))
-            fm = self._psi(self._ev(wm[:-2], wm[-2:]))
+            fp = self._psi(wp[:-2], wp[-2:], self._ev(wp[:-2], wp[-2:], jacobian=False))
+            fm = self._psi(wm[:-2], wm[-2:], self._ev(wm[:-2], wm[-2:], jacobian=False))
             grad[k] = (fp - fm) / (2 * h)
         n = u.size
         G = np.append(ev.F, psi)
