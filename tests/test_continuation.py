@@ -511,3 +511,28 @@ def test_impact_velocity_to_zero_ends_the_impacting_branch_once(ds):
     stop = pwsdyn.continue_orbit(IO_MODEL, io_orbit("stable"), "sigma", span=(-0.6, 0.4),
                                  ds=ds, on_dib="stop")
     assert stop.points[-1].special == "GR" and "GR located" in stop.stop_reason
+
+
+def test_boundary_equilibrium_bifurcations():
+    """x' = p - x - sign(x): the upper mode's equilibrium x = p - 1 reaches the switching
+    surface at p = 1 (not admissible below), and the pseudo-equilibrium on x = 0 has
+    alpha = (p + 1)/2, leaving the sliding region at p = 1 (alpha = 1) and p = -1 (alpha = 0):
+    boundary equilibrium bifurcations, located to 1e-10."""
+    m = pwsdyn.load_model({"name": "beb", "states": ["x"], "parameters": {"p": 2.0},
+                           "modes": {"m": {"x": "p - x - sign(x)"}}})
+    up = m.mode_names[m.switches[0].above]
+    br = pwsdyn.continue_equilibrium(m, [1.0], "p", mode=up, span=(-2, 3), ds=-0.05)
+    beb = br.special("BEB")
+    assert len(beb) == 1 and abs(beb[0].value - 1.0) < 1e-10 and abs(beb[0].state[0]) < 1e-10
+    assert np.allclose(br.states[:, 0], br.values - 1.0, atol=1e-12)
+    assert (br.admissible == (br.values >= 1.0 - 1e-9)).all()
+    slide = f"slide:{m.switches[0].name}"
+    for ds in (0.05, -0.05):
+        ps = pwsdyn.continue_equilibrium(m, [0.0], "p", mode=slide, params={"p": 0.0},
+                                         span=(-2, 2), ds=ds)
+        beb = ps.special("BEB")
+        assert len(beb) == 1 and abs(abs(beb[0].value) - 1.0) < 1e-10
+        assert beb[0].key == ("BEB/above" if ds > 0 else "BEB/below")
+        alpha = np.array([p.data["alpha"] for p in ps.points])
+        assert np.allclose(alpha, (ps.values + 1) / 2, atol=1e-12)
+        assert (ps.admissible == (np.abs(ps.values) <= 1 + 1e-9)).all()

@@ -187,15 +187,45 @@ class EquilibriumProblem:
             raise TrialRejected("the vector field is not finite here", "nonfinite")
         return F, J[:n, :n], J[:n, n]
 
+    def _region(self, u, lam) -> dict:
+        """``{surface: signed h}`` of the surfaces bounding the mode's region: positive
+        inside (above a switch for its upper mode, below for its lower one, the admissible
+        side of an impact surface)."""
+        m = self.model
+        out = {}
+        for sw in m.switches:
+            if self._mode in (sw.above, sw.below):
+                sign = 1.0 if self._mode == sw.above else -1.0
+                out[m.surfaces[sw.surface].name] = sign * self._h(sw.surface, u, lam)
+        for e in m.events:
+            if e.kind == "impact" and self._mode in e.modes:
+                out[m.surfaces[e.surface].name] = self._h(e.surface, u, lam)
+        return out
+
+    def _h(self, k, u, lam) -> float:
+        from ..model.codegen import W_H
+
+        z = np.append(np.asarray(u, dtype=float), lam)
+        out = np.zeros(max(self._n + 1, 2))
+        self._cm.evaluate(W_H, k, 0.0, z, self._pv, out)
+        return float(out[0])
+
     def analyse(self, u, lam, _evaluation=None) -> dict:
         _, A, _ = self.evaluate(u, lam)
         ev = np.linalg.eigvals(A)
-        return {"eigenvalues": ev, "stable": bool(np.max(ev.real) < 0.0), "admissible": True,
-                "reason": ""}
+        region = self._region(u, lam)
+        out = [f"the equilibrium lies outside the region of mode {self.mode!r}: {name} = "
+               f"{val:.3e} on the wrong side" for name, val in region.items() if val < 0]
+        return {"eigenvalues": ev, "stable": bool(np.max(ev.real) < 0.0),
+                "admissible": not out, "reason": out[0] if out else "", "region": region}
 
     def test_functions(self, data) -> dict:
         ev = data["eigenvalues"]
-        return {"HB": _pair_product(ev, lambda a, b: a + b)} if ev.size >= 2 else {}
+        out = {"HB": _pair_product(ev, lambda a, b: a + b)} if ev.size >= 2 else {}
+        # boundary equilibrium bifurcation: the equilibrium reaches a surface of its region
+        for name, val in data.get("region", {}).items():
+            out[f"BEB/{name}"] = val
+        return out
 
     def confirm(self, kind, data) -> bool:
         if kind == "HB":
@@ -464,7 +494,13 @@ class PseudoEquilibriumProblem:
 
     def test_functions(self, data) -> dict:
         ev = data["eigenvalues"]
-        return {"HB": _pair_product(ev, lambda a, b: a + b)} if ev.size >= 2 else {}
+        out = {"HB": _pair_product(ev, lambda a, b: a + b)} if ev.size >= 2 else {}
+        # boundary equilibrium bifurcation: the pseudo-equilibrium leaves the sliding region
+        # (alpha through 0 or 1) where it meets an equilibrium of the mode below or above
+        a = data["alpha"]
+        out["BEB/below"] = a
+        out["BEB/above"] = 1.0 - a
+        return out
 
     def confirm(self, kind, data) -> bool:
         if kind == "HB":
