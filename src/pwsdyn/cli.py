@@ -1025,35 +1025,15 @@ def continue_cmd(model, params, sets, start, stop, x0, t0, periods, period, tran
     import numpy as np
 
     import pwsdyn
-    from .errors import ModelError, PwsdynError
-    from .orbits import OrbitError, PeriodicOrbit, find_periodic_orbit
+    from .errors import PwsdynError
+    from .orbits import OrbitError
 
-    named = list(dict.fromkeys(v.strip() for v in params if "=" not in v))
-    if len(named) != 1:
-        raise click.UsageError("name the continued parameter once: --param NAME")
-    param = named[0]
-    params = [v for v in params if "=" in v]
-    if start == stop:
-        raise click.BadParameter("--from and --to must differ", param_hint="--to")
     if max_points < 2:
         raise click.BadParameter(f"must be at least 2, got {max_points}",
                                  param_hint="--max-points")
     _check_outputs(force, [("--out", out, "data"), ("--plot", plot, "figure")])
-    cli_params, hints = _all_params(params, sets)
-    cli_x0 = _parse_x0(x0)
-    try:
-        mdl = pwsdyn.load_model(model)
-    except ModelError as exc:
-        _fail(exc)
-    if param not in mdl.parameters:
-        raise click.BadParameter(f"unknown parameter {param!r} for model {mdl.name!r}; "
-                                 f"parameters are {list(mdl.parameters)}", param_hint="--param")
-    _check_params(mdl, cli_params, hints)
-    if cli_x0 is not None:
-        _check_x0(mdl, cli_x0)
-    all_params = {**mdl.parameters, **cli_params, param: start}
-    x0_val, t0, t_end = _run_defaults(mdl, cli_x0, t0, None)
-    span = (min(start, stop), max(start, stop))
+    mdl, param, all_params, cli_x0, x0_val, t0, t_end, span = _branch_setup(
+        model, params, sets, start, stop, x0, t0)
     step = ds if ds is not None else min(0.02, abs(stop - start) / 100.0)
     step = abs(step) if stop > start else -abs(step)
     options = {}
@@ -1098,6 +1078,37 @@ def continue_cmd(model, params, sets, start, stop, x0, t0, periods, period, tran
                                  out, branch.to_dataset)
         if problem is not None:
             _fail(problem)
+
+
+def _branch_setup(model, params, sets, start, stop, x0, t0):
+    """What `continue` and `grazing` read the same way: the model, the continued parameter
+    (--param NAME, no value), the parameter values (the model's, -p NAME=VALUE, and the
+    parameter at --from), --x0, the run defaults and the span [--from, --to]."""
+    import pwsdyn
+    from .errors import ModelError
+
+    named = list(dict.fromkeys(v.strip() for v in params if "=" not in v))
+    if len(named) != 1:
+        raise click.UsageError("name the continued parameter once: --param NAME")
+    param = named[0]
+    params = [v for v in params if "=" in v]
+    if start == stop:
+        raise click.BadParameter("--from and --to must differ", param_hint="--to")
+    cli_params, hints = _all_params(params, sets)
+    cli_x0 = _parse_x0(x0)
+    try:
+        mdl = pwsdyn.load_model(model)
+    except ModelError as exc:
+        _fail(exc)
+    if param not in mdl.parameters:
+        raise click.BadParameter(f"unknown parameter {param!r} for model {mdl.name!r}; "
+                                 f"parameters are {list(mdl.parameters)}", param_hint="--param")
+    _check_params(mdl, cli_params, hints)
+    if cli_x0 is not None:
+        _check_x0(mdl, cli_x0)
+    all_params = {**mdl.parameters, **cli_params, param: start}
+    x0_val, t0, t_end = _run_defaults(mdl, cli_x0, t0, None)
+    return mdl, param, all_params, cli_x0, x0_val, t0, t_end, (min(start, stop), max(start, stop))
 
 
 def _start_orbit(mdl, x0_val, t0, t_end, all_params, cli_x0, transient, period, periods,
@@ -1165,34 +1176,12 @@ def grazing_cmd(model, params, sets, start, stop, x0, t0, periods, period, trans
       pwsdyn grazing impact-oscillator --param sigma --from 0.45 --to 0.0 \\
           -p omega=2.8 -p eps=0.1 --x0 x=-0.006,v=-0.41 --t0 0
     """
-    import numpy as np
-
     import pwsdyn
-    from .errors import ModelError, PwsdynError
+    from .errors import PwsdynError
     from .orbits import OrbitError
 
-    named = list(dict.fromkeys(v.strip() for v in params if "=" not in v))
-    if len(named) != 1:
-        raise click.UsageError("name the parameter once: --param NAME")
-    param = named[0]
-    params = [v for v in params if "=" in v]
-    if start == stop:
-        raise click.BadParameter("--from and --to must differ", param_hint="--to")
-    cli_params, hints = _all_params(params, sets)
-    cli_x0 = _parse_x0(x0)
-    try:
-        mdl = pwsdyn.load_model(model)
-    except ModelError as exc:
-        _fail(exc)
-    if param not in mdl.parameters:
-        raise click.BadParameter(f"unknown parameter {param!r} for model {mdl.name!r}; "
-                                 f"parameters are {list(mdl.parameters)}", param_hint="--param")
-    _check_params(mdl, cli_params, hints)
-    if cli_x0 is not None:
-        _check_x0(mdl, cli_x0)
-    all_params = {**mdl.parameters, **cli_params, param: start}
-    x0_val, t0, t_end = _run_defaults(mdl, cli_x0, t0, None)
-    span = (min(start, stop), max(start, stop))
+    mdl, param, all_params, cli_x0, x0_val, t0, t_end, span = _branch_setup(
+        model, params, sets, start, stop, x0, t0)
     step = min(0.02, abs(stop - start) / 100.0) * (1 if stop > start else -1)
     try:
         orbit = _start_orbit(mdl, x0_val, t0, t_end, all_params, cli_x0, transient, period,

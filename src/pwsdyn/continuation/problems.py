@@ -122,39 +122,24 @@ class OrbitBranchProblem:
         return tuple(self.orbit_problem.model.states)
 
 
-class EquilibriumProblem:
-    """Equilibria ``f(x, p) = 0`` of one mode of an autonomous model.
+class _PointProblem:
+    """What equilibria and pseudo-equilibria share: the model compiled with the continued
+    parameter made a state (so that its ``f_x`` and ``h_x`` carry ``f_p`` and ``h_p`` in their
+    last column, :func:`pwsdyn.model.augment.with_parameters_as_states`), eigenvalue test
+    functions (Hopf) and their confirmation."""
 
-    ``f_x`` and ``f_p`` come from the generated code of the model with the parameter made a
-    state (:func:`pwsdyn.model.augment.with_parameters_as_states`): the last column of its
-    ``f_x`` is ``f_p``.
-    """
-
-    kind = "equilibrium"
-
-    def __init__(self, model, parameter: str, *, params=None, mode=None):
+    def __init__(self, model, parameter: str, params, caller: str):
         from .. import _validate as V
         from ..model import compile_model
         from ..model.augment import with_parameters_as_states
 
-        model = V.model(model, kind="flow", caller="continue_equilibrium()")
+        model = V.model(model, kind="flow", caller=caller)
         if parameter not in model.parameters:
             raise ArgumentError(f"model {model.name!r} has no parameter {parameter!r}; its "
                                 f"parameters: {list(model.parameters)}")
-        if model.forcing_period is not None:
-            raise ArgumentError(f"model {model.name!r} is forced (time-periodic): it has "
-                                f"periodic orbits, not equilibria; use continue_orbit")
         self.model = model
         self.parameter = parameter
         self.params = dict(zip(model.parameters, model.parameter_vector(params)))
-        if mode is None:
-            mode = model.mode_names[model.initial_mode]
-        if mode not in model.mode_names:
-            raise ArgumentError(f"model {model.name!r} has no mode {mode!r}; its modes: "
-                                f"{list(model.mode_names)}")
-        self.mode = mode
-        self._mode = model.mode_names.index(mode)
-        self.size = model.n_states
         ext = with_parameters_as_states(model, [parameter])
         self._cm = compile_model(ext)
         self._pv = ext.parameter_vector({k: v for k, v in self.params.items()
@@ -162,27 +147,62 @@ class EquilibriumProblem:
         if not self._pv.size:
             self._pv = np.zeros(1)
         self._n = model.n_states
-        self._buf = np.zeros((self._n + 1) ** 2)
 
     @property
     def state_names(self):
         return tuple(self.model.states)
 
-    def _call(self, which, u, lam):
-        from ..model.codegen import W_F, W_FX
+    def _call(self, which, idx, x, lam, size):
+        """Generated quantity ``which`` (case ``idx``) at ``(x, lam)`` of the extended model."""
+        z = np.append(np.asarray(x, dtype=float), lam)
+        out = np.zeros(max(size, 2))
+        self._cm.evaluate(which, idx, 0.0, z, self._pv, out)
+        return out[:size]
 
-        z = np.append(np.asarray(u, dtype=float), lam)
-        n1 = self._n + 1
-        out = np.zeros(n1 if which == W_F else n1 * n1)
-        self._cm.evaluate(which, self._mode, 0.0, z, self._pv, out)
-        return out
+    def _h(self, k, x, lam) -> float:
+        from ..model.codegen import W_H
+
+        return float(self._call(W_H, k, x, lam, 1)[0])
+
+    @staticmethod
+    def _hopf(ev) -> dict:
+        return {"HB": _pair_product(ev, lambda a, b: a + b)} if ev.size >= 2 else {}
+
+    def confirm(self, kind, data) -> bool:
+        if kind == "HB":
+            ev = data["eigenvalues"]
+            cx = ev[np.abs(ev.imag) > CONFIRM_TOL]
+            return bool(cx.size and np.min(np.abs(cx.real)) < CONFIRM_TOL ** 0.5)
+        return True
+
+
+class EquilibriumProblem(_PointProblem):
+    """Equilibria ``f(x, p) = 0`` of one mode of an autonomous model, watched against the
+    surfaces that bound the mode's region (boundary equilibrium bifurcations, ``BEB``)."""
+
+    kind = "equilibrium"
+
+    def __init__(self, model, parameter: str, *, params=None, mode=None):
+        super().__init__(model, parameter, params, "continue_equilibrium()")
+        model = self.model
+        if model.forcing_period is not None:
+            raise ArgumentError(f"model {model.name!r} is forced (time-periodic): it has "
+                                f"periodic orbits, not equilibria; use continue_orbit")
+        if mode is None:
+            mode = model.mode_names[model.initial_mode]
+        if mode not in model.mode_names:
+            raise ArgumentError(f"model {model.name!r} has no mode {mode!r}; its modes: "
+                                f"{list(model.mode_names)}")
+        self.mode = mode
+        self._mode = model.mode_names.index(mode)
+        self.size = self._n
 
     def evaluate(self, u, lam):
         from ..model.codegen import W_F, W_FX
 
         n = self._n
-        F = self._call(W_F, u, lam)[:n]
-        J = self._call(W_FX, u, lam).reshape(n + 1, n + 1)
+        F = self._call(W_F, self._mode, u, lam, n + 1)[:n]
+        J = self._call(W_FX, self._mode, u, lam, (n + 1) ** 2).reshape(n + 1, n + 1)
         if not (np.all(np.isfinite(F)) and np.all(np.isfinite(J))):
             raise TrialRejected("the vector field is not finite here", "nonfinite")
         return F, J[:n, :n], J[:n, n]
@@ -202,14 +222,6 @@ class EquilibriumProblem:
                 out[m.surfaces[e.surface].name] = self._h(e.surface, u, lam)
         return out
 
-    def _h(self, k, u, lam) -> float:
-        from ..model.codegen import W_H
-
-        z = np.append(np.asarray(u, dtype=float), lam)
-        out = np.zeros(max(self._n + 1, 2))
-        self._cm.evaluate(W_H, k, 0.0, z, self._pv, out)
-        return float(out[0])
-
     def analyse(self, u, lam, _evaluation=None) -> dict:
         _, A, _ = self.evaluate(u, lam)
         ev = np.linalg.eigvals(A)
@@ -220,19 +232,11 @@ class EquilibriumProblem:
                 "admissible": not out, "reason": out[0] if out else "", "region": region}
 
     def test_functions(self, data) -> dict:
-        ev = data["eigenvalues"]
-        out = {"HB": _pair_product(ev, lambda a, b: a + b)} if ev.size >= 2 else {}
+        out = self._hopf(data["eigenvalues"])
         # boundary equilibrium bifurcation: the equilibrium reaches a surface of its region
         for name, val in data.get("region", {}).items():
             out[f"BEB/{name}"] = val
         return out
-
-    def confirm(self, kind, data) -> bool:
-        if kind == "HB":
-            ev = data["eigenvalues"]
-            cx = ev[np.abs(ev.imag) > CONFIRM_TOL]
-            return bool(cx.size and np.min(np.abs(cx.real)) < CONFIRM_TOL ** 0.5)
-        return True
 
     def section_state(self, u):
         return np.asarray(u, dtype=float)
@@ -366,7 +370,7 @@ class BifurcationCurveProblem:
         return tuple(self.orbit_problem.model.states)
 
 
-class PseudoEquilibriumProblem:
+class PseudoEquilibriumProblem(_PointProblem):
     """Pseudo-equilibria of a Filippov switching surface: points on ``h(x) = 0`` where the
     sliding vector field vanishes, followed in a parameter.
 
@@ -388,14 +392,8 @@ class PseudoEquilibriumProblem:
 
     def __init__(self, model, parameter: str, *, params=None, switch=None,
                  fd_step: float = 1e-7):
-        from .. import _validate as V
-        from ..model import compile_model
-        from ..model.augment import with_parameters_as_states
-
-        model = V.model(model, kind="flow", caller="continue_equilibrium()")
-        if parameter not in model.parameters:
-            raise ArgumentError(f"model {model.name!r} has no parameter {parameter!r}; its "
-                                f"parameters: {list(model.parameters)}")
+        super().__init__(model, parameter, params, "continue_equilibrium()")
+        model = self.model
         sws = [s for s in model.switches if s.kind == "filippov"]
         if not sws:
             raise ArgumentError(f"model {model.name!r} has no Filippov switching surface")
@@ -407,42 +405,22 @@ class PseudoEquilibriumProblem:
                 raise ArgumentError(f"model {model.name!r} has no Filippov switch {switch!r}; "
                                     f"its switches: {[s.name for s in sws]}")
             sw = match[0]
-        self.model = model
-        self.parameter = parameter
         self.switch = sw.name
         self.mode = f"slide:{sw.name}"
         self._sw = sw
-        self.params = dict(zip(model.parameters, model.parameter_vector(params)))
-        ext = with_parameters_as_states(model, [parameter])
-        self._cm = compile_model(ext)
-        self._pv = ext.parameter_vector({k: v for k, v in self.params.items()
-                                         if k != parameter})
-        if not self._pv.size:
-            self._pv = np.zeros(1)
-        self._n = model.n_states
         self.size = self._n + 1
         self.fd_step = fd_step
 
-    @property
-    def state_names(self):
-        return tuple(self.model.states)
-
-    def _call(self, which, idx, x, lam, size):
-        z = np.append(np.asarray(x, dtype=float), lam)
-        out = np.zeros(size)
-        self._cm.evaluate(which, idx, 0.0, z, self._pv, out)
-        return out
-
     def _fields(self, x, lam):
-        from ..model.codegen import W_F, W_FX, W_H, W_HX
+        from ..model.codegen import W_F, W_FX, W_HX
 
-        n1 = self._n + 1
+        n, n1 = self._n, self._n + 1
         sw = self._sw
-        fp = self._call(W_F, sw.above, x, lam, n1)[:self._n]
-        fm = self._call(W_F, sw.below, x, lam, n1)[:self._n]
-        Jp = self._call(W_FX, sw.above, x, lam, n1 * n1).reshape(n1, n1)[:self._n]
-        Jm = self._call(W_FX, sw.below, x, lam, n1 * n1).reshape(n1, n1)[:self._n]
-        h = self._call(W_H, sw.surface, x, lam, 1)[0]
+        fp = self._call(W_F, sw.above, x, lam, n1)[:n]
+        fm = self._call(W_F, sw.below, x, lam, n1)[:n]
+        Jp = self._call(W_FX, sw.above, x, lam, n1 * n1).reshape(n1, n1)[:n]
+        Jm = self._call(W_FX, sw.below, x, lam, n1 * n1).reshape(n1, n1)[:n]
+        h = self._h(sw.surface, x, lam)
         hx = self._call(W_HX, sw.surface, x, lam, n1)
         return fp, fm, Jp, Jm, h, hx
 
@@ -493,21 +471,13 @@ class PseudoEquilibriumProblem:
                 "admissible": bool(inside), "reason": reason}
 
     def test_functions(self, data) -> dict:
-        ev = data["eigenvalues"]
-        out = {"HB": _pair_product(ev, lambda a, b: a + b)} if ev.size >= 2 else {}
+        out = self._hopf(data["eigenvalues"])
         # boundary equilibrium bifurcation: the pseudo-equilibrium leaves the sliding region
         # (alpha through 0 or 1) where it meets an equilibrium of the mode below or above
         a = data["alpha"]
         out["BEB/below"] = a
         out["BEB/above"] = 1.0 - a
         return out
-
-    def confirm(self, kind, data) -> bool:
-        if kind == "HB":
-            ev = data["eigenvalues"]
-            cx = ev[np.abs(ev.imag) > CONFIRM_TOL]
-            return bool(cx.size and np.min(np.abs(cx.real)) < CONFIRM_TOL ** 0.5)
-        return True
 
     def section_state(self, u):
         return np.asarray(u, dtype=float)[:self._n]

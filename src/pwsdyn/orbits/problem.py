@@ -1116,8 +1116,8 @@ class OrbitProblem:
         * ``"GR/<surface>/<i>"``: the smallest interior local minimum of ``h`` (or ``-h``
           below a switching surface) along segment ``i`` in a mode -- a graze of the surface
           inside the segment where it reaches zero: ``h = 0`` and ``h_t + h_x f = 0`` at an
-          interior point (thesis conditions 2.30-2.31), refined by golden-section search on
-          the dense output;
+          interior point (thesis conditions 2.30-2.31), refined by minimizing on the dense
+          output;
         * ``"GR/<event>@<i>"``: ``-(h_t + h_x f)`` at the impact ending segment ``i`` -- the
           impact's normal velocity going to zero (the end of a branch of impacting orbits
           at a graze).
@@ -1723,33 +1723,27 @@ def _sample_times(tr) -> np.ndarray:
 
 def _interior_minimum(val, ts, g):
     """``(t, value)`` of the smallest local minimum of the samples ``g`` at ``ts`` strictly
-    inside the range (not at its ends), refined by golden-section search of ``val`` between
-    the neighbouring samples; ``None`` when the samples have no interior local minimum."""
+    inside the range (not at its ends), refined by minimizing ``val`` between the
+    neighbouring samples; ``None`` when the samples have no interior local minimum."""
     cands = [i for i in range(1, len(g) - 1) if g[i] <= g[i - 1] and g[i] <= g[i + 1]]
     if not cands:
         return None
     best = None
-    phi = (math.sqrt(5.0) - 1.0) / 2.0
     for i in sorted(cands, key=lambda k: g[k])[:8]:
-        a, b = ts[i - 1], ts[i + 1]
-        x1, x2 = b - phi * (b - a), a + phi * (b - a)
-        f1, f2 = val(x1), val(x2)
-        for _ in range(60):
-            if b - a <= 4e-16 * max(1.0, abs(b)):
-                break
-            if f1 < f2:
-                b, x2, f2 = x2, x1, f1
-                x1 = b - phi * (b - a)
-                f1 = val(x1)
-            else:
-                a, x1, f1 = x1, x2, f2
-                x2 = a + phi * (b - a)
-                f2 = val(x2)
-        tm, fm = (x1, f1) if f1 < f2 else (x2, f2)
+        tm, fm = _refine_min(val, ts[i - 1], ts[i + 1], 4e-16 * max(1.0, abs(ts[i + 1])))
         fm = min(fm, g[i])
         if best is None or fm < best[1]:
             best = (float(tm), float(fm))
     return best
+
+
+def _refine_min(val, a, b, xatol):
+    """``(t, val(t))`` of the minimum of ``val`` on ``[a, b]`` (Brent's bounded method)."""
+    from scipy.optimize import minimize_scalar
+
+    res = minimize_scalar(val, bounds=(float(a), float(b)), method="bounded",
+                          options={"xatol": max(float(xatol), 1e-300), "maxiter": 200})
+    return float(res.x), float(res.fun)
 
 
 def _parabola_min(t3, g3, a, b) -> float:
@@ -1773,12 +1767,13 @@ def _parabola_min(t3, g3, a, b) -> float:
 
 def _worst(fn, tr, ts, vals, sign, n, limit=None):
     """``(t, value)`` of the most negative ``sign * fn`` over the samples, each sampled local
-    minimum refined by golden-section search on the dense output.
+    minimum refined by minimizing on the dense output.
 
     With ``limit``, only minima that could reach below it are refined: the parabola through
     a sampled minimum and its neighbours predicts the minimum between them, and a minimum
     whose prediction stays above ``limit`` by four times its own correction is left (the
-    refinement, 40 evaluations of the dense output, costs more than the rest of a check)."""
+    refinement, tens of evaluations of the dense output, costs more than the rest of a
+    check)."""
     g = sign * vals
     k = int(np.argmin(g))
     best = (float(ts[k]), float(vals[k]))
@@ -1794,22 +1789,9 @@ def _worst(fn, tr, ts, vals, sign, n, limit=None):
             corr = abs(g[i] - pred)
             if pred - 4.0 * corr - 1e-3 * (abs(g[i]) + corr) > limit:
                 continue
-        phi = (math.sqrt(5.0) - 1.0) / 2.0
-
         def val(tt):
             return sign * fn(tt, tr(tt)[:n])
-        x1, x2 = b - phi * (b - a), a + phi * (b - a)
-        f1, f2 = val(x1), val(x2)
-        for _ in range(40):
-            if f1 < f2:
-                b, x2, f2 = x2, x1, f1
-                x1 = b - phi * (b - a)
-                f1 = val(x1)
-            else:
-                a, x1, f1 = x1, x2, f2
-                x2 = a + phi * (b - a)
-                f2 = val(x2)
-        tm, fm = (x1, f1) if f1 < f2 else (x2, f2)
+        tm, fm = _refine_min(val, a, b, 1e-9 * (b - a))
         if fm < sign * best[1]:
             best = (float(tm), float(sign * fm))
     return best
