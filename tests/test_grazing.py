@@ -128,3 +128,55 @@ def test_grazing_curve_in_two_parameters():
     assert cur.curve == "GR" and len(cur) >= 6 and cur.values.max() == pytest.approx(3.5)
     for w, s in zip(cur.values, cur.values_of("sigma")):
         assert abs(s - 1.0 / math.hypot(1 - w * w, 0.1 * w)) < 1e-8
+
+
+# ---- grazing-sliding ---------------------------------------------------------------------
+
+FRICTION = {"name": "forced-friction", "states": ["x", "v"],
+            "parameters": {"m": 1.0, "k": 1.0, "c": 0.1, "F": 0.2, "omega": 1.5, "V": 0.5,
+                           "mu": 0.3},
+            "forcing_period": "2*pi/omega", "definitions": {"vrel": "v - V"},
+            "modes": {"block": {"x": "v",
+                                "v": "(F*cos(omega*t) - c*v - k*x - mu*sign(vrel))/m"}}}
+
+
+def test_grazing_sliding_of_a_forced_friction_oscillator():
+    """m x'' + c x' + k x = F cos(omega t) - mu sign(v - V) (a block on a belt moving at V).
+    While the block is slower than the belt the friction is the constant +mu and the orbit is
+    the forced response x = mu/k + (F/D) cos(omega t - phi), D = |k - m omega^2 + i c omega|:
+    its peak velocity F omega / D reaches V at F_GS = V D / omega, where the orbit touches the
+    switching surface with the field beyond it pointing back -- grazing-sliding. Past it the
+    orbit sticks to the belt for a time T growing like sqrt(F - F_GS): to leading order
+    T = sqrt(2 dw / ((1 + q) a)), dw = omega (F - F_GS) / D the velocity excess of the free
+    motion, a = V omega^2 its curvature at the peak, and 1 / (1 + q) the amplification of that
+    excess by the orbit's own response to the velocity it loses by sliding (q the (v, v) entry
+    of E (I - E)^-1, E the free flow over one period)."""
+    from scipy.linalg import expm
+
+    m_, k, c, w, V, mu = 1.0, 1.0, 0.1, 1.5, 0.5, 0.3
+    D = math.hypot(k - m_ * w * w, c * w)
+    F_gs = V * D / w
+    model = pwsdyn.load_model(FRICTION)
+    F0 = 0.5 * F_gs
+    X, Y = np.linalg.solve(np.array([[k - m_ * w * w, c * w], [-c * w, k - m_ * w * w]]),
+                           [F0, 0.0])
+    orb = pwsdyn.find_periodic_orbit(model, [mu / k + X, w * Y], t0=0.0, params={"F": F0})
+    assert len(orb.signature) == 0
+    br = pwsdyn.continue_orbit(model, orb, "F", span=(0.0, 0.47), ds=0.05)
+    gs = br.special("GS")
+    assert len(gs) == 1 and abs(gs[0].value - F_gs) < 1e-10
+    assert [str(s) for s in br.signatures][1] == \
+        "(block[vrel<0]) slide_start:vrel (slide:vrel) slide_end:vrel (block[vrel<0])"
+    A = np.array([[0.0, 1.0], [-k / m_, -c / m_]])
+    E = expm(A * 2 * math.pi / w)
+    q = (E @ np.linalg.inv(np.eye(2) - E))[1, 1]
+    const = math.sqrt(2 * w / (D * (1 + q) * V * w * w))
+    ratios = []
+    for p in br.points:
+        if p.signature_index == 1 and p.lam - F_gs < 1e-3:
+            _, _, Ts = br.problem_of(p).orbit_problem.unpack(p.u)
+            ratios.append((p.lam - F_gs, Ts[1] / math.sqrt(p.lam - F_gs)))
+    assert len(ratios) >= 2 and ratios[0][0] < 2e-4
+    assert abs(ratios[0][1] / const - 1) < 0.01            # the square-root law, within 1%
+    assert abs(ratios[0][1] / const - 1) < abs(ratios[-1][1] / const - 1)   # converging
+    assert br.admissible.all()

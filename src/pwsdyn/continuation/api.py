@@ -32,7 +32,7 @@ def _split_options(options: dict, span, ds, max_points):
 
 
 #: Kinds of discontinuity-induced bifurcations at which an orbit branch changes signature.
-DIB_KINDS = ("GR",)
+DIB_KINDS = ("GR", "GS")
 ON_DIB = ("switch", "stop", "continue")
 
 

@@ -19,6 +19,8 @@ KINDS = {
     "HB": "Hopf: a complex pair of eigenvalues crosses the imaginary axis",
     "GR": "grazing: the orbit touches a surface tangentially (a segment's interior minimum of "
           "h, or an impact's normal velocity, reaches zero)",
+    "GS": "grazing-sliding: the orbit touches a Filippov surface where the field beyond it "
+          "points back, and a sliding segment is born",
     "BEB": "boundary equilibrium bifurcation: an equilibrium reaches the boundary of its "
            "mode's region, or a pseudo-equilibrium that of the sliding region",
     "EP": "end point of the branch",

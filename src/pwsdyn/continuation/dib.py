@@ -6,7 +6,10 @@ At a graze located on an orbit branch (monitor ``GR`` of
 * a segment touching an impact surface inside it (``GR/<surface>/<i>``): past the graze it
   hits the surface -- an impact is added, splitting segment ``i``;
 * an impact whose normal velocity goes to zero (``GR/<event>@<i>``): past it the orbit no
-  longer reaches the surface -- the impact is removed, joining segments ``i`` and ``i + 1``.
+  longer reaches the surface -- the impact is removed, joining segments ``i`` and ``i + 1``;
+* a segment touching a Filippov surface where the field beyond points back
+  (``GS/<surface>/<i>``, grazing-sliding): past it the orbit slides on the surface -- a
+  sliding segment (``slide_start``, ``slide_end``) is added inside segment ``i``.
 
 The new problem is singular at the graze itself (its event condition's derivative
 ``h_x f`` vanishes there) and the new orbit lies a square root of the parameter distance
@@ -124,6 +127,67 @@ def remove_impact(op, u, lam, seg: int):
     return prob, prob.pack(t0, xs2, Ts2)
 
 
+def insert_sliding(op, u, lam, seg: int, surface_name: str):
+    """The problem with a sliding segment on the Filippov surface ``surface_name`` added
+    inside segment ``seg`` (past a grazing-sliding) and its ``u`` at ``lam`` from the old
+    signature's solution there, which crosses the surface and comes back: sliding from where
+    it enters to where it returns (Newton moves the exit to where the sliding field leaves):
+    ``(problem, u)`` or a reason string."""
+    from ..orbits.problem import OrbitProblem, _context
+    from ..orbits.signature import Signature, SignatureEvent
+
+    m = op.model
+    n = op.n
+    if len(op.bounds) != len(op.signature) or op.fields[seg].kind != "mode":
+        return "only segments in a mode ending in single events are re-segmented"
+    mode = op.fields[seg].index
+    sws = [sw for sw in m.switches if sw.kind == "filippov" and mode in (sw.above, sw.below)
+           and m.surfaces[sw.surface].name == surface_name]
+    if not sws:
+        return f"no Filippov switch on surface {surface_name!r} bounds the segment's mode"
+    sw = sws[0]
+    sign = 1.0 if mode == sw.above else -1.0
+    p = np.array([lam])
+    ev = op.evaluate(u, p, jacobian=False)
+    s = ev.segs[seg]
+    opts = op._seg_opts(p, dense=True, variational=False)
+    _, _, tr = op._flow(seg, s.t, s.z, s.T, opts)
+    ctx = _context(m, op.param_dict(p), op.sliding)
+
+    def g(t):
+        return sign * ctx.h(sw.surface, t, tr(t)[:n])
+    ts = np.linspace(s.t, s.t + s.T, 400)[1:-1]
+    gv = np.array([g(t) for t in ts])
+    k_in = np.flatnonzero((gv[:-1] > 0) & (gv[1:] <= 0))
+    if not k_in.size:
+        return "the orbit past the graze does not reach the surface"
+    k_out = np.flatnonzero((gv[:-1] <= 0) & (gv[1:] > 0))
+    k_out = k_out[k_out > k_in[0]]
+    if not k_out.size:
+        return "the orbit past the graze does not come back across the surface"
+    ta = brentq(g, ts[k_in[0]], ts[k_in[0] + 1], xtol=1e-14)
+    tb = brentq(g, ts[k_out[0]], ts[k_out[0] + 1], xtol=1e-14)
+    xa, xb = tr(ta)[:n], tr(tb)[:n]
+    mname = op.state_names[seg]
+    sname = f"slide:{sw.name}"
+    start = SignatureEvent("slide_start", sw.name, mname, sname)
+    end = SignatureEvent("slide_end", sw.name, sname, mname)
+    t0, xs, Ts = op.unpack(u)
+    xs, Ts = [np.asarray(x, dtype=float) for x in xs], list(Ts)
+    if not op.m:
+        P = op.period_value(p)
+        prob = OrbitProblem(m, Signature([start, end]), params=op.params,
+                            parameters=list(op.parameters), periods=op.periods,
+                            sliding=op.sliding, **_opts(op))
+        return prob, prob.pack(tb, [xb, xa], [ta + P - tb, tb - ta])
+    sig = Signature(list(op.signature[:seg]) + [start, end] + list(op.signature[seg:]))
+    prob = OrbitProblem(m, sig, params=op.params, parameters=list(op.parameters),
+                        periods=op.periods, t_ref=op.t_ref, sliding=op.sliding, **_opts(op))
+    xs2 = xs[:seg + 1] + [xa, xb] + xs[seg + 1:]
+    Ts2 = Ts[:seg] + [ta - s.t, tb - ta, s.t + s.T - tb] + Ts[seg + 1:]
+    return prob, prob.pack(t0, xs2, Ts2)
+
+
 def _opts(op):
     from ..integrate.simulate import DEFAULTS
 
@@ -134,11 +198,14 @@ def _opts(op):
 def past_graze(op, key: str, u, lam):
     """The new signature's problem and solution just past the graze ``key`` at ``lam``:
     ``(problem, u)``, or a reason string. ``u`` solves the old signature at ``lam``."""
-    body = key.split("/", 1)[1]
+    kind, body = key.split("/", 1)
     try:
         if "@" in body:
             seg = int(body.rsplit("@", 1)[1])
             made = remove_impact(op, u, lam, seg)
+        elif kind == "GS":
+            surface, seg = body.rsplit("/", 1)
+            made = insert_sliding(op, u, lam, int(seg), surface)
         else:
             surface, seg = body.rsplit("/", 1)
             made = insert_impact(op, u, lam, int(seg), surface)

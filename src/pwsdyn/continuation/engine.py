@@ -98,7 +98,7 @@ class ContinuationSettings:
     max_iter: int = 10
     target_iter: int = 3
     max_angle: float = 0.35
-    locate: tuple = ("LP", "BP", "PD", "NS", "HB", "GR", "BEB")
+    locate: tuple = ("LP", "BP", "PD", "NS", "HB", "GR", "GS", "BEB")
     locate_tol: float = 1e-11
     predictor: str = "tangent"
     stop_at: tuple = ()
@@ -472,9 +472,10 @@ class Continuation:
             end = self._end_at_bound(prev, X, lo if X[-1] < lo else hi)
             if end is not None:
                 out.extend(self._located(prev, end))
-                end_pt = end
-                end_pt.special = "EP"
-                out.append(end_pt)
+                if self._stops_at(out):
+                    return out[:self._stops_at(out)]
+                end.special = "EP"
+                out.append(end)
             return out + self._stop(f"the parameter reached the end of span "
                                     f"({lo:.10g}, {hi:.10g})")
         arc = prev.arclength + ds
@@ -483,11 +484,8 @@ class Continuation:
             # leaving a special point (a branch switch, a restart there), the test functions
             # are zero at the start: its own zero is not located again
             out.extend(self._located(prev, new))
-        for k, q in enumerate(out):
-            if q.special in st.stop_at:
-                self.stop_point = q
-                return out[:k + 1] + self._stop(f"{q.special} located at "
-                                                f"{self._lam_name()} = {q.lam:.12g}")
+        if self._stops_at(out):
+            return out[:self._stops_at(out)]
         out.append(new)
         # the next step: from the Newton iterations and the turn of the tangent
         it = res.iterations
@@ -498,6 +496,17 @@ class Continuation:
         if not np.all(np.isfinite(X)):
             return self._stop("the branch left the finite numbers")
         return out
+
+    def _stops_at(self, located) -> int:
+        """With a located point of a kind in ``stop_at``: the branch ends there (its
+        ``stop_reason`` and ``stop_point`` set); returns how many of ``located`` to keep
+        (0: none of them is such a point)."""
+        for k, q in enumerate(located):
+            if q.special in self.settings.stop_at:
+                self.stop_point = q
+                self._stop(f"{q.special} located at {self._lam_name()} = {q.lam:.12g}")
+                return k + 1
+        return 0
 
     def _lam_name(self):
         return getattr(self.problem, "parameter", "lam")

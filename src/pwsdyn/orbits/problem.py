@@ -1117,7 +1117,9 @@ class OrbitProblem:
           below a switching surface) along segment ``i`` in a mode -- a graze of the surface
           inside the segment where it reaches zero: ``h = 0`` and ``h_t + h_x f = 0`` at an
           interior point (thesis conditions 2.30-2.31), refined by minimizing on the dense
-          output;
+          output; ``"GS/..."`` for a Filippov surface where the field on its other side points
+          back into it at the tangency: touching it there starts sliding (grazing-sliding,
+          the slides' "sliding bifurcations");
         * ``"GR/<event>@<i>"``: ``-(h_t + h_x f)`` at the impact ending segment ``i`` -- the
           impact's normal velocity going to zero (the end of a branch of impacting orbits
           at a graze).
@@ -1140,22 +1142,33 @@ class OrbitProblem:
                 if len(ts) < 3:
                     continue
                 Y = np.asarray(tr(ts))[:, :n]
-                watched = []
+                watched = []      # (surface name, surface index, side sign, other mode)
                 for e in m.events:
                     if e.kind == "impact" and fk.index in e.modes:
-                        watched.append((m.surfaces[e.surface].name, e.surface, 1.0))
+                        watched.append((m.surfaces[e.surface].name, e.surface, 1.0, -1))
                 for sw in m.switches:
                     if fk.index in (sw.above, sw.below):
+                        above = fk.index == sw.above
+                        other = sw.below if above else sw.above
                         watched.append((m.surfaces[sw.surface].name, sw.surface,
-                                        1.0 if fk.index == sw.above else -1.0))
-                for name, k, sign in dict.fromkeys(watched):
+                                        1.0 if above else -1.0,
+                                        other if sw.kind == "filippov" else -1))
+                for name, k, sign, other in dict.fromkeys(watched):
                     fn = _h(ctx, k)
                     vals = sign * np.array([fn(tt, x) for tt, x in zip(ts, Y)])
                     found = _interior_minimum(lambda tt: sign * fn(tt, tr(tt)[:n]), ts, vals)
-                    if found is not None:
-                        tg, hg = found
-                        out[f"GR/{name}/{i}"] = Monitor(float(hg), i, name, float(tg),
-                                                        np.asarray(tr(tg)[:n], dtype=float))
+                    if found is None:
+                        continue
+                    tg, hg = found
+                    xg = np.asarray(tr(tg)[:n], dtype=float)
+                    kind = "GR"
+                    if other >= 0:
+                        # a Filippov surface: where the field on the other side points back
+                        # into it, touching it starts sliding (grazing-sliding, GS); else the
+                        # orbit would cross it (a grazing of the crossing region, GR)
+                        rate = _hd(ctx, k, other)(tg, xg)
+                        kind = "GS" if sign * rate > 0 else "GR"
+                    out[f"{kind}/{name}/{i}"] = Monitor(float(hg), i, name, float(tg), xg)
             if i < len(self.bounds) and self.bounds[i].kind == "impact":
                 b = self.bounds[i]
                 e = m.events[b.ref]
