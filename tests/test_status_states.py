@@ -247,6 +247,10 @@ def _imports(path: Path) -> set:
     ("orbits/_base.py", ("pwsdyn.orbits._orbit", "pwsdyn.orbits._shooting",
                          "pwsdyn.orbits.problem")),
     ("orbits/problem.py", ("pwsdyn.orbits._shooting",)),
+    ("model/discontinuities.py", ("pwsdyn.model.spec",)),
+    ("model/elements.py", ("pwsdyn.model.spec", "pwsdyn.model.discontinuities")),
+    ("model/maps.py", ("pwsdyn.model.codegen",)),
+    ("model/_map_kernels.py", ("pwsdyn.model.maps",)),
 ])
 def test_imports_run_one_way(files, forbidden):
     bad = {(str(p.relative_to(SRC)), m) for p in SRC.glob(files) for m in _imports(p)

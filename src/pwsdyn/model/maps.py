@@ -39,7 +39,7 @@ from ..errors import ModelError
 from .cache import header, load_module
 from ._map_step import (MAP_DIVERGED, MAP_NO_PIECE, MAP_NONFINITE, MAP_OK,  # noqa: F401
                         MAP_STEP_SIGNATURE, MAP_STEP_TYPE)
-from .codegen import _Printer
+from ._printer import NumbaPrinter
 from .expressions import parse_expression
 from .spec import SymbolicSystem, check_identifiers
 
@@ -260,7 +260,7 @@ def _generate_map_body(model: MapModel) -> str:
     """The module's text after its header line: only identifiers and numbers (the map's name
     and other text never reach it)."""
     check_identifiers(model.states, model.parameters, origin=model.origin)
-    pr = _Printer()
+    pr = NumbaPrinter()
     X = sp.Matrix(model.state_symbols)
     rename = {sym: sp.Symbol(f"s_{sym.name}", real=True) for sym in model.state_symbols}
     rename.update({sym: sp.Symbol(f"p_{sym.name}", real=True)
