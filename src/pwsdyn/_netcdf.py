@@ -354,7 +354,7 @@ def _str_array(values) -> np.ndarray:
 
 
 def _library_version() -> str:
-    from . import __version__
+    from ._version import __version__
 
     return __version__
 

@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Any, Mapping, NamedTuple
 
 import numpy as np
 
-from .. import __version__
+from .._version import __version__
 from .. import _validate as V
 from ..errors import ArgumentError, Status
 from ..integrate.simulate import _simulate_compiled, check_mode, integrator_options

@@ -61,7 +61,7 @@ from pathlib import Path
 
 import xarray as xr
 
-from .. import __version__
+from .._version import __version__
 from ..errors import PwsdynError, StoreError
 
 MANIFEST = "manifest.json"

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
-from .. import __version__
+from .._version import __version__
 from .. import _validate as V
 from ..errors import ArgumentError, SolveError, Status
 from ..model import compile_model

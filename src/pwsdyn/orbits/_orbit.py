@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .. import __version__
+from .._version import __version__
 from ..errors import Status
 from ..integrate.trajectory import Trajectory
 from ._base import MAX_PERIODS, RECURRENCE_MAX_PERIODS, OrbitError

@@ -1495,7 +1495,7 @@ def _nearest(values, target):
 
 
 def _version():
-    from .. import __version__
+    from .._version import __version__
 
     return __version__
 
