@@ -316,11 +316,19 @@ def decode_status(var) -> np.ndarray:
     if "flag_values" in attrs and "flag_meanings" in attrs:
         for v, word in zip(np.atleast_1d(attrs["flag_values"]).tolist(),
                            str(attrs["flag_meanings"]).split()):
-            table[int(v)] = _OLD_MAP_MEANINGS.get(word) or Status.from_meaning(word)
+            member = _OLD_MAP_MEANINGS.get(word)
+            if member is None:
+                try:
+                    member = Status.from_meaning(word)
+                except KeyError:
+                    raise ArgumentError(f"`{getattr(var, 'name', 'status')}` has the flag "
+                                        f"{word!r}, which is no status") from None
+            table[int(v)] = member
     out = np.empty(values.shape, dtype=object)
     flat = out.reshape(-1)
     for i, v in enumerate(values.reshape(-1).tolist()):
-        flat[i] = table.get(int(v)) or Status(int(v))
+        member = table.get(int(v))
+        flat[i] = member if member is not None else Status(int(v))
     return out
 
 

@@ -438,7 +438,8 @@ def lyapunov_spectrum(model: ModelLike, x0: StateLike | None = None,
     t0 : float, optional
         Start time (flows; default: the model's ``[defaults] t0``, else 0).
     bound : float
-        A state component beyond this magnitude counts as divergence (status -1).
+        A state component beyond this magnitude counts as divergence
+        (``Status.DIVERGED``).
     **options
         Integrator options of :func:`pwsdyn.simulate` (``rtol``, ``atol``, ``method``, ...).
 

@@ -337,8 +337,8 @@ def sweep(model: ModelLike, param: str, values: ArrayLike, x0: StateLike | None 
         Section points ``j`` and ``j + k`` count as equal within
         ``period_tol * (1 + max |point|)`` (default 1e-6).
     bound : float
-        A state component beyond ``bound`` counts as divergence (status -1); the next value
-        then starts again from ``x0``.
+        A state component beyond ``bound`` counts as divergence (``Status.DIVERGED``); the
+        next value then starts again from ``x0``.
     lyapunov : bool
         Also compute the Lyapunov spectrum over the window (flows: variational equations with
         saltation matrices, one QR per period; maps: per iteration). Slower for flows.
@@ -388,8 +388,11 @@ def sweep(model: ModelLike, param: str, values: ArrayLike, x0: StateLike | None 
         - ``events_per_period``: impacts, transitions, crossings and chattering sequences per
           period (maps: border crossings per iteration);
         - ``stick_time``, ``slide_time``: time per period spent sticking / sliding;
-        - ``status``: 0, a :class:`pwsdyn.Status` code of a failed run, -1 (diverged) or -3
-          (the section at the end of the window was not logged; not expected to occur);
+        - ``status``: the value of a :class:`pwsdyn.Status` member (its flags name them;
+          :func:`pwsdyn.io.decode_status` gives the members): 0 success, the status of a
+          failed run (maps: ``NO_PIECE_APPLIES``, ``NONFINITE``), ``DIVERGED`` (-1) or
+          ``SECTION_MISSED`` (-3: the section at the end of the window was not logged; not
+          expected to occur);
         - ``x_final``: the state handed on to the next value; ``steps``: integrator steps;
         - ``lyapunov`` (direction, param, exponent), with ``lyapunov=True`` (flows with
           sticking: exponents of the free motion, see :class:`pwsdyn.LyapunovSpectrum`);
