@@ -392,9 +392,9 @@ def test_serial_and_parallel_give_identical_datasets(tmp_path):
 
 
 def _contexts_on_worker():
-    from pwsdyn.explore import _common
+    from pwsdyn.stability import _context
 
-    return len(_common._CONTEXTS)
+    return len(_context._CONTEXTS)
 
 
 _KILL_SCRIPT = textwrap.dedent("""

@@ -14,6 +14,7 @@ import xarray as xr
 
 import pwsdyn
 from pwsdyn import Status
+from pwsdyn.integrate import DiscreteState
 from pwsdyn.io import (load_trajectory, open_dataset, save_dataset, trajectory_from_dataset,
                        trajectory_to_dataset)
 
@@ -64,8 +65,9 @@ def _assert_same_events(a, b):
         assert ea.t_after == eb.t_after
         assert ea.name == eb.name and type(eb.name) is str
         assert ea.kind == eb.kind and type(eb.kind) is str
-        assert ea.mode_before == eb.mode_before and type(eb.mode_before) is str
-        assert ea.mode_after == eb.mode_after and type(eb.mode_after) is str
+        # discrete states are DiscreteState values (a str), never numpy strings or bytes
+        assert ea.mode_before == eb.mode_before and type(eb.mode_before) is DiscreteState
+        assert ea.mode_after == eb.mode_after and type(eb.mode_after) is DiscreteState
         np.testing.assert_array_equal(ea.x_before, eb.x_before)
         np.testing.assert_array_equal(ea.x_after, eb.x_after)
 

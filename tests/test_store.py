@@ -493,7 +493,7 @@ def test_store_of_the_old_format_is_refused(store):
     man = json.loads(m.read_text())
     man["format"] = 1
     m.write_text(json.dumps(man))
-    _refused(store, "", "store format: stored 1, requested 2", error=StoreMismatchError)
+    _refused(store, "", "store format: stored 1, requested 3", error=StoreMismatchError)
 
 
 @settings(max_examples=40, deadline=None,

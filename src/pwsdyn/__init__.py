@@ -14,7 +14,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING
 
-__version__ = "0.1.0"
+from ._version import __version__ as __version__
 
 from .errors import (ArgumentError as ArgumentError, ExpressionError as ExpressionError,
                      ModelError as ModelError, OutputExistsError as OutputExistsError,

@@ -38,7 +38,7 @@ from typing import Mapping
 
 import numpy as np
 
-from .errors import ArgumentError, PwsdynError
+from .errors import ArgumentError
 
 #: Largest accepted count (steps, events, periods, iterations, segments, grid points, ...).
 MAX_COUNT = 10**12
@@ -190,12 +190,12 @@ def path(name: str, value, *, allow_none: bool = True):
     """A path (``str`` or ``os.PathLike``), or ``None``."""
     if value is None and allow_none:
         return None
-    if not _usable_path(value):
+    if not is_path(value):
         raise fail(name, "a file or directory path" + (" or None" if allow_none else ""), value)
     return value
 
 
-def _usable_path(value) -> bool:
+def is_path(value) -> bool:
     """A non-empty ``str`` or ``os.PathLike`` naming a text path without NUL characters."""
     if not isinstance(value, (str, os.PathLike)):
         return False
@@ -336,40 +336,18 @@ def _size(nbytes: float) -> str:
     return f"{int(nbytes)} bytes"
 
 
-def model(value, *, kind: str | None = None, caller: str = "", name: str = "model"):
-    """Load ``value`` with :func:`pwsdyn.load_model`, turning a wrong type into an
-    :class:`ArgumentError`; ``kind='flow'`` or ``'map'`` refuses the other kind, naming
-    ``caller``."""
-    from .model.spec import SymbolicSystem, load_model
+def state_vector(model, x0, *, name: str = "x0") -> np.ndarray:
+    """``x0`` as a float vector of the states of ``model``: a sequence in state order or a
+    dict by state name.
 
-    if not (isinstance(value, (str, os.PathLike, Mapping, SymbolicSystem))
-            or getattr(value, "is_map", False)):
-        raise fail(name, "a Model, a model name, a path to a TOML file or a dict", value)
-    if isinstance(value, (str, os.PathLike)) and not _usable_path(value):
-        raise fail(name, "a Model, a model name, a path to a TOML file or a dict", value)
-    try:
-        m = load_model(value)
-    except PwsdynError:
-        raise
-    except Exception as exc:
-        # a wrong type, an unreadable path, or a dict the model parser does not expect
-        # (keys that are not strings, ...): the argument, not pwsdyn, is at fault
-        raise ArgumentError(f"`{name}` cannot be loaded as a model: "
-                            f"{type(exc).__name__}: {exc}") from exc
-    is_map = bool(getattr(m, "is_map", False))
-    who = f"{caller} " if caller else ""
-    if kind == "flow" and is_map:
-        raise ArgumentError(f"`{name}`: {who}needs a flow (a model with modes and events); "
-                            f"{m.name!r} is a map (iterate it with pwsdyn.model.maps.iterate, "
-                            "explore it with pwsdyn.sweep, pwsdyn.basins or "
-                            "pwsdyn.lyapunov_spectrum)")
-    if kind == "map" and not is_map:
-        raise ArgumentError(f"`{name}`: {who}needs a map; {m.name!r} is a flow (use "
-                            "pwsdyn.simulate)")
-    return m
+    Raises :class:`~pwsdyn.errors.ArgumentError` naming ``name`` for a wrong type, length,
+    unknown or missing state, an entry that is not a real number, or a non-finite entry."""
+    if x0 is None:
+        raise fail(name, f"a sequence of {model.n_states} numbers or a dict by state name", x0)
+    return vector(name, x0, size=model.n_states, names=model.states)
 
 
 __all__ = ["MAX_COUNT", "MEMORY_LIMIT", "TIME_RESOLUTION_ULPS", "choice", "describe", "fail",
-           "flag", "integer", "is_int", "is_real", "mapping", "matrix", "memory", "model",
-           "nonnegative", "number", "path", "positive", "resolution", "text", "time_span", "time_window",
-           "tolerance", "vector"]
+           "flag", "integer", "is_int", "is_path", "is_real", "mapping", "matrix", "memory",
+           "nonnegative", "number", "path", "positive", "resolution", "state_vector", "text",
+           "time_span", "time_window", "tolerance", "vector"]

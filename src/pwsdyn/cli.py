@@ -274,7 +274,7 @@ def _check_outputs(force: bool, outputs) -> None:
     outputs = [o for o in outputs if o[1] is not None]
     if not outputs:     # nothing to check: xarray and matplotlib are not imported
         return
-    from .io import _check_output_path
+    from ._netcdf import _check_output_path
 
     for option, path, kind in outputs:
         p = Path(path)

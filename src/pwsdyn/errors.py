@@ -41,8 +41,22 @@ class ExpressionError(ModelError):
 
 
 class Status(enum.IntEnum):
-    """How a simulation ended. The text of each member says what happened and what to do."""
+    """How a run or an analysis ended: the one vocabulary of outcomes of pwsdyn.
 
+    Every result with a status (a :class:`~pwsdyn.integrate.trajectory.Trajectory`, a Lyapunov
+    spectrum, the ``status`` variables of sweeps and basins, an :class:`OrbitError`) and every
+    file's ``status`` variable (its ``flag_values`` and ``flag_meanings``) uses these members.
+    The text of each member says what happened and what to do (:attr:`message`).
+
+    Values 0 to 7 are the outcomes of the compiled integrator and keep the values files have
+    always held. The outcomes of the analyses built on it are negative, so that no code of an
+    analysis can be read as an outcome of the integrator: -1 diverged, -3 section missed (the
+    values sweeps and basins always wrote), -4 no applicable map piece, and from -10 down the
+    ways a periodic-orbit solve fails (:attr:`reason` gives the text :class:`OrbitError` has
+    always used).
+    """
+
+    # the compiled integrator (pwsdyn.integrate._kernel returns these codes)
     SUCCESS = 0
     TERMINAL_EVENT = 1
     MAX_STEPS = 2
@@ -51,6 +65,19 @@ class Status(enum.IntEnum):
     NONFINITE = 5
     SURFACE_INTERSECTION = 6
     ZENO = 7
+    # sweeps, basins, Lyapunov spectra and map iteration
+    DIVERGED = -1
+    SECTION_MISSED = -3
+    NO_PIECE_APPLIES = -4
+    # periodic orbits (find_periodic_orbit, OrbitProblem)
+    SINGULAR = -10
+    PHASE = -11
+    EQUILIBRIUM = -12
+    SIGNATURE = -13
+    BUDGET = -14
+    NO_PROGRESS = -15
+    NEWTON_DIVERGED = -16
+    SIMULATION_FAILED = -17
 
     @property
     def message(self) -> str:
@@ -60,6 +87,47 @@ class Status(enum.IntEnum):
     def failed(self) -> bool:
         return self not in (Status.SUCCESS, Status.TERMINAL_EVENT)
 
+    @property
+    def meaning(self) -> str:
+        """The member as a word of a file's ``flag_meanings`` (its name in lower case)."""
+        return self.name.lower()
+
+    @property
+    def reason(self) -> str:
+        """The short text of the outcome: :attr:`meaning`, except for the orbit failures,
+        whose text is the ``reason`` :class:`OrbitError` has always carried (``'diverged'``,
+        ``'simulation'``, ...)."""
+        return _ORBIT_REASONS.get(self, self.meaning)
+
+    @classmethod
+    def of_orbit(cls, reason: "str | Status") -> "Status":
+        """The member of an orbit failure from its :attr:`reason` text (or the member)."""
+        if isinstance(reason, Status):
+            return reason
+        for member, text in _ORBIT_REASONS.items():
+            if text == reason:
+                return member
+        raise ValueError(f"unknown orbit failure reason {reason!r}; reasons are "
+                         f"{sorted(_ORBIT_REASONS.values())}")
+
+    @classmethod
+    def from_meaning(cls, word: str) -> "Status":
+        """The member named by a word of a file's ``flag_meanings``."""
+        return cls[word.upper()]
+
+    @classmethod
+    def integrator_outcomes(cls) -> tuple:
+        """The members the compiled integrator returns (a trajectory's status)."""
+        return tuple(s for s in cls if s >= 0)
+
+
+#: The orbit failures, with the ``reason`` text of :class:`OrbitError`.
+ORBIT_FAILURES = (Status.SINGULAR, Status.PHASE, Status.EQUILIBRIUM, Status.SIGNATURE,
+                  Status.BUDGET, Status.NO_PROGRESS, Status.NEWTON_DIVERGED,
+                  Status.SIMULATION_FAILED)
+_ORBIT_REASONS = {s: s.name.lower() for s in ORBIT_FAILURES}
+_ORBIT_REASONS[Status.NEWTON_DIVERGED] = "diverged"
+_ORBIT_REASONS[Status.SIMULATION_FAILED] = "simulation"
 
 _STATUS_MESSAGES = {
     Status.SUCCESS: "The integration reached the end of the time span.",
@@ -76,6 +144,29 @@ _STATUS_MESSAGES = {
                                  "surfaces while sliding; sliding on intersections is not "
                                  "supported.",
     Status.ZENO: "Events accumulate in finite time (Zeno) and no chattering map applies.",
+    Status.DIVERGED: "A state component grew beyond `bound`: the run diverged. Raise `bound` "
+                     "if the attractor is that large.",
+    Status.SECTION_MISSED: "The section at the end of the window was not reached (the last "
+                           "event was not logged); lengthen the window or choose another "
+                           "section.",
+    Status.NO_PIECE_APPLIES: "No piece of the map applies at the state (every condition is "
+                             "false there): complete the map's pieces, or give the last one "
+                             "no condition.",
+    Status.SINGULAR: "The Newton matrix is singular (a multiplier 1, or a phase condition "
+                     "tangent to the flow).",
+    Status.PHASE: "The phase condition is degenerate (the vector field vanishes or is "
+                  "tangent to it at the guess): choose another guess or phase condition.",
+    Status.EQUILIBRIUM: "The iteration converged to an equilibrium, not a periodic orbit: "
+                        "start from a guess on the orbit.",
+    Status.SIGNATURE: "The event sequence changed after it had been locked: the orbit is near "
+                      "a grazing or sliding bifurcation, or the guess is not near it.",
+    Status.BUDGET: "No convergence within `max_iter` Newton iterations: raise it or improve "
+                   "the guess.",
+    Status.NO_PROGRESS: "No Newton step reduced the residual: improve the guess.",
+    Status.NEWTON_DIVERGED: "The Newton step or the period ran away: the guess is not near a "
+                            "periodic orbit.",
+    Status.SIMULATION_FAILED: "An interval of the orbit could not be integrated (see the "
+                              "integrator's status in the message).",
 }
 
 

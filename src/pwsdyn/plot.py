@@ -189,6 +189,8 @@ def _break_at_jumps(T, Y, tol):
 
 def _constrained_spans(traj):
     """Time spans ``(a, b, kind, name)`` where the state is ``stick:...`` or ``slide:...``."""
+    from .integrate.trajectory import DiscreteState
+
     t = np.asarray(traj.t)
     spans = []
     cur = None
@@ -196,7 +198,7 @@ def _constrained_spans(traj):
         if not t[i + 1] > t[i]:
             continue  # a jump: zero length, the discrete state changes across it
         st = traj.state[i]
-        kind = st.split(":", 1)[0] if ":" in st else None
+        kind = DiscreteState.parse(str(st)).kind
         if kind in CONSTRAINED_STYLES:
             if cur is not None and cur[3] == st and cur[1] == t[i]:
                 cur[1] = t[i + 1]
@@ -214,7 +216,7 @@ def _constrained_spans(traj):
 
 def _span_states(traj, a, b, num):
     """Times and states on ``[a, b]``: the right side of a jump at ``a``, the left at ``b``."""
-    if traj._dense is None:
+    if traj.dense is None:
         t = np.asarray(traj.t)
         sel = (t >= a) & (t <= b)
         return t[sel], np.asarray(traj.x)[sel]
@@ -275,7 +277,7 @@ def _title(traj) -> str:
         title = "\n".join([f"{model.name}"] + lines)
     if traj.status.failed:
         title += f"\nstopped early: {traj.status.name} at $t = {traj.t_final:.10g}$"
-    if traj._dense is None:
+    if traj.dense is None:
         title += "\n(no dense output: straight lines between stored nodes)"
     return title
 
@@ -799,7 +801,7 @@ def _figure_format(path) -> str:
 
 def _check_figure_path(path, overwrite: bool = False) -> str:
     """Check a figure path before drawing: its format, directory and an existing file."""
-    from .io import _check_output_path
+    from ._netcdf import _check_output_path
 
     fmt = _figure_format(path)
     _check_output_path(path, overwrite=overwrite)

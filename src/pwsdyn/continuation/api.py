@@ -11,6 +11,7 @@ import numpy as np
 
 from .. import _validate as V
 from ..errors import ArgumentError
+from ..model.spec import as_model
 from .branch import Branch, SpecialPoint
 from .engine import Continuation, ContinuationError, ContinuationSettings, null_space
 from .problems import (CURVE_KINDS, BifurcationCurveProblem, OrbitBranchProblem,
@@ -156,7 +157,7 @@ def continue_orbit(model, orbit, param: str, *, span=None, ds: float | None = No
     """
     from ..orbits.problem import OrbitProblem
 
-    model = V.model(model, kind="flow", caller="continue_orbit()")
+    model = as_model(model, kind="flow", caller="continue_orbit()")
     param = _parameter(model, param)
     on_dib = V.choice("on_dib", on_dib, ON_DIB)
     settings, options = _split_options(dict(options), span, ds, max_points)
@@ -354,9 +355,7 @@ def continue_equilibrium(model, x0, param: str, *, span=None, ds: float | None =
     -------
     Branch
     """
-    from ..integrate.simulate import state_vector
-
-    model = V.model(model, kind="flow", caller="continue_equilibrium()")
+    model = as_model(model, kind="flow", caller="continue_equilibrium()")
     param = _parameter(model, param)
     settings, options = _split_options(dict(options), span, ds, max_points)
     if options:
@@ -374,7 +373,7 @@ def continue_equilibrium(model, x0, param: str, *, span=None, ds: float | None =
                     tangent=pt.tangent * np.sign(settings.ds), correct_start=False,
                     progress=progress, model=model, start_kind=x0.kind)
     prob = equilibrium_problem(model, param, params=params, mode=mode)
-    x = state_vector(model, x0)
+    x = V.state_vector(model, x0)
     if prob.kind == "pseudo-equilibrium":
         # alpha from the fields at the guess (corrected with x)
         fp, fm, _, _, _, hx = prob._fields(x, prob.params[param])
@@ -388,7 +387,7 @@ def load_branch(path) -> Branch:
     """Read a branch written by :meth:`Branch.save`: its points, special points and the
     problem, so that it can be plotted, inspected and continued further
     (``continue_orbit(model, branch, param)``)."""
-    from ..io import open_dataset
+    from .._netcdf import open_dataset
     from ..model import load_model
     from ..orbits.problem import OrbitProblem
     from .engine import Point
@@ -492,7 +491,7 @@ def continue_bifurcation(model, special_point: SpecialPoint, params, *, span=Non
     """
     from ..orbits.problem import OrbitProblem
 
-    model = V.model(model, kind="flow", caller="continue_bifurcation()")
+    model = as_model(model, kind="flow", caller="continue_bifurcation()")
     if not isinstance(special_point, SpecialPoint):
         raise ArgumentError(f"`special_point` must be a SpecialPoint of an orbit branch, got "
                             f"{type(special_point).__name__}")

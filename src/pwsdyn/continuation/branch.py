@@ -219,7 +219,7 @@ class Branch:
         """The branch as an :class:`xarray.Dataset` (dimension ``point``)."""
         import xarray as xr
 
-        from ..io import _str_array, cf_global_attrs, quantity_attrs, state_attrs, state_coords
+        from .._netcdf import _str_array, cf_global_attrs, quantity_attrs, state_attrs, state_coords
 
         m = self.model
         names = list(self.problem.state_names)
@@ -319,7 +319,7 @@ class Branch:
 
     def save(self, path, *, overwrite: bool = False):
         """Write the branch to a NetCDF file (:func:`pwsdyn.load_branch` reads it back)."""
-        from ..io import save_dataset
+        from .._netcdf import save_dataset
 
         return save_dataset(self.to_dataset(), path, overwrite=overwrite)
 

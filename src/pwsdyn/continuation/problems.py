@@ -129,11 +129,11 @@ class _PointProblem:
     functions (Hopf) and their confirmation."""
 
     def __init__(self, model, parameter: str, params, caller: str):
-        from .. import _validate as V
         from ..model import compile_model
         from ..model.augment import with_parameters_as_states
+        from ..model.spec import as_model
 
-        model = V.model(model, kind="flow", caller=caller)
+        model = as_model(model, kind="flow", caller=caller)
         if parameter not in model.parameters:
             raise ArgumentError(f"model {model.name!r} has no parameter {parameter!r}; its "
                                 f"parameters: {list(model.parameters)}")

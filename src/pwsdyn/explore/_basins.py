@@ -30,10 +30,12 @@ import xarray as xr
 
 from .. import _validate as V
 from ..errors import ArgumentError, Status
-from ..io import (_check_output_path, cf_global_attrs, flag_attrs, quantity_attrs,
-                  run_status_codes, state_attrs, state_coords, time_units)
-from ..integrate.simulate import DEFAULTS, check_mode, integrator_options, state_vector
-from ._common import (check_common, check_section, check_time_unit, DIVERGED, ModelContext,
+from .._netcdf import (_check_output_path, cf_global_attrs, flag_attrs, quantity_attrs,
+                       run_status_codes, state_attrs, state_coords, time_units)
+from ..integrate.simulate import DEFAULTS, check_mode, integrator_options
+from ..model.spec import as_model
+from ..stability._context import ModelContext
+from ._common import (check_common, check_section, check_time_unit, DIVERGED,
                       model_payload, period_estimate)
 from ._executor import run_chunks
 from ._store import ChunkStore
@@ -228,7 +230,7 @@ def basins(model: ModelLike, grid: Mapping[str, object], x0: StateLike | None = 
         workers=workers, progress=progress, store=store, out=out, scheduler=scheduler)
     match_tol = V.tolerance("match_tol", match_tol)
     overwrite = V.flag("overwrite", overwrite)
-    model = V.model(model, caller="basins()")
+    model = as_model(model, caller="basins()")
     is_map = bool(getattr(model, "is_map", False))
     if not isinstance(grid, Mapping) or not 1 <= len(grid) <= 2:
         raise ArgumentError("`grid` must be a dict of one or two entries: state name -> values, "
@@ -262,7 +264,7 @@ def basins(model: ModelLike, grid: Mapping[str, object], x0: StateLike | None = 
         check_time_unit(model, p, period, phase, transient + samples)
     if x0 is None:
         x0 = model.defaults.get("x0")
-    base = state_vector(model, x0) if x0 is not None else np.zeros(model.n_states)
+    base = V.state_vector(model, x0) if x0 is not None else np.zeros(model.n_states)
     if max_period is None:
         max_period = max(1, min(samples // 4, 64))
     shape = tuple(len(a) for _, a in axes)
@@ -332,7 +334,7 @@ def basins(model: ModelLike, grid: Mapping[str, object], x0: StateLike | None = 
     labels, table = classify(fp, match_tol)
     ds = _assemble(model, axes, shape, labels, table, fp, starts, settings)
     if out_path is not None:
-        from ..io import save_dataset
+        from .._netcdf import save_dataset
 
         save_dataset(ds, out_path, overwrite=overwrite)
     return ds

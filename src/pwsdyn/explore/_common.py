@@ -2,7 +2,8 @@
 of one window of forcing periods with a stroboscopic section, and the period estimate.
 
 Workers receive a model as its *spec* (the dict the TOML file holds), never as compiled
-numba functions. Each worker process loads it once and calls ``compile_model``, which finds
+numba functions. Each worker process loads it once
+(:meth:`pwsdyn.stability._context.ModelContext.get`) and calls ``compile_model``, which finds
 the generated module in the on-disk cache by the model hash and loads its machine code
 (:mod:`pwsdyn.model.codegen`), so no task recompiles anything.
 
@@ -17,24 +18,24 @@ step for the section.
 from __future__ import annotations
 
 import math
-import threading
 
 import numpy as np
 
 from .. import _validate as V
-from ..errors import ArgumentError
+from ..errors import ArgumentError, Status
 from ..integrate._load import kernel
 from ..integrate._start import ADMIT_BEHIND, REGULAR, Start, start_state
 from ..integrate.simulate import kernel_tables
-from ..model import compile_model, load_model
+from ..stability._context import ModelContext
 
 #: Event kinds counted in "events per period" (state changes -- stick, release, slide start
 #: and end -- are reported as times instead).
 COUNTED_KINDS = ("impact", "transition", "crossing", "chatter")
 
-#: Extra status codes of the explore results (besides :class:`pwsdyn.Status` values >= 0).
-DIVERGED = -1
-SECTION_MISSED = -3
+#: The outcomes of the analyses themselves (the rest are the integrator's), members of the
+#: one :class:`pwsdyn.Status`.
+DIVERGED = Status.DIVERGED
+SECTION_MISSED = Status.SECTION_MISSED
 
 
 def model_payload(model) -> dict:
@@ -50,57 +51,6 @@ def model_payload(model) -> dict:
     if not getattr(model, "is_map", False):
         kernel()
     return {"spec": model.spec, "origin": model.origin, "hash": model.hash}
-
-
-_CONTEXTS: dict = {}
-#: Worker threads of one process share the contexts: each model is built once.
-_CONTEXTS_LOCK = threading.RLock()
-
-
-class ModelContext:
-    """A model with its compiled functions, created once per process (see module docstring).
-
-    Attributes
-    ----------
-    model : Model or MapModel
-    is_map : bool
-    cm : CompiledModel or CompiledMap
-    """
-
-    def __init__(self, model):
-        self.model = model
-        self.is_map = bool(getattr(model, "is_map", False))
-        if self.is_map:
-            from ..model.maps import compile_map
-
-            self.cm = compile_map(model)
-            return
-        self.cm = compile_model(model)
-
-    @classmethod
-    def get(cls, payload_or_model) -> "ModelContext":
-        with _CONTEXTS_LOCK:
-            return cls._get(payload_or_model)
-
-    @classmethod
-    def _get(cls, payload_or_model) -> "ModelContext":
-        if isinstance(payload_or_model, dict):
-            key = payload_or_model["hash"]
-            if key not in _CONTEXTS:
-                from ..model.spec import model_from_dict
-
-                model = model_from_dict(dict(payload_or_model["spec"]),
-                                        origin=payload_or_model["origin"])
-                if model.hash != key:
-                    raise RuntimeError(f"model {model.name!r} rebuilt on a worker has hash "
-                                       f"{model.hash}, expected {key} (different pwsdyn "
-                                       "versions on the client and the workers?)")
-                _CONTEXTS[key] = cls(model)
-            return _CONTEXTS[key]
-        model = load_model(payload_or_model)
-        if model.hash not in _CONTEXTS:
-            _CONTEXTS[model.hash] = cls(model)
-        return _CONTEXTS[model.hash]
 
 
 def readmit(ctx: ModelContext, t: float, x, p) -> np.ndarray:
@@ -177,9 +127,10 @@ def state_times(t, after, chatter, t_lo: float, t_hi: float, initial: int = 0
     return float(d[during == 1].sum()), float(d[during == 2].sum())
 
 
-def failed_status(traj) -> int:
-    """The run's status as an int for the result arrays (0 when it did not fail)."""
-    return int(traj.status) if traj.status.failed else 0
+def failed_status(traj) -> Status:
+    """The run's status for the result arrays: ``SUCCESS`` when it did not fail (a
+    terminal event ends a window as planned)."""
+    return traj.status if traj.status.failed else Status.SUCCESS
 
 
 def check_section(model, section: str) -> None:
@@ -258,4 +209,4 @@ def check_bound(x: np.ndarray, bound: float) -> bool:
     return bool(np.all(np.isfinite(x)) and np.all(np.abs(x) <= bound))
 
 
-__all__ = ["ModelContext", "period_estimate", "readmit", "state_times"]
+__all__ = ["period_estimate", "readmit", "state_times"]

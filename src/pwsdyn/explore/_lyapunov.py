@@ -32,15 +32,15 @@ from typing import TYPE_CHECKING, Any, Mapping, NamedTuple
 
 import numpy as np
 
-from .. import __version__
+from .._version import __version__
 from .. import _validate as V
-from ..errors import ArgumentError
-from ..integrate.simulate import (_simulate_compiled, check_mode, integrator_options,
-                                  state_vector)
+from ..errors import ArgumentError, Status
+from ..integrate.simulate import _simulate_compiled, check_mode, integrator_options
+from ..model.spec import as_model
 from ..integrate.trajectory import EVENT_KINDS
-from ..stability._context import forcing_period
 from ..integrate._start import STICK
-from ._common import ModelContext, check_bound, failed_status, readmit, start_of
+from ..stability._context import ModelContext
+from ._common import check_bound, failed_status, readmit, start_of
 
 if TYPE_CHECKING:
     from .._typing import ModelLike, StateLike
@@ -65,8 +65,9 @@ class LyapunovSpectrum:
         (NaN while no free time has been averaged).
     events : dict
         Number of events of each kind in the averaging window (flows).
-    status : int
-        0, or the :class:`pwsdyn.Status` of a failed simulation (-1: diverged).
+    status : Status
+        ``Status.SUCCESS``, the :class:`pwsdyn.Status` of a failed simulation (flows) or
+        iteration (maps: ``NO_PIECE_APPLIES``, ``NONFINITE``), or ``DIVERGED``.
     x_final : numpy.ndarray
     provenance : dict
     span : float
@@ -125,6 +126,10 @@ class LyapunovSpectrum:
     model: object = field(default=None, repr=False)
 
     def __post_init__(self):
+        # an int code (an older pickle, a caller) is read as the member it is
+        self.status = Status(int(self.status))
+
+    def __post_init__(self):
         if self.span is None:
             self.span = self.time
 
@@ -147,8 +152,8 @@ class LyapunovSpectrum:
 
         import xarray as xr
 
-        from ..io import (_dumps, cf_global_attrs, flag_attrs, inverse_time_units,
-                          run_status_codes, state_attrs, state_coords, time_units)
+        from .._netcdf import (_dumps, cf_global_attrs, flag_attrs, inverse_time_units,
+                               run_status_codes, state_attrs, state_coords, time_units)
 
         model = self.model
         if model is None:
@@ -203,7 +208,7 @@ class LyapunovSpectrum:
     def save(self, path, overwrite: bool = False):
         """Write :meth:`to_dataset` to a NetCDF file; an existing file is refused
         (:class:`~pwsdyn.OutputExistsError`) unless ``overwrite=True``."""
-        from ..io import save_dataset
+        from .._netcdf import save_dataset
 
         return save_dataset(self.to_dataset(), path, overwrite=overwrite)
 
@@ -274,7 +279,7 @@ def flow_segments(ctx: ModelContext, x, t0: float, seg: float, n_seg: int, p, op
     running = np.full((n_seg, n), np.nan)
     events = []
     vopts = {**opts, "variational": True, "dense": False, "throw": False}
-    status = 0
+    status = Status.SUCCESS
     done = 0
     x = np.array(x, dtype=float)
     # ``discrete``: the discrete state the previous segment ended in
@@ -329,7 +334,7 @@ def flow_segments(ctx: ModelContext, x, t0: float, seg: float, n_seg: int, p, op
         was_stuck = ep_start is not None
         discrete = traj.final_discrete_state
         if not check_bound(x, bound):
-            status = -1
+            status = Status.DIVERGED
             break
         log = traj.events
         saved = (Q, sums.copy(), excluded, contact, episodes, ep_start, st_start)
@@ -375,7 +380,7 @@ def flow_segments(ctx: ModelContext, x, t0: float, seg: float, n_seg: int, p, op
                     st_start = te
         if not ok:
             Q, sums, excluded, contact, episodes, ep_start, st_start = saved
-            status = -1
+            status = Status.DIVERGED
             break
         done = k + 1
         time = done * seg - excluded
@@ -433,7 +438,8 @@ def lyapunov_spectrum(model: ModelLike, x0: StateLike | None = None,
     t0 : float, optional
         Start time (flows; default: the model's ``[defaults] t0``, else 0).
     bound : float
-        A state component beyond this magnitude counts as divergence (status -1).
+        A state component beyond this magnitude counts as divergence
+        (``Status.DIVERGED``).
     **options
         Integrator options of :func:`pwsdyn.simulate` (``rtol``, ``atol``, ``method``, ...).
 
@@ -463,14 +469,14 @@ def lyapunov_spectrum(model: ModelLike, x0: StateLike | None = None,
     duration = V.integer("duration", duration, lo=1)
     segment = V.positive("segment", segment, allow_none=True)
     bound = V.positive("bound", bound, allow_inf=True)
-    model = V.model(model, caller="lyapunov_spectrum()")
+    model = as_model(model, caller="lyapunov_spectrum()")
     t0 = V.number("t0", model.defaults.get("t0", 0.0) if t0 is None else t0)
     p = model.parameter_vector(params)
     if x0 is None:
         x0 = model.defaults.get("x0")
         if x0 is None:
             raise ArgumentError(f"give `x0`: model {model.name!r} has no [defaults] x0")
-    x = state_vector(model, x0)
+    x = V.state_vector(model, x0)
     n = model.n_states
     prov = {"model": model.name, "model_hash": model.hash, "pwsdyn_version": __version__,
             "params": dict(zip(model.parameters, map(float, p)))}
@@ -479,21 +485,19 @@ def lyapunov_spectrum(model: ModelLike, x0: StateLike | None = None,
             raise ArgumentError("integrator options and `segment` apply to flows only, not to "
                                 f"map {model.name!r}")
         ctx = ModelContext.get(model)
-        from ..model.maps import MAP_DIVERGED, MAP_OK, lyapunov_kernel
+        from ..model.maps import lyapunov_kernel
 
         st, ex, xe, done = lyapunov_kernel(ctx.cm.step, x, p if p.size else np.zeros(1),
                                            int(transient), int(duration), float(bound))
-        status = 0 if st == MAP_OK else (-1 if st == MAP_DIVERGED else int(st))
+        status = Status(int(st))      # the loops return Status values
         return LyapunovSpectrum(np.sort(ex)[::-1], float(done), ex[None, :], {}, status, xe,
                                 prov, model=model)
     opts = {**integrator_options(options, "lyapunov_spectrum()"), "dense": False,
             "throw": False}
     check_mode(model, opts)
     if segment is None:
-        segment = forcing_period(model, p)       # checked: positive and finite
-        if segment is not None:
-            segment = model.forcing_period_value(params)
-        else:
+        segment = model.forcing_period_at(p)       # checked: positive and finite
+        if segment is None:
             raise ArgumentError(f"model {model.name!r} is autonomous: give `segment`, the time "
                                 "between re-orthonormalisations")
     total = (transient + duration) * segment
@@ -505,7 +509,7 @@ def lyapunov_spectrum(model: ModelLike, x0: StateLike | None = None,
     V.memory(f"lyapunov_spectrum() with duration={duration}", 8.0 * duration * (2 * n + 2))
     ctx = ModelContext.get(model)
     t = float(t0)
-    status = 0
+    status = Status.SUCCESS
     discrete = None
     if transient:
         x = readmit(ctx, t, x, p)

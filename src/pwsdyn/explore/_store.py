@@ -61,12 +61,15 @@ from pathlib import Path
 
 import xarray as xr
 
-from .. import __version__
+from .._version import __version__
 from ..errors import PwsdynError, StoreError
 
 MANIFEST = "manifest.json"
 LOCK = "lock"
-FORMAT = 2
+#: The store format. 3: the status codes of map runs are those of pwsdyn.Status (no
+#: applicable piece -4, non-finite 5; format 2 wrote 2 and 3, the values of MAX_STEPS and
+#: MAX_EVENTS), so a store of format 2 is refused rather than resumed with codes misread.
+FORMAT = 3
 
 try:                                    # POSIX
     import fcntl
@@ -365,7 +368,7 @@ class ChunkStore:
         path, side = self.chunk_path(i), self.checksum_path(i)
         if path.exists():
             return
-        from ..io import stamp
+        from .._netcdf import stamp
 
         ds = ds.copy()
         ds.attrs = {**self.attrs, **ds.attrs}

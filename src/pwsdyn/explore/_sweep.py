@@ -34,18 +34,19 @@ import math
 from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
-import sympy as sp
 import xarray as xr
 
 from .. import _validate as V
 from ..errors import ArgumentError
-from ..io import (_check_output_path, cf_global_attrs, flag_attrs, inverse_time_units,
-                  quantity_attrs, run_status_codes, state_attrs, state_coords, time_units)
-from ..integrate.simulate import (DEFAULTS, check_mode, integrator_options, _simulate_compiled,
-                                  state_vector)
-from ..integrate.trajectory import EventLog
+from .._netcdf import (_check_output_path, cf_global_attrs, flag_attrs, inverse_time_units,
+                       quantity_attrs, run_status_codes, state_attrs, state_coords, time_units)
+from ..errors import Status
+from ..integrate.simulate import DEFAULTS, check_mode, integrator_options, _simulate_compiled
+from ..model.spec import as_model
+from ..stability._context import ModelContext
+from ..integrate.trajectory import DiscreteState, EventLog
 from ._common import (check_common, check_section, check_time_unit, COUNTED_KINDS, DIVERGED,
-                      SECTION_MISSED, ModelContext, check_bound, failed_status, model_payload,
+                      SECTION_MISSED, check_bound, failed_status, model_payload,
                       period_estimate, readmit, state_times)
 from ._executor import run_chunks
 from ._lyapunov import flow_segments
@@ -75,13 +76,12 @@ SECTION_KINDS = ("impact", "transition", "crossing", "slide_start", "slide_end")
 # ======================================================================================
 
 def _period_function(ctx: ModelContext):
-    """A fast numeric forcing period ``T(p)`` (or ``None`` for an autonomous model)."""
-    fn = getattr(ctx, "_period_fn", False)
-    if fn is False:
-        fp = ctx.model.forcing_period
-        fn = None if fp is None else sp.lambdify(ctx.model.parameter_symbols, fp, "math")
-        ctx._period_fn = fn
-    return fn
+    """A fast numeric forcing period ``T(p)`` (or ``None`` for an autonomous model): the
+    model's own (:attr:`Model.forcing_period_function <pwsdyn.model.Model.
+    forcing_period_function>`)."""
+    if ctx.model.forcing_period is None:
+        return None
+    return ctx.model.forcing_period_function
 
 
 def _event_columns(events, n: int):
@@ -90,8 +90,7 @@ def _event_columns(events, n: int):
     if isinstance(events, EventLog):
         return (events.t, events.kind, events.name, events.x_before,
                 events.state_after[:, 0])
-    after = [1 if e.mode_after.startswith("stick:") else
-             2 if e.mode_after.startswith("slide:") else 0 for e in events]
+    after = [DiscreteState.parse(e.mode_after).code for e in events]
     return (np.array([e.t for e in events], dtype=float),
             np.array([e.kind for e in events], dtype=object),
             np.array([e.name for e in events], dtype=object),
@@ -193,17 +192,17 @@ def run_window(ctx: ModelContext, x, p, T: float, phase: float, n_tr: int, n_s: 
 
 
 def _map_window(ctx, x, p, n_tr, n_s, max_points, bound, lyapunov, record):
-    from ..model.maps import MAP_DIVERGED, MAP_OK, lyapunov_kernel, orbit_kernel
+    from ..model.maps import lyapunov_kernel, orbit_kernel
 
     n = ctx.model.n_states
     pv = p if p.size else np.zeros(1)
     x = np.asarray(x, dtype=float)
     if not record:
         st, _, _, xe, _ = orbit_kernel(ctx.cm.step, x, pv, int(n_tr), 0, float(bound))
-        return {"x_end": xe, "status": 0 if st == MAP_OK else
-                (DIVERGED if st == MAP_DIVERGED else int(st))}
+        # the loops return Status values: no piece applies is not MAX_STEPS
+        return {"x_end": xe, "status": Status(int(st))}
     st, xs, pieces, xe, _ = orbit_kernel(ctx.cm.step, x, pv, int(n_tr), int(n_s), float(bound))
-    status = 0 if st == MAP_OK else (DIVERGED if st == MAP_DIVERGED else int(st))
+    status = Status(int(st))
     pts = np.full((max_points, n), np.nan)
     m = min(max_points, n_s)
     pts[:m] = xs[:m]
@@ -338,8 +337,8 @@ def sweep(model: ModelLike, param: str, values: ArrayLike, x0: StateLike | None 
         Section points ``j`` and ``j + k`` count as equal within
         ``period_tol * (1 + max |point|)`` (default 1e-6).
     bound : float
-        A state component beyond ``bound`` counts as divergence (status -1); the next value
-        then starts again from ``x0``.
+        A state component beyond ``bound`` counts as divergence (``Status.DIVERGED``); the
+        next value then starts again from ``x0``.
     lyapunov : bool
         Also compute the Lyapunov spectrum over the window (flows: variational equations with
         saltation matrices, one QR per period; maps: per iteration). Slower for flows.
@@ -389,8 +388,11 @@ def sweep(model: ModelLike, param: str, values: ArrayLike, x0: StateLike | None 
         - ``events_per_period``: impacts, transitions, crossings and chattering sequences per
           period (maps: border crossings per iteration);
         - ``stick_time``, ``slide_time``: time per period spent sticking / sliding;
-        - ``status``: 0, a :class:`pwsdyn.Status` code of a failed run, -1 (diverged) or -3
-          (the section at the end of the window was not logged; not expected to occur);
+        - ``status``: the value of a :class:`pwsdyn.Status` member (its flags name them;
+          :func:`pwsdyn.io.decode_status` gives the members): 0 success, the status of a
+          failed run (maps: ``NO_PIECE_APPLIES``, ``NONFINITE``), ``DIVERGED`` (-1) or
+          ``SECTION_MISSED`` (-3: the section at the end of the window was not logged; not
+          expected to occur);
         - ``x_final``: the state handed on to the next value; ``steps``: integrator steps;
         - ``lyapunov`` (direction, param, exponent), with ``lyapunov=True`` (flows with
           sticking: exponents of the free motion, see :class:`pwsdyn.LyapunovSpectrum`);
@@ -430,7 +432,7 @@ def sweep(model: ModelLike, param: str, values: ArrayLike, x0: StateLike | None 
     lyapunov = V.flag("lyapunov", lyapunov)
     overwrite = V.flag("overwrite", overwrite)
     max_points = V.integer("max_points", max_points, lo=1, allow_none=True)
-    model = V.model(model, caller="sweep()")
+    model = as_model(model, caller="sweep()")
     is_map = bool(getattr(model, "is_map", False))
     if not isinstance(param, str) or param not in model.parameters:
         raise ArgumentError(f"unknown parameter {V.describe(param)} for model {model.name!r}; "
@@ -471,7 +473,7 @@ def sweep(model: ModelLike, param: str, values: ArrayLike, x0: StateLike | None 
         x0 = model.defaults.get("x0")
         if x0 is None:
             raise ArgumentError(f"give `x0`: model {model.name!r} has no [defaults] x0")
-    x0v = state_vector(model, x0)
+    x0v = V.state_vector(model, x0)
     max_points = samples if max_points is None else max_points
     if max_period is None:
         max_period = max(1, min(samples // 4, 64))
@@ -540,7 +542,7 @@ def sweep(model: ModelLike, param: str, values: ArrayLike, x0: StateLike | None 
             st.close()
     ds = _assemble(model, vals, tasks, results, dirs, settings, lyapunov)
     if out_path is not None:
-        from ..io import save_dataset
+        from .._netcdf import save_dataset
 
         save_dataset(ds, out_path, overwrite=overwrite)
     return ds

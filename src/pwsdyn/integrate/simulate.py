@@ -8,18 +8,18 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
-from .. import __version__
+from .._version import __version__
 from .. import _validate as V
 from ..errors import ArgumentError, SolveError, Status
 from ..model import compile_model
 from ..model.codegen import CompiledModel
 from ..model.affine import affine_structure
-from ..model.spec import run_defaults
+from ..model.spec import as_model, run_defaults
 from ._load import kernel
 from ._start import ADMIT_BEHIND, STICK, start_state
 from ._variational import assemble_segments
 from .tableaus import METHODS
-from .trajectory import EventLog, LazyDense, Trajectory
+from .trajectory import DiscreteState, EventLog, LazyDense, Trajectory
 
 if TYPE_CHECKING:
     from .._typing import ModelLike, StateLike
@@ -58,15 +58,8 @@ def integrator_options(options: Mapping, caller: str, reserved=()) -> dict:
     return opts
 
 
-def state_vector(model, x0, *, name: str = "x0") -> np.ndarray:
-    """``x0`` as a float vector: a sequence in state order or a dict by state name.
-
-    Raises :class:`~pwsdyn.errors.ArgumentError` naming ``name`` for a wrong type, length,
-    unknown or missing state, an entry that is not a real number, or a non-finite entry."""
-    if x0 is None:
-        raise V.fail(name, f"a sequence of {model.n_states} numbers or a dict by state name",
-                     x0)
-    return V.vector(name, x0, size=model.n_states, names=model.states)
+#: Kept importable from here (its home is the argument checks).
+state_vector = V.state_vector
 
 
 def check_mode(model, opts) -> None:
@@ -84,12 +77,13 @@ def check_mode(model, opts) -> None:
                             f"{mode!r}; modes are {list(model.mode_names)}") from None
 
 
-def _state_name(model, kind: int, idx: int, mode: int) -> str:
+def _state_name(model, kind: int, idx: int, mode: int) -> DiscreteState:
+    """The discrete state of the kernel's code ``(kind, index, mode)``."""
     if kind == 0:
-        return model.modes[mode].name
+        return DiscreteState("mode", model.modes[mode].name)
     if kind == 1:
-        return f"stick:{model.events[idx].name}"
-    return f"slide:{model.switches[idx].name}"
+        return DiscreteState("stick", model.events[idx].name)
+    return DiscreteState("slide", model.switches[idx].name)
 
 
 def simulate(model: ModelLike, x0: StateLike | Trajectory | None = None,
@@ -251,7 +245,7 @@ def simulate(model: ModelLike, x0: StateLike | Trajectory | None = None,
     'impact'
     """
     opts = integrator_options(options, "simulate()")
-    model = V.model(model, kind="flow", caller="simulate()")
+    model = as_model(model, kind="flow", caller="simulate()")
     cont = x0 if isinstance(x0, Trajectory) else None
     if cont is not None:
         params = _continued_params(model, cont, opts, params)

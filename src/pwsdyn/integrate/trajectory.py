@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import Status
+from ..errors import ArgumentError, Status
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -23,6 +23,80 @@ EVENT_KINDS = ("impact", "transition", "chatter", "stick", "release", "crossing"
                "slide_end")
 #: Discrete states of the kernel: a regular mode, sticking on an impact surface, sliding.
 STATE_KINDS = ("mode", "stick", "slide")
+
+
+class DiscreteState(str):
+    """A discrete state of a flow: a mode, sticking on an impact event or sliding on a switch.
+
+    ``DiscreteState(kind, name)`` with ``kind`` one of :data:`STATE_KINDS` (``"mode"``,
+    ``"stick"``, ``"slide"``) and ``name`` the mode, impact event or switch. It is the text
+    the event log, the trajectory's ``state`` and every file have always used (the mode's
+    name, ``stick:<event>``, ``slide:<switch>``) and a ``str``: it compares equal to that
+    text, hashes like it and is written as it, so code that compares states with strings
+    keeps working. :meth:`parse` is the one reader of that text.
+
+    Examples
+    --------
+    >>> s = DiscreteState.parse("stick:impact")
+    >>> s.kind, s.name, s == "stick:impact"
+    ('stick', 'impact', True)
+    """
+
+    __slots__ = ()
+
+    def __new__(cls, kind: str, name: str):
+        if kind not in STATE_KINDS:
+            raise ValueError(f"the kind of a discrete state is one of {STATE_KINDS}, got "
+                             f"{kind!r}")
+        if not isinstance(name, str) or not name or ":" in name:
+            raise ValueError(f"the name of a discrete state is a non-empty name without ':', "
+                             f"got {name!r}")
+        return super().__new__(cls, name if kind == "mode" else f"{kind}:{name}")
+
+    @classmethod
+    def parse(cls, text) -> "DiscreteState":
+        """The state written as ``text`` (a mode name, ``stick:<event>`` or
+        ``slide:<switch>``); a :class:`ValueError` for any other text."""
+        if isinstance(text, DiscreteState):
+            return text
+        if not isinstance(text, str):
+            raise ValueError(f"a discrete state is written as a string, got "
+                             f"{type(text).__name__}")
+        kind, sep, name = str(text).partition(":")
+        if not sep:
+            return cls("mode", kind)
+        if kind not in ("stick", "slide"):
+            raise ValueError(f"unknown discrete state {str(text)!r}: expected a mode name, "
+                             "'stick:<event>' or 'slide:<switch>'")
+        return cls(kind, name)
+
+    @property
+    def kind(self) -> str:
+        """``"mode"``, ``"stick"`` or ``"slide"``."""
+        kind, sep, _ = self.partition(":")
+        return kind if sep else "mode"
+
+    @property
+    def name(self) -> str:
+        """The mode, impact event or switch."""
+        _, sep, name = self.partition(":")
+        return name if sep else str(self)
+
+    @property
+    def code(self) -> int:
+        """The kernel's code of :attr:`kind`: 0 a mode, 1 sticking, 2 sliding."""
+        return STATE_KINDS.index(self.kind)
+
+    @property
+    def is_mode(self) -> bool:
+        """True for a regular mode (not sticking, not sliding)."""
+        return ":" not in self
+
+    def __getnewargs__(self):
+        return (self.kind, self.name)
+
+    def __repr__(self):
+        return f"DiscreteState({self.kind!r}, {self.name!r})"
 
 
 @dataclass(slots=True)
@@ -42,7 +116,7 @@ class EventRecord:
         ``slide_start``, ``slide_end``.
     x_before, x_after : numpy.ndarray
         State just before and just after the event.
-    mode_before, mode_after : str
+    mode_before, mode_after : DiscreteState (a str)
         The discrete state before and after: a mode name, ``stick:<event>`` or
         ``slide:<switch>``.
     t_after : float
@@ -98,12 +172,68 @@ class EventLog(Sequence):
         self._state_name = state_name
         self._records = None
 
+    @classmethod
+    def from_records(cls, model, records, n: int | None = None) -> "EventLog":
+        """The log of ``records`` (:class:`EventRecord`, in time order), with its columns.
+
+        For a log that does not come from the kernel: one read from a file, the events of a
+        periodic orbit put together from its segments. Its records are the ones given (their
+        discrete states as :class:`DiscreteState`); the kernel codes of the columns are
+        derived from the names, the constrained mode of a sticking or sliding state being the
+        last regular mode before it (-1 before any)."""
+        records = list(records)
+        m = len(records)
+        if n is None:
+            n = len(model.states) if model is not None else (
+                len(records[0].x_before) if m else 0)
+        ev_index = {e.name: j for j, e in enumerate(getattr(model, "events", ()))}
+        sw_index = {s.name: j for j, s in enumerate(getattr(model, "switches", ()))}
+        modes = {name: j for j, name in enumerate(getattr(model, "mode_names", ()))}
+        info = np.full((m, 8), -1, dtype=np.int64)
+        last_mode = -1
+
+        def code(st: DiscreteState) -> tuple:
+            nonlocal last_mode
+            if st.kind == "mode":
+                last_mode = modes.get(st.name, -1)
+                return (0, -1, last_mode)
+            table = ev_index if st.kind == "stick" else sw_index
+            return (st.code, table.get(st.name, -1), last_mode)
+
+        out = []
+        for r, e in enumerate(records):
+            before = DiscreteState.parse(e.mode_before)
+            after = DiscreteState.parse(e.mode_after)
+            on_switch = e.kind in SWITCH_EVENT_KINDS
+            info[r, 0] = EVENT_KINDS.index(e.kind) if e.kind in EVENT_KINDS else -1
+            info[r, 1] = (sw_index if on_switch else ev_index).get(e.name, -1)
+            info[r, 2:5] = code(before)
+            info[r, 5:8] = code(after)
+            if before is not e.mode_before or after is not e.mode_after:
+                e = EventRecord(e.t, e.name, e.kind, e.x_before, e.x_after, before, after,
+                                e.t_after)
+            out.append(e)
+
+        def rows(attr):
+            return np.array([np.asarray(getattr(e, attr), dtype=float)[:n] for e in out],
+                            dtype=float).reshape(m, n)
+
+        log = cls(model, np.array([e.t for e in out], dtype=float),
+                  np.array([e.t_after for e in out], dtype=float), info, rows("x_before"),
+                  rows("x_after"), None)
+        log._records = out
+        return log
+
     @property
     def kind(self) -> np.ndarray:
+        if self._records is not None and self._state_name is None:
+            return np.array([e.kind for e in self._records], dtype=object)
         return np.array(EVENT_KINDS, dtype=object)[self.kind_code]
 
     @property
     def name(self) -> np.ndarray:
+        if self._records is not None and self._state_name is None:
+            return np.array([e.name for e in self._records], dtype=object)
         ev = np.array([e.name for e in self.model.events] or [""], dtype=object)
         sw = np.array([s.name for s in self.model.switches] or [""], dtype=object)
         on_switch = np.isin(self.kind_code, [EVENT_KINDS.index(k) for k in SWITCH_EVENT_KINDS])
@@ -220,11 +350,13 @@ class Trajectory:
         time appears twice, before and after the jump).
     x : numpy.ndarray, shape (N, n)
         States at those times.
-    state : list[str]
-        Discrete state (mode name, ``stick:<event>`` or ``slide:<switch>``) at each node.
-    events : sequence of EventRecord
-        The event log, in time order (an :class:`EventLog`, whose columns are also arrays,
-        or a list). It is the hybrid orbit's segment signature.
+    state : numpy.ndarray of str
+        Discrete state (mode name, ``stick:<event>`` or ``slide:<switch>``) at each node;
+        :meth:`DiscreteState.parse` reads an entry.
+    events : EventLog
+        The event log, in time order: a sequence of :class:`EventRecord` whose columns are
+        also arrays. It is the hybrid orbit's segment signature. A list of records given to
+        the constructor is made an :class:`EventLog` (:meth:`EventLog.from_records`).
     status : Status
     message : str
     stats : dict
@@ -275,10 +407,44 @@ class Trajectory:
     _y: np.ndarray | None = field(default=None, repr=False)  # full nodes incl. variational part
     provenance: dict = field(default_factory=dict)
 
+    def __post_init__(self):
+        # one type of log whatever made the trajectory (the kernel, a file, an orbit's
+        # segments): code reading the columns need not ask which
+        if not isinstance(self.events, EventLog):
+            self.events = EventLog.from_records(self.model, self.events,
+                                                n=np.shape(self.x)[1] if np.ndim(self.x) == 2
+                                                else None)
+
     # ------------------------------------------------------------------------------------
     @property
     def success(self) -> bool:
         return not self.status.failed
+
+    @property
+    def y(self) -> np.ndarray:
+        """The full node vectors: the state, then (runs with ``variational=True``) the
+        variational matrix, row-major; the states ``x`` when there is no variational part."""
+        return self.x if self._y is None else self._y
+
+    @property
+    def dense(self) -> np.ndarray | LazyDense | None:
+        """The dense output: per interval between consecutive nodes, the coefficients of
+        ``y(t0 + theta h) = y0 + sum_k dense[k] theta^(k+1)``, shape ``(intervals, len(y),
+        degree)``; ``None`` for a run with ``dense=False``."""
+        return self._dense
+
+    @property
+    def interval_kind(self) -> np.ndarray | None:
+        """How each interval between consecutive nodes is evaluated: 0 the dense polynomial,
+        1 linear (a jump, or no dense output), 2 linear across a chattering gap."""
+        return self._ikind
+
+    @classmethod
+    def from_parts(cls, *, dense=None, interval_kind=None, y=None, **fields) -> "Trajectory":
+        """A trajectory from its fields (those of the class) and its dense output: ``dense``,
+        ``interval_kind`` and the full node vectors ``y``, as :attr:`dense`,
+        :attr:`interval_kind` and :attr:`y` give them back."""
+        return cls(**fields, _dense=dense, _ikind=interval_kind, _y=y)
 
     @property
     def n_states(self) -> int:
@@ -330,15 +496,19 @@ class Trajectory:
         out = []
         cur = None
         t = np.asarray(self.t)
+        parsed: dict = {}
         for i in range(len(t)):
-            st = str(self.state[i])
-            if st.startswith("slide:"):
-                if cur is not None and cur[2] == st[6:]:
+            text = str(self.state[i])
+            st = parsed.get(text)
+            if st is None:
+                st = parsed[text] = DiscreteState.parse(text)
+            if st.kind == "slide":
+                if cur is not None and cur[2] == st.name:
                     cur[1] = float(t[i])
                 else:
                     if cur is not None:
                         out.append(tuple(cur))
-                    cur = [float(t[i]), float(t[i]), st[6:]]
+                    cur = [float(t[i]), float(t[i]), st.name]
             elif cur is not None:
                 out.append(tuple(cur))
                 cur = None
@@ -426,14 +596,10 @@ class Trajectory:
     def to_dataset(self) -> xr.Dataset:
         """The trajectory as an :class:`xarray.Dataset` (nodes, events, dense output,
         provenance in attributes). Inverse: :meth:`from_dataset`."""
-        from ..io import trajectory_to_dataset
-
         return trajectory_to_dataset(self)
 
     @classmethod
     def from_dataset(cls, ds: xr.Dataset) -> Trajectory:
-        from ..io import trajectory_from_dataset
-
         return trajectory_from_dataset(ds)
 
     def save(self, path: PathLike, overwrite: bool = False) -> Path:
@@ -442,6 +608,272 @@ class Trajectory:
         An existing file is refused with :class:`~pwsdyn.OutputExistsError` (nothing is
         written) unless ``overwrite=True``. Read it back with :func:`pwsdyn.io.load_trajectory`.
         """
-        from ..io import save_dataset
+        from .._netcdf import save_dataset
 
         return save_dataset(self.to_dataset(), path, overwrite=overwrite)
+
+
+# ======================================================================================
+# Trajectory <-> Dataset (the layout is described in pwsdyn.io, which offers these; the
+# attributes every file shares come from pwsdyn._netcdf). xarray is imported on use.
+# ======================================================================================
+
+def _ycomp_labels(state_names, ny: int) -> list:
+    n = len(state_names)
+    labels = list(state_names)
+    if ny == n + n * n:
+        labels += [f"Phi[{a},{b}]" for a in state_names for b in state_names]
+    else:
+        labels += [f"y{k}" for k in range(n, ny)]
+    return labels
+
+
+
+def trajectory_to_dataset(traj) -> xr.Dataset:
+    """The trajectory as an :class:`xarray.Dataset`, with the model and provenance attached.
+
+    Parameters
+    ----------
+    traj : Trajectory
+        A result of :func:`pwsdyn.simulate`.
+
+    Returns
+    -------
+    xarray.Dataset
+        See the module docstring for the layout. ``dense`` is omitted when the trajectory has
+        no dense output, ``jacobian`` when it has no variational part.
+
+    Raises
+    ------
+    TypeError
+        If ``traj`` is not a trajectory.
+    """
+    import json
+
+    import xarray as xr
+
+    from .._netcdf import (TRAJECTORY_TYPE, _dumps, _library_version, _str_array,
+                           cf_global_attrs, flag_attrs, quantity_attrs, state_attrs,
+                           state_coords, status_codes)
+
+    if not isinstance(traj, Trajectory):
+        raise ArgumentError(f"`traj` must be a Trajectory, got {type(traj).__name__}")
+    model = traj.model
+    names = list(model.states)
+    n = len(names)
+    t = np.asarray(traj.t, dtype=float)
+    x = np.asarray(traj.x, dtype=float).reshape(len(t), n)
+    y = np.asarray(traj.y, dtype=float)
+    ny = y.shape[1]
+
+    tattrs = quantity_attrs(model, "t", "time")
+    data_vars = {
+        "x": (("node", "state"), x, state_attrs(model, "state at the node")),
+        "discrete_state": (("node",), _str_array(traj.state),
+                           {"long_name": "discrete state at the node: mode name, "
+                                         "stick:<event> or slide:<switch>"}),
+        "y": (("node", "ycomp"), y,
+              {"long_name": "full node vector: state, then variational matrix (row-major)"}),
+    }
+    if traj.interval_kind is not None:
+        data_vars["interval_kind"] = (
+            ("interval",), np.asarray(traj.interval_kind, dtype=np.int64),
+            {"long_name": "how the interval after the node is evaluated",
+             **flag_attrs({0: "dense_polynomial", 1: "linear_jump_or_no_dense_output",
+                           2: "linear_chattering_gap"})})
+    if traj.dense is not None:
+        dense = np.asarray(traj.dense, dtype=float)
+        data_vars["dense"] = (
+            ("interval", "ycomp", "power"), dense,
+            {"long_name": "dense output: y(t0 + theta h) = y0 + sum_k dense[k] theta^(k+1)"})
+
+    ev = list(traj.events)
+    ne = len(ev)
+
+    def evx(attr):
+        # reshape keeps an empty log a (0, n) array with the `state` dimension
+        return np.array([getattr(e, attr)[:n] for e in ev], dtype=float).reshape(ne, n)
+
+    data_vars.update({
+        "event_t": (("event",), np.array([e.t for e in ev], dtype=float),
+                    {**tattrs, "long_name": "time of the event (start of a chattering "
+                                            "sequence)"}),
+        "event_t_after": (("event",), np.array([e.t_after for e in ev], dtype=float),
+                          {**tattrs, "long_name": "time after the event (accumulation time "
+                                                  "of chatter)"}),
+        "event_name": (("event",), _str_array(e.name for e in ev),
+                       {"long_name": "name of the event or switch"}),
+        "event_kind": (("event",), _str_array(e.kind for e in ev),
+                       {"long_name": "kind of the event record (impact, transition, "
+                                     "crossing, chatter, stick, release, slide_start, "
+                                     "slide_end, ...)"}),
+        "event_mode_before": (("event",), _str_array(e.mode_before for e in ev),
+                              {"long_name": "discrete state before the event"}),
+        "event_mode_after": (("event",), _str_array(e.mode_after for e in ev),
+                             {"long_name": "discrete state after the event"}),
+        "event_x_before": (("event", "state"), evx("x_before"),
+                           state_attrs(model, "state just before the event")),
+        "event_x_after": (("event", "state"), evx("x_after"),
+                          state_attrs(model, "state just after the event")),
+    })
+    if traj.jacobian is not None:
+        data_vars["jacobian"] = (
+            ("state", "state_in"), np.asarray(traj.jacobian, dtype=float),
+            {"long_name": "derivative of the final state with respect to the initial state"})
+
+    status = Status(traj.status)
+    data_vars["status"] = ((), np.int64(int(status)),
+                           {"long_name": "how the simulation ended",
+                            **flag_attrs(status_codes(Status.integrator_outcomes()))})
+
+    coords = {
+        "node": ("node", np.arange(len(t)), {"long_name": "index of the stored node"}),
+        # the time of each node: a coordinate, not an index (both sides of an event share it)
+        "t": ("node", t, tattrs),
+        **state_coords(model),
+        "event": ("event", np.arange(ne), {"long_name": "index of the event record"}),
+        "ycomp": ("ycomp", _str_array(_ycomp_labels(names, ny)),
+                  {"long_name": "component of the full node vector"}),
+    }
+    if traj.jacobian is not None:
+        coords["state_in"] = ("state_in", _str_array(names),
+                              {"long_name": "initial state variable"})
+
+    provenance = dict(traj.provenance or {})
+    attrs = {
+        **cf_global_attrs(model, TRAJECTORY_TYPE,
+                          f"pwsdyn trajectory of model {model.name}",
+                          f"event-driven simulation (pwsdyn.simulate, method "
+                          f"{traj.options.get('method', '?')})"),
+        "params": _dumps(dict(traj.params)),
+        "parameter_units": json.dumps({k: model.unit(k) for k in model.parameters
+                                       if model.unit(k) is not None}),
+        "options": _dumps(dict(traj.options)),
+        "status": status.name,
+        "status_code": int(status),
+        "message": str(traj.message),
+        "stats": _dumps(dict(traj.stats)),
+        "t0": float(traj.t0),
+        "t_end": float(traj.t_end),
+        "provenance": _dumps(provenance),
+    }
+    # the version that made the data (a reloaded trajectory keeps its own)
+    attrs["pwsdyn_version"] = str(provenance.get("pwsdyn_version", _library_version()))
+    return xr.Dataset(data_vars, coords=coords, attrs=attrs)
+
+
+def _attr(ds, key: str):
+    try:
+        return ds.attrs[key]
+    except KeyError:
+        raise ArgumentError(f"the dataset has no attribute {key!r}; it was not written by "
+                         f"pwsdyn.io.trajectory_to_dataset") from None
+
+
+def _strings(da) -> list:
+    # h5netcdf may hand back bytes or numpy str_ scalars; the Trajectory holds Python str
+    return [v.decode() if isinstance(v, bytes) else str(v) for v in np.asarray(da).tolist()]
+
+
+def trajectory_from_dataset(ds: xr.Dataset, model=None):
+    """Rebuild a :class:`~pwsdyn.integrate.trajectory.Trajectory` from its dataset.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        A dataset made by :func:`trajectory_to_dataset` (or read from its NetCDF file).
+    model : Model, str, path or dict, optional
+        The model to attach. By default it is rebuilt from the ``model_spec`` attribute with
+        :func:`pwsdyn.load_model`; a warning is issued if its hash differs from the stored
+        ``model_hash`` (the file was written by a version of pwsdyn that read the model
+        differently).
+
+    Returns
+    -------
+    Trajectory
+        With the same nodes, event log, status and dense output: ``traj(t)`` gives the same
+        numbers as the trajectory that was saved.
+
+    Raises
+    ------
+    ValueError
+        If ``ds`` is not a pwsdyn trajectory dataset.
+    """
+    import dataclasses
+    import json
+    import warnings
+
+    import xarray as xr
+
+    from .._netcdf import TRAJECTORY_TYPE, _STRING_OPTIONS, _json_restore
+    from ..model import load_model
+
+
+    if not isinstance(ds, xr.Dataset):
+        raise ArgumentError(f"`ds` must be an xarray.Dataset, got {type(ds).__name__}")
+    kind = ds.attrs.get("pwsdyn_type")
+    if kind != TRAJECTORY_TYPE:
+        raise ArgumentError(f"the dataset is not a pwsdyn trajectory (attribute pwsdyn_type="
+                         f"{kind!r}, expected {TRAJECTORY_TYPE!r})")
+    stored_hash = str(_attr(ds, "model_hash"))
+    if model is None:
+        spec = json.loads(_attr(ds, "model_spec"))
+        if not spec:
+            raise ArgumentError("the dataset holds no model definition (`model_spec` is empty); "
+                             "pass the model with `model=`")
+        model = load_model(spec)
+        if model.hash != stored_hash:
+            warnings.warn(f"the model rebuilt from the file has hash {model.hash}, the file "
+                          f"records {stored_hash}: the model definition was read differently "
+                          f"(written by pwsdyn {ds.attrs.get('pwsdyn_version')})", stacklevel=2)
+        elif ds.attrs.get("model_text_format") == "toml" and ds.attrs.get("model_text"):
+            # keep the TOML source with the model, so that the next file carries it too
+            model = dataclasses.replace(model, text=str(ds.attrs["model_text"]))
+    else:
+        model = load_model(model)
+
+    names = list(model.states)
+    stored_names = _strings(ds["state"].values)
+    if stored_names != names:
+        raise ArgumentError(f"the dataset has states {stored_names}, the model has {names}")
+    n = len(names)
+
+    t = np.ascontiguousarray(ds["t"].values, dtype=float)
+    x = np.ascontiguousarray(ds["x"].values, dtype=float).reshape(len(t), n)
+    y = np.ascontiguousarray(ds["y"].values, dtype=float) if "y" in ds else x.copy()
+    dense = np.ascontiguousarray(ds["dense"].values, dtype=float) if "dense" in ds else None
+    ikind = (np.ascontiguousarray(ds["interval_kind"].values, dtype=np.int64)
+             if "interval_kind" in ds else None)
+    jac = np.ascontiguousarray(ds["jacobian"].values, dtype=float) if "jacobian" in ds else None
+
+    ev_t = ds["event_t"].values
+    ev_t2 = ds["event_t_after"].values
+    ev_name = _strings(ds["event_name"].values)
+    ev_kind = _strings(ds["event_kind"].values)
+    ev_mb = _strings(ds["event_mode_before"].values)
+    ev_ma = _strings(ds["event_mode_after"].values)
+    ev_xb = np.asarray(ds["event_x_before"].values, dtype=float).reshape(len(ev_t), n)
+    ev_xa = np.asarray(ds["event_x_after"].values, dtype=float).reshape(len(ev_t), n)
+    events = EventLog.from_records(model, (
+        EventRecord(float(ev_t[r]), ev_name[r], ev_kind[r], ev_xb[r].copy(), ev_xa[r].copy(),
+                    ev_mb[r], ev_ma[r], float(ev_t2[r])) for r in range(len(ev_t))), n=n)
+
+    status_name = str(_attr(ds, "status"))
+    try:
+        status = Status[status_name]
+    except KeyError:
+        raise ArgumentError(f"unknown status {status_name!r} in the dataset; statuses are "
+                         f"{[s.name for s in Status]}") from None
+    provenance = _json_restore(json.loads(ds.attrs.get("provenance", "{}")))
+    return Trajectory.from_parts(
+        t=t, x=x, state=np.array(_strings(ds["discrete_state"].values), dtype=str),
+        events=events, status=status,
+        message=str(ds.attrs.get("message", status.message)),
+        stats=json.loads(ds.attrs.get("stats", "{}")),
+        model=model,
+        params={k: float(v) for k, v in _json_restore(json.loads(_attr(ds, "params"))).items()},
+        options=_json_restore(json.loads(ds.attrs.get("options", "{}")),
+                              keep_strings=_STRING_OPTIONS),
+        t0=float(_attr(ds, "t0")), t_end=float(_attr(ds, "t_end")), jacobian=jac,
+        dense=dense, interval_kind=ikind, y=y, provenance=provenance,
+    )

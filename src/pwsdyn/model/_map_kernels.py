@@ -1,7 +1,7 @@
 """The iteration loops of map models, compiled once for all maps (numba, cached on disk).
 
 They take a map's generated ``step`` function as a first-class numba function of one fixed
-signature (:data:`pwsdyn.model.maps.MAP_STEP_TYPE`). Kept apart from :mod:`pwsdyn.model.maps`
+signature (:data:`pwsdyn.model._map_step.MAP_STEP_TYPE`). Kept apart from :mod:`pwsdyn.model.maps`
 so that loading a model (``pwsdyn models``, ``load_model``) does not load or compile them:
 ``pwsdyn.model.maps.orbit_kernel`` and ``lyapunov_kernel`` import this module on first use.
 ``nogil``: a sweep runs its chunks on threads.
@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, types
 
-from .maps import MAP_DIVERGED, MAP_NO_PIECE, MAP_NONFINITE, MAP_OK, MAP_STEP_TYPE
+from ._map_step import MAP_DIVERGED, MAP_NO_PIECE, MAP_NONFINITE, MAP_OK, MAP_STEP_TYPE
 
 _f1 = types.float64[::1]
 _f2 = types.float64[:, ::1]
@@ -25,8 +25,9 @@ def orbit_kernel(step, x0, p, n_transient, n_samples, bound):
     """Iterate ``n_transient`` times, then record ``n_samples`` iterates.
 
     Returns (status, states (n_samples, n), piece applied to each recorded state, final
-    state, iterations done). A state with a component beyond ``bound`` in magnitude ends the
-    run with ``MAP_DIVERGED``; a state no piece claims with ``MAP_NO_PIECE``.
+    state, iterations done); the status is the value of a :class:`pwsdyn.Status`. A state
+    with a component beyond ``bound`` in magnitude ends the run with ``MAP_DIVERGED``; a
+    state no piece claims with ``MAP_NO_PIECE``.
     """
     n = x0.shape[0]
     x = x0.copy()

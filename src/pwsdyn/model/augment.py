@@ -36,7 +36,7 @@ from __future__ import annotations
 import sympy as sp
 
 from ..errors import ArgumentError
-from .spec import Event, Mode, Model, Switch
+from .spec import Event, Mode, Model, Switch, as_model
 
 
 def with_parameters_as_states(model, names) -> Model:
@@ -64,7 +64,7 @@ def with_parameters_as_states(model, names) -> Model:
     """
     from .. import _validate as V
 
-    model = V.model(model, kind="flow", caller="with_parameters_as_states()")
+    model = as_model(model, kind="flow", caller="with_parameters_as_states()")
     if isinstance(names, str) or not hasattr(names, "__iter__"):
         raise V.fail("names", "a sequence of parameter names", names)
     names = list(names)

@@ -31,11 +31,11 @@ import numpy as np
 import sympy as sp
 from numba import types
 from sympy.printing.codeprinter import PrintMethodNotImplementedError
-from sympy.printing.pycode import PythonCodePrinter
 
 from ..errors import ModelError
 from .affine import affine_structure
 from .cache import cache_dir as cache_dir, load_module
+from ._printer import NumbaPrinter
 from .discontinuities import U_SYMBOL
 from .spec import Model, check_identifiers
 
@@ -74,58 +74,6 @@ _CODEGEN_VERSION = "7"
 #: than the source (40,000 characters, sixteen split modes, compile in about 7 s; the largest
 #: built-in model needs 25,000). A model past it is refused before minutes of compiling.
 MAX_SOURCE_CHARS = 100_000
-
-
-class _Printer(PythonCodePrinter):
-    def __init__(self):
-        super().__init__({"fully_qualified_modules": True, "inline": True})
-
-    # numba types integer literals as int64: one beyond 2**53 (where doubles stop being
-    # exact anyway) is written as the double it stands for
-    def _print_Integer(self, expr):
-        if abs(int(expr)) > 2**53:
-            return repr(float(expr))
-        return super()._print_Integer(expr)
-
-    def _print_Rational(self, expr):
-        if abs(int(expr.p)) > 2**53 or int(expr.q) > 2**53:
-            return repr(float(expr))
-        return super()._print_Rational(expr)
-
-    # SymPy differentiates Abs(f) of an f it cannot prove real into re() and im() terms; the
-    # generated code computes in real doubles (a complex value is NaN there), so re(f) = f,
-    # im(f) = 0 and conjugate(f) = f
-    def _print_re(self, expr):
-        return f"({self._print(expr.args[0])})"
-
-    def _print_im(self, expr):
-        return "0.0"
-
-    def _print_conjugate(self, expr):
-        return f"({self._print(expr.args[0])})"
-
-    def _print_Heaviside(self, expr):
-        a = self._print(expr.args[0])
-        return f"(1.0 if {a} > 0 else (0.0 if {a} < 0 else 0.5))"
-
-    def _print_DiracDelta(self, expr):
-        # derivative of sign/Heaviside: zero away from the surface; the surface is an event
-        return "0.0"
-
-    def _print_BooleanTrue(self, expr):
-        return "True"
-
-    def _print_BooleanFalse(self, expr):
-        return "False"
-
-    # numba raises ZeroDivisionError for ``0.0 ** -k`` (a negative integer power) whatever the
-    # error model, where ``1.0 / 0.0 ** k`` is inf: a model that divides by zero somewhere
-    # must get a non-finite value the integrator reports, not an exception out of the kernel
-    def _print_Pow(self, expr, rational=False):
-        base, ex = expr.args
-        if ex.is_Integer and ex < -1:
-            return f"(1.0/({self._print(sp.Pow(base, -ex, evaluate=False))}))"
-        return super()._print_Pow(expr, rational=rational)
 
 
 def _clean(e):
@@ -259,7 +207,7 @@ def emit_evaluate(cases: dict, states, parameters) -> str:
     identifiers (:func:`~pwsdyn.model.spec.check_identifiers`): they become prefixed locals.
     """
     check_identifiers(states, parameters)
-    pr = _Printer()
+    pr = NumbaPrinter()
     lines = [
         "import math",
         "import numba",

@@ -42,6 +42,7 @@ import itertools
 import sympy as sp
 
 from ..errors import ModelError
+from .elements import Mode, Surface, Switch
 
 #: The scalar switching variable of Utkin's equivalent control in a switch's family f(t, x, u).
 U_SYMBOL = sp.Symbol("u_switch", real=True)
@@ -104,8 +105,6 @@ class _Registry:
     """The model's surfaces (shared with events and explicit switches), found up to sign."""
 
     def __init__(self, surfaces: list, definitions: dict, variables: tuple):
-        from .spec import Surface
-
         self._Surface = Surface
         self.surfaces = surfaces
         self.variables = variables
@@ -296,8 +295,6 @@ def expand_discontinuities(modes, surfaces, events, switches, initial_mode, defi
         A mode with more than ``MAX_SURFACES_PER_MODE`` distinct surfaces, or a split that
         would give more than ``MAX_SPLIT_MODES`` modes.
     """
-    from .spec import Mode, Switch
-
     if not any(has_discontinuities(e) for m in modes for e in m.rhs):
         return list(modes), list(events), list(switches), initial_mode
     registry = _Registry(surfaces, definitions, tuple(variables))

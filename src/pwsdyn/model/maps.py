@@ -35,18 +35,13 @@ from typing import Any, Mapping
 
 import numpy as np
 import sympy as sp
-from numba import types
-
 from ..errors import ModelError
 from .cache import header, load_module
-from .codegen import _Printer
+from ._map_step import (MAP_DIVERGED, MAP_NO_PIECE, MAP_NONFINITE, MAP_OK,  # noqa: F401
+                        MAP_STEP_SIGNATURE, MAP_STEP_TYPE)
+from ._printer import NumbaPrinter
 from .expressions import parse_expression
 from .spec import SymbolicSystem, check_identifiers
-
-#: Signature of a generated map function: step(x, p, out, jac, want_jac) -> piece.
-MAP_STEP_SIGNATURE = types.int64(types.float64[::1], types.float64[::1], types.float64[::1],
-                                 types.float64[::1], types.int64)
-MAP_STEP_TYPE = types.FunctionType(MAP_STEP_SIGNATURE)
 
 _MAP_CODEGEN_VERSION = "3"
 _NAME_OK = "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ_0123456789"
@@ -55,8 +50,6 @@ _TOP_KEYS = {"name", "kind", "description", "source", "reference", "states", "pa
 _PIECE_KEYS = {"name", "condition", "map", "description"}
 _DEFAULT_KEYS = {"x0", "t_end", "params"}
 
-#: Status codes of the iteration kernels (shared with :mod:`pwsdyn.explore`).
-MAP_OK, MAP_DIVERGED, MAP_NO_PIECE, MAP_NONFINITE = 0, 1, 2, 3
 
 
 @dataclass(frozen=True)
@@ -106,6 +99,10 @@ class MapModel(SymbolicSystem):
 
     def forcing_period_value(self, params=None):
         """Maps have no forcing period (``None``); one iteration is their unit of time."""
+        return None
+
+    def forcing_period_at(self, p):
+        """Maps have no forcing period (``None``)."""
         return None
 
     @functools.cached_property
@@ -263,7 +260,7 @@ def _generate_map_body(model: MapModel) -> str:
     """The module's text after its header line: only identifiers and numbers (the map's name
     and other text never reach it)."""
     check_identifiers(model.states, model.parameters, origin=model.origin)
-    pr = _Printer()
+    pr = NumbaPrinter()
     X = sp.Matrix(model.state_symbols)
     rename = {sym: sp.Symbol(f"s_{sym.name}", real=True) for sym in model.state_symbols}
     rename.update({sym: sp.Symbol(f"p_{sym.name}", real=True)
@@ -396,14 +393,14 @@ def iterate(model, x0, n: int, params: Mapping[str, float] | None = None, transi
     (5, 1)
     """
     from .. import _validate as V
-    from ..integrate.simulate import state_vector
+    from .spec import as_model
 
     n = V.integer("n", n, lo=0)
     transient = V.integer("transient", transient, lo=0)
     bound = V.positive("bound", bound, allow_inf=True)
-    model = V.model(model, kind="map", caller="iterate()")
+    model = as_model(model, kind="map", caller="iterate()")
     p = model.parameter_vector(params)
-    x = state_vector(model, x0)
+    x = V.state_vector(model, x0)
     V.memory(f"iterate() with n={n}", 8.0 * n * (model.n_states + 1))
     cm = compile_map(model)
     orbit_kernel = _map_kernel("orbit_kernel")

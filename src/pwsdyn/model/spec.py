@@ -28,6 +28,7 @@ from typing import Any, Mapping
 import sympy as sp
 
 from ..errors import ArgumentError, ModelError, PwsdynError
+from .elements import Event as Event, Mode as Mode, Surface as Surface, Switch as Switch
 from .expressions import check_expression, parse_expression
 
 #: Name of the independent variable in expressions.
@@ -131,81 +132,6 @@ def default_parameters(parameters: dict, defaults) -> dict:
         for k, v in (defaults.get("params") or {}).items():
             values[k] = float(v)
     return values
-
-
-@dataclass(frozen=True)
-class Mode:
-    """A smooth mode: its name and vector field ``f(t, x, p)`` (one expression per state)."""
-
-    name: str
-    rhs: tuple
-
-
-@dataclass(frozen=True)
-class Surface:
-    """A scalar event function ``h(t, x, p)``; its zero set is a discontinuity surface."""
-
-    name: str
-    expr: Any
-
-
-@dataclass(frozen=True)
-class Event:
-    """A transition fired when ``h`` crosses zero in ``direction`` while in one of ``modes``.
-
-    Attributes
-    ----------
-    name : str
-    kind : {'impact', 'transition'}
-    surface : int
-        Index into ``Model.surfaces``.
-    direction : int
-        -1: ``h`` decreasing through zero; +1 increasing; 0 either.
-    modes : tuple[int, ...]
-        Modes in which the event is active.
-    guard : sympy Boolean or None
-        The event fires only where the guard holds.
-    reset : tuple or None
-        The new state ``g(t, x, p)``, one expression per state (identity where not given).
-    target : int or None
-        The mode after the event (``None``: the same mode).
-    terminal : bool
-        Stop the simulation after this event.
-    """
-
-    name: str
-    kind: str
-    surface: int
-    direction: int
-    modes: tuple
-    guard: Any = None
-    reset: tuple | None = None
-    target: int | None = None
-    terminal: bool = False
-
-
-@dataclass(frozen=True)
-class Switch:
-    """A switching surface: mode ``above`` where ``h > 0``, ``below`` where ``h < 0``.
-
-    Attributes
-    ----------
-    kind : {'filippov', 'continuous'}
-        ``filippov``: the field jumps across the surface; the flow crosses or slides (thesis
-        eq. 2.6-2.8). ``continuous``: only a derivative jumps (``Abs``, ``Max``, ``Min``); the
-        crossing is located, there is no sliding.
-    family : tuple or None
-        The field ``f(t, x, u)`` with the switching term replaced by
-        :data:`pwsdyn.model.discontinuities.U_SYMBOL` (``u = +1`` above, ``-1`` below), for
-        Utkin's equivalent control; ``None``: ``(1 + u)/2 f_above + (1 - u)/2 f_below``.
-    """
-
-    name: str
-    surface: int
-    above: int
-    below: int
-    kind: str = "filippov"
-    family: tuple | None = None
 
 
 class SymbolicSystem:
@@ -339,20 +265,36 @@ class Model(SymbolicSystem):
 
     # --- parameters ----------------------------------------------------------------------
     def forcing_period_value(self, params: Mapping[str, float] | None = None) -> float | None:
-        """The forcing period for these parameters, or ``None`` for an autonomous model."""
+        """The forcing period for these parameters (by name), or ``None`` for an autonomous
+        model; see :meth:`forcing_period_at`."""
+        return self.forcing_period_at(self.parameter_vector(params))
+
+    def forcing_period_at(self, p) -> float | None:
+        """The forcing period at the parameter vector ``p`` (values in parameter order), or
+        ``None`` for an autonomous model. Where it is not a positive finite number (``2*pi/
+        omega`` at ``omega = 0``) an :class:`ArgumentError` names the parameters.
+
+        Every part of pwsdyn that needs the forcing period as a number asks here (or, for
+        the raw value in a hot loop, :attr:`forcing_period_function`)."""
         if self.forcing_period is None:
             return None
-        p = self.parameter_vector(params)
-        val = float(self.forcing_period.subs(dict(zip(self.parameter_symbols, p))))
+        try:
+            val = float(self.forcing_period_function(*(float(q) for q in p)))
+            got = repr(val)
+        except (ArithmeticError, ValueError, TypeError) as exc:
+            val, got = math.nan, f"undefined ({exc})"
         if not (math.isfinite(val) and val > 0):
-            raise ArgumentError(f"the forcing period of model {self.name!r} must be a positive "
-                             f"number, got {val!r} for these parameters")
+            where = ", ".join(f"{k}={float(v):.17g}" for k, v in zip(self.parameters, p))
+            raise ArgumentError(f"the forcing period {self.forcing_period} of model "
+                                f"{self.name!r} must be a positive finite number, got {got} "
+                                f"at the parameters ({where}): choose parameters where it is")
         return val
 
     @functools.cached_property
     def forcing_period_function(self):
-        """The forcing period as a fast function of the parameter values (in order); NaN for
-        an autonomous model. Lambdified once from the trusted symbolic expression."""
+        """The forcing period as a fast function of the parameter values (in order), unchecked;
+        NaN for an autonomous model. Lambdified once per model from the trusted symbolic
+        expression (a SymPy substitution costs milliseconds, as much as a shooting step)."""
         if self.forcing_period is None:
             return lambda *p: math.nan
         return sp.lambdify(self.parameter_symbols, self.forcing_period, modules="math")
@@ -398,6 +340,39 @@ def zoo_names() -> list[str]:
 
 def zoo_path(name: str) -> Path:
     return Path(str(resources.files("pwsdyn.model") / "zoo" / f"{name}.toml"))
+
+
+def as_model(value, *, kind: str | None = None, caller: str = "", name: str = "model"):
+    """The model an entry point was given: ``value`` loaded with :func:`load_model`, a wrong
+    type an :class:`ArgumentError` naming ``name``; ``kind='flow'`` or ``'map'`` refuses the
+    other kind, naming ``caller``."""
+    from .. import _validate as V
+
+    if not (isinstance(value, (str, os.PathLike, Mapping, SymbolicSystem))
+            or getattr(value, "is_map", False)):
+        raise V.fail(name, "a Model, a model name, a path to a TOML file or a dict", value)
+    if isinstance(value, (str, os.PathLike)) and not V.is_path(value):
+        raise V.fail(name, "a Model, a model name, a path to a TOML file or a dict", value)
+    try:
+        m = load_model(value)
+    except PwsdynError:
+        raise
+    except Exception as exc:
+        # a wrong type, an unreadable path, or a dict the model parser does not expect
+        # (keys that are not strings, ...): the argument, not pwsdyn, is at fault
+        raise ArgumentError(f"`{name}` cannot be loaded as a model: "
+                            f"{type(exc).__name__}: {exc}") from exc
+    is_map = bool(getattr(m, "is_map", False))
+    who = f"{caller} " if caller else ""
+    if kind == "flow" and is_map:
+        raise ArgumentError(f"`{name}`: {who}needs a flow (a model with modes and events); "
+                            f"{m.name!r} is a map (iterate it with pwsdyn.model.maps.iterate, "
+                            "explore it with pwsdyn.sweep, pwsdyn.basins or "
+                            "pwsdyn.lyapunov_spectrum)")
+    if kind == "map" and not is_map:
+        raise ArgumentError(f"`{name}`: {who}needs a map; {m.name!r} is a flow (use "
+                            "pwsdyn.simulate)")
+    return m
 
 
 def load_model(source: str | os.PathLike[str] | Mapping[str, Any] | Model,

@@ -4,7 +4,8 @@ fixed signature as problems ``F(u, p) = 0`` with exact Jacobians (:class:`OrbitP
 
 from ._orbit import (PeriodicOrbit as PeriodicOrbit, Recurrence as Recurrence,
                      RecurrenceWarning as RecurrenceWarning)
-from ._shooting import OrbitError as OrbitError, find_periodic_orbit as find_periodic_orbit
+from ._base import OrbitError as OrbitError
+from ._shooting import find_periodic_orbit as find_periodic_orbit
 from .problem import (Admissibility as Admissibility, OrbitProblem as OrbitProblem,
                       OrbitSensitivity as OrbitSensitivity,
                       ProblemEvaluation as ProblemEvaluation)

@@ -8,9 +8,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .. import __version__
+from .._version import __version__
 from ..errors import Status
 from ..integrate.trajectory import Trajectory
+from ._base import MAX_PERIODS, RECURRENCE_MAX_PERIODS, OrbitError
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -19,9 +20,6 @@ if TYPE_CHECKING:
 
     from .._typing import PathLike
 
-#: Default of ``max_periods`` of :meth:`PeriodicOrbit.from_trajectory`: the most forcing
-#: periods searched for a recurrence of the trajectory.
-RECURRENCE_MAX_PERIODS = 16
 
 
 class RecurrenceWarning(UserWarning):
@@ -263,9 +261,7 @@ class PeriodicOrbit:
         ``None`` for an autonomous one."""
         if self.autonomous:
             return None
-        from ..stability._context import forcing_period
-
-        Tf = forcing_period(self.model, self.model.parameter_vector(self.params))
+        Tf = self.model.forcing_period_at(self.model.parameter_vector(self.params))
         return None if Tf is None else int(round(self.period / Tf))
 
     @property
@@ -388,8 +384,7 @@ class PeriodicOrbit:
             As :func:`pwsdyn.find_periodic_orbit`; its ``result`` carries ``recurrence``.
         """
         from .. import _validate as V
-        from ._shooting import (MAX_PERIODS, OrbitError, _guess_from_trajectory,
-                                find_periodic_orbit, orbit_at)
+        from ._shooting import _guess_from_trajectory, find_periodic_orbit, orbit_at
 
         if not isinstance(traj, Trajectory):
             raise V.fail("traj", "a Trajectory (the result of pwsdyn.simulate)", traj)
@@ -433,7 +428,7 @@ class PeriodicOrbit:
 
         if self.trajectory is None:
             raise ValueError("this orbit has no trajectory to save")
-        from ..io import _library_version, quantity_attrs
+        from .._netcdf import _library_version, quantity_attrs
 
         ds = self.trajectory.to_dataset()
         n = len(self.model.states)
@@ -466,7 +461,7 @@ class PeriodicOrbit:
             "title": f"pwsdyn periodic orbit of model {self.model.name}",
             "period": float(self.period), "orbit_t0": float(self.t0),
             "orbit_x0": json.dumps([float(v) for v in self.x0]),
-            "orbit_state0": self.state0, "stable": int(bool(self.stable)),
+            "orbit_state0": str(self.state0), "stable": int(bool(self.stable)),
             "converged": int(bool(self.converged)), "autonomous": int(bool(self.autonomous)),
             "signature": json.dumps([list(s) for s in self.signature]),
             "admissible": int(bool(self.admissible)), "locked": int(bool(self.locked)),
@@ -478,7 +473,7 @@ class PeriodicOrbit:
     def save(self, path: PathLike, overwrite: bool = False) -> Path:
         """Write :meth:`to_dataset` to a NetCDF file; an existing file is refused
         (:class:`~pwsdyn.OutputExistsError`) unless ``overwrite=True``."""
-        from ..io import save_dataset
+        from .._netcdf import save_dataset
 
         return save_dataset(self.to_dataset(), path, overwrite=overwrite)
 
@@ -507,8 +502,8 @@ def merge_intervals(trajs: list, *, t0: float, t_end: float) -> Trajectory:
     transfer = None
     stats: dict = {}
     for i, tr in enumerate(trajs):
-        y = np.array(tr._y, dtype=float, copy=True)
-        d = None if tr._dense is None else np.array(tr._dense, dtype=float, copy=True)
+        y = np.array(tr.y, dtype=float, copy=True)
+        d = None if tr.dense is None else np.array(tr.dense, dtype=float, copy=True)
         if variational:
             N = len(y)
             y[:, n:n + n * n] = np.matmul(y[:, n:n + n * n].reshape(N, n, n), P).reshape(N, -1)
@@ -532,19 +527,19 @@ def merge_intervals(trajs: list, *, t0: float, t_end: float) -> Trajectory:
         xs.append(np.asarray(tr.x, dtype=float))
         ys.append(y)
         states.append(np.asarray(tr.state))
-        ikind.append(np.asarray(tr._ikind, dtype=np.int64))
+        ikind.append(np.asarray(tr.interval_kind, dtype=np.int64))
         if d is not None:
             dense.append(d)
         events += list(tr.events)
         for k, v in tr.stats.items():
             stats[k] = stats.get(k, 0) + v
-    has_dense = all(tr._dense is not None for tr in trajs)
-    return Trajectory(
+    has_dense = all(tr.dense is not None for tr in trajs)
+    return Trajectory.from_parts(
         t=np.concatenate(ts), x=np.concatenate(xs), state=np.concatenate(states), events=events,
         status=Status.SUCCESS, message=Status.SUCCESS.message, stats=stats, model=model,
         params=dict(first.params), options=dict(first.options), t0=float(t0), t_end=float(t_end),
         jacobian=P if variational else None, transfer_matrices=transfer,
-        _dense=np.concatenate(dense) if has_dense else None, _ikind=np.concatenate(ikind),
-        _y=np.concatenate(ys),
+        dense=np.concatenate(dense) if has_dense else None, interval_kind=np.concatenate(ikind),
+        y=np.concatenate(ys),
         provenance={"model": model.name, "model_hash": model.hash, "pwsdyn_version": __version__},
     )

@@ -36,58 +36,23 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .. import _validate as V
-from ..errors import ArgumentError, PwsdynError
+from ..errors import ArgumentError
 from ..newton import TrialRejected, newton
-from ..integrate.simulate import integrator_options, _simulate_compiled, state_vector
-from ..stability._context import (DiscreteState, ModelContext, check_state_name, event_states,
-                                  forcing_period, initial_state, trajectory_start_state)
+from ..integrate.simulate import _simulate_compiled
+from ..model.spec import as_model
+from ..integrate.trajectory import DiscreteState
+from ..stability._context import (KernelState, ModelContext, check_state_name, event_states,
+                                  initial_state, trajectory_start_state)
 from ..stability._floquet import floquet_multipliers
-from ._orbit import RECURRENCE_MAX_PERIODS, PeriodicOrbit, Recurrence, merge_intervals
+from ._base import (MAX_ITER, MAX_NODES, MAX_PERIODS, RECURRENCE_MAX_PERIODS,
+                    STABILITY_MARGIN, OrbitError, shooting_options)
+from ._base import SHOOTING_DEFAULTS as SHOOTING_DEFAULTS  # its old home, still imported
+from ._orbit import PeriodicOrbit, Recurrence, merge_intervals
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
     from .._typing import ModelLike, StateLike
-
-#: Integrator options used by the shooting code unless given: tight tolerances, 8th order.
-SHOOTING_DEFAULTS = dict(method="DOP853", rtol=1e-12, atol=1e-12, max_steps=500_000)
-_RESERVED = {"variational", "dense", "throw", "mode"}
-#: Largest number of shooting nodes (the Newton matrix has ``(nodes * n + 1)**2`` entries).
-MAX_NODES = 1000
-#: Largest Newton budget and number of forcing periods of one orbit.
-MAX_ITER = 10_000
-MAX_PERIODS = 1_000_000
-#: An orbit is reported stable when every multiplier has modulus below ``1 - STABILITY_MARGIN``
-#: (a multiplier on the unit circle within the accuracy of the monodromy is not asymptotic
-#: stability).
-STABILITY_MARGIN = 1e-8
-
-
-class OrbitError(PwsdynError, RuntimeError):
-    """Newton shooting did not find a periodic orbit.
-
-    Attributes
-    ----------
-    reason : str
-        ``'singular'`` (the Newton matrix is singular: a multiplier 1, or a phase condition
-        tangent to the flow), ``'phase'`` (the phase condition is degenerate),
-        ``'equilibrium'`` (an autonomous iteration converged to a rest point), ``'signature'``
-        (the event sequence changed after it had been locked), ``'budget'`` (``max_iter``
-        Newton steps), ``'no_progress'`` (no step reduced the residual), ``'diverged'`` (the
-        Newton step or the period ran away: the guess is not near an orbit), ``'simulation'``
-        (an interval could not be integrated).
-    result : PeriodicOrbit or None
-        The last iterate, with ``converged = False``.
-    history : list[float]
-        Residual norms of the iterates.
-    """
-
-    def __init__(self, reason: str, message: str, result=None, history=None):
-        super().__init__(message)
-        self.reason = reason
-        self.result = result
-        self.history = list(history or [])
-
 
 class _SimulationFailed(Exception):
     def __init__(self, interval, traj=None, exc=None):
@@ -96,7 +61,7 @@ class _SimulationFailed(Exception):
         self.exc = exc
 
 
-def _signature_of(traj, end: DiscreteState, ctx: ModelContext) -> tuple:
+def _signature_of(traj, end: KernelState, ctx: ModelContext) -> tuple:
     return (tuple((e.kind, e.name, e.mode_before, e.mode_after) for e in traj.events),
             ctx.state_name(end))
 
@@ -181,19 +146,14 @@ class _Shooter:
         return float(np.max(np.abs(r)) / (1.0 + np.max(np.abs(X))))
 
 
-def _options(options: dict, caller: str = "find_periodic_orbit()") -> dict:
-    integrator_options(options, caller, _RESERVED)       # names, types and ranges
-    return {**integrator_options({}, caller), **SHOOTING_DEFAULTS, **options}
-
-
-def _initial_state(ctx: ModelContext, mode) -> DiscreteState:
+def _initial_state(ctx: ModelContext, mode) -> KernelState:
     return initial_state(ctx, mode)
 
 
 def _orbit_period(model, p, period, periods, what="period"):
     """The period of an orbit: ``periods`` forcing periods, or ``period`` (a multiple of the
     forcing period of a forced model; a guess for an autonomous one). Validated."""
-    Tf = forcing_period(model, p)
+    Tf = model.forcing_period_at(p)
     if Tf is None:
         if period is None:
             raise ArgumentError(f"model {model.name!r} is autonomous (no `forcing_period`): "
@@ -336,10 +296,10 @@ def find_periodic_orbit(model: ModelLike, x0: StateLike, *,
     >>> orbit.events[0].kind, orbit.stable
     ('impact', True)
     """
-    opts = _options(options)
-    model = V.model(model, kind="flow", caller="find_periodic_orbit()")
+    opts = shooting_options(options)
+    model = as_model(model, kind="flow", caller="find_periodic_orbit()")
     p = model.parameter_vector(params)
-    x0 = state_vector(model, x0)
+    x0 = V.state_vector(model, x0)
     period = V.positive("period", period, allow_none=True)
     t0 = V.number("t0", model.defaults.get("t0", 0.0) if t0 is None else t0)
     periods = V.integer("periods", periods, lo=1, hi=MAX_PERIODS)
@@ -654,10 +614,10 @@ def orbit_at(model, x0, *, params=None, period, t0=0.0, mode=None, tol: float = 
     (``converged`` says whether it closes to ``tol``). Newton-only options are ignored."""
     for key in ("nodes", "max_iter", "lock_tol", "max_nodes", "phase"):
         options.pop(key, None)
-    opts = _options(options, "PeriodicOrbit.from_trajectory()")
-    model = V.model(model, kind="flow", caller="PeriodicOrbit.from_trajectory()")
+    opts = shooting_options(options, "PeriodicOrbit.from_trajectory()")
+    model = as_model(model, kind="flow", caller="PeriodicOrbit.from_trajectory()")
     p = model.parameter_vector(params)
-    x0 = state_vector(model, x0)
+    x0 = V.state_vector(model, x0)
     period = V.positive("period", period)
     t0 = V.number("t0", t0)
     tol = V.tolerance("tol", tol)
@@ -685,7 +645,7 @@ def _guess_from_trajectory(traj, *, t0=None, period=None, periods=None, recurren
     ``recurrence`` (a :class:`Recurrence`, ``None`` for an autonomous model given ``period``)
     says how the period was chosen; its ``message`` is the warning to issue ('' if none).
     """
-    if traj._dense is None:
+    if traj.dense is None:
         raise ArgumentError("the trajectory has no dense output (simulated with `dense=False`)")
     ctx = ModelContext(traj.model, traj.params, traj.options.get("sliding", "convex"))
     Tf = ctx.forcing_period
@@ -715,7 +675,8 @@ def _guess_from_trajectory(traj, *, t0=None, period=None, periods=None, recurren
             evs = [e for e in traj.events if e.t >= t0]
             bounds = [t0] + [x for e in evs for x in (e.t, e.t_after)] + [t_end]
             spans = [(bounds[i], bounds[i + 1]) for i in range(0, len(bounds) - 1, 2)]
-            spans = [s for s in spans if ":" not in _name_at(traj, 0.5 * (s[0] + s[1]))]
+            spans = [s for s in spans
+                     if DiscreteState.parse(_name_at(traj, 0.5 * (s[0] + s[1]))).is_mode]
             if spans:
                 a, b = max(spans, key=lambda s: s[1] - s[0])
                 t0 = 0.5 * (a + b)
@@ -724,19 +685,19 @@ def _guess_from_trajectory(traj, *, t0=None, period=None, periods=None, recurren
     return t0, x0, T, _discrete_state_at(traj, ctx, t0), recurrence
 
 
-def _discrete_state_at(traj, ctx, t) -> DiscreteState:
+def _discrete_state_at(traj, ctx, t) -> KernelState:
     """The discrete state of a trajectory at ``t``: its ``state`` entry there, a sticking
     state completed with the regular mode it constrains from the event log."""
-    name = _name_at(traj, t)
-    if not name.startswith("stick:"):
+    name = DiscreteState.parse(_name_at(traj, t))
+    if name.kind != "stick":
         return ctx.state(name)
     hint = None
     for e in traj.events:
         if e.t_after > t:
             break
-        if ":" not in e.mode_after:
+        if DiscreteState.parse(e.mode_after).is_mode:
             hint = e.mode_after
-        elif ":" not in e.mode_before:
+        elif DiscreteState.parse(e.mode_before).is_mode:
             hint = e.mode_before
     return ctx.state(name, mode_hint=hint)
 

@@ -58,9 +58,13 @@ from ..errors import ArgumentError, Status
 from ..integrate.simulate import _simulate_compiled
 from ..integrate.trajectory import EventRecord, Trajectory
 from ..model.codegen import W_GUARD, W_HD, W_HDT, W_HDX
+from ..model.spec import as_model
 from ..newton import TrialRejected, newton
-from ..stability._context import ModelContext, forcing_period
+from ..integrate.trajectory import DiscreteState
+from ..stability._context import KernelState, ModelContext
 from ..stability._floquet import floquet_multipliers
+from ._base import STABILITY_MARGIN, OrbitError, shooting_options
+from ._orbit import PeriodicOrbit
 from ._segments import FieldKey, SegmentSystem
 from .signature import Signature
 
@@ -232,10 +236,8 @@ class OrbitProblem:
     def __init__(self, model, signature, *, params=None, parameters=None, periods: int = 1,
                  t_ref: float = 0.0, state: str | None = None, phase_ref=None,
                  phase_normal=None, sliding: str = "convex", **options):
-        from ._shooting import _options
-
-        self.opts = _options(options, "OrbitProblem()")
-        self.model = V.model(model, kind="flow", caller="OrbitProblem()")
+        self.opts = shooting_options(options, "OrbitProblem()")
+        self.model = as_model(model, kind="flow", caller="OrbitProblem()")
         self.sliding = V.choice("sliding", sliding, ("convex", "utkin"))
         self.opts["sliding"] = self.sliding
         m = self.model
@@ -281,7 +283,8 @@ class OrbitProblem:
         if self.forced:
             syms = m.parameter_symbols
             fp = m.forcing_period
-            self._Tf = sp.lambdify(syms, fp, modules="math")
+            # the period itself is the model's (Model.forcing_period_at); its derivatives
+            # with respect to the problem's parameters are the problem's own
             self._Tf_p = [sp.lambdify(syms, sp.diff(fp, sp.Symbol(k, real=True)), modules="math")
                           for k in self.parameters]
 
@@ -338,7 +341,7 @@ class OrbitProblem:
         if not sig:
             if state is None:
                 state = m.mode_names[m.initial_mode]
-            if not isinstance(state, str) or ":" in state:
+            if not (isinstance(state, str) and _is_mode(state)):
                 raise ArgumentError(f"an orbit without events runs in a mode of model "
                                     f"{m.name!r} {list(m.mode_names)}, got {state!r}")
             self.fields = [FieldKey("mode", _mode_by_name(m, state))]
@@ -356,10 +359,10 @@ class OrbitProblem:
         for k in range(nev):
             for back in range(1, nev + 1):
                 e = sig[(k - back) % nev]
-                if ":" not in e.mode_after:
+                if _is_mode(e.mode_after):
                     regular[k] = e.mode_after
                     break
-                if ":" not in e.mode_before:
+                if _is_mode(e.mode_before):
                     regular[k] = e.mode_before
                     break
         fields, bounds, names = [], [], []
@@ -368,8 +371,13 @@ class OrbitProblem:
             e0 = g[0]
             name = e0.mode_before
             names.append(name)
-            kind, _, ref = name.partition(":")
-            if not ref:
+            try:
+                st = DiscreteState.parse(name)
+            except ValueError:
+                raise ArgumentError(f"unknown discrete state {name!r} in the signature") \
+                    from None
+            kind, ref = st.kind, st.name
+            if kind == "mode":
                 fk = FieldKey("mode", _mode_by_name(m, name))
                 mode = fk.index
             elif kind == "stick":
@@ -518,8 +526,7 @@ class OrbitProblem:
     def period_value(self, p=None) -> float:
         """The period: ``periods * forcing_period`` (forced models)."""
         d = self.param_dict(p)
-        return self.periods * forcing_period(self.model, [d[k] for k in self.model.parameters],
-                                             self._Tf)
+        return self.periods * self.model.forcing_period_at([d[k] for k in self.model.parameters])
 
     def _period_grad(self, p) -> np.ndarray:
         d = self.param_dict(p)
@@ -844,14 +851,13 @@ class OrbitProblem:
             return None
         ctx = _context(self.model, self.param_dict(p), self.sliding)
         fk = self.fields[0]
-        from ..stability._context import DiscreteState
 
         if fk.kind == "mode":
-            st = DiscreteState(0, -1, fk.index)
+            st = KernelState(0, -1, fk.index)
         elif fk.kind == "stick":
-            st = DiscreteState(1, fk.index, fk.mode)
+            st = KernelState(1, fk.index, fk.mode)
         else:
-            st = DiscreteState(2, fk.index, int(ctx.stab[fk.index, 1]))
+            st = KernelState(2, fk.index, int(ctx.stab[fk.index, 1]))
         opts = dict(self.opts, variational=False, dense=False, throw=False, mode=None)
         nev = len(self.signature)
         try:
@@ -1286,7 +1292,6 @@ class OrbitProblem:
         the reason. Monodromy: the segments' flow Jacobians and the boundaries' full
         saltation matrices (:meth:`_saltation`).
         """
-        from ._orbit import PeriodicOrbit
 
         p = self._p(p)
         ev = self.evaluate(u, p, jacobian=False)
@@ -1344,8 +1349,6 @@ class OrbitProblem:
             trivial = complex(eg[np.argmin(np.abs(eg - 1.0))])
         else:
             mult = floquet_multipliers(M)
-        from ._shooting import STABILITY_MARGIN
-
         hist = list(history) if history is not None else [self.norm(ev.F, u)]
         nodes = np.array([t_base] + [segs[i].t + shift + (P if i < k else 0.0)
                                      for i in order[1:]])
@@ -1397,7 +1400,7 @@ class OrbitProblem:
         deg = None
         for tr, *_ in pieces:
             if tr is not None:
-                deg = np.asarray(tr._dense).shape[2]
+                deg = np.asarray(tr.dense).shape[2]
                 break
         for idx, ((tr, name, ta, za), P0) in enumerate(zip(pieces, Pstart)):
             if tr is None:
@@ -1406,10 +1409,10 @@ class OrbitProblem:
                 d = np.zeros((0, n + n * n, deg or 1))
                 ik = np.zeros(0, dtype=np.int64)
             else:
-                y = np.asarray(tr._y, dtype=float)[:, cols].copy()
+                y = np.asarray(tr.y, dtype=float)[:, cols].copy()
                 t = np.asarray(tr.t, dtype=float)
-                d = np.asarray(tr._dense, dtype=float)[:, cols, :].copy()
-                ik = np.asarray(tr._ikind, dtype=np.int64)
+                d = np.asarray(tr.dense, dtype=float)[:, cols, :].copy()
+                ik = np.asarray(tr.interval_kind, dtype=np.int64)
                 N = len(y)
                 y[:, n:] = np.matmul(y[:, n:].reshape(N, n, n), P0).reshape(N, n * n)
                 if len(d):
@@ -1425,14 +1428,14 @@ class OrbitProblem:
             ikind.append(ik)
             dense.append(d)
         Y = np.concatenate(ys)
-        traj = Trajectory(
+        traj = Trajectory.from_parts(
             t=np.concatenate(ts), x=Y[:, :n].copy(), state=np.concatenate(states),
             events=list(records), status=Status.SUCCESS, message=Status.SUCCESS.message,
             stats={}, model=self.model, params=self.param_dict(p),
             options={k: v for k, v in self.opts.items() if k != "throw"}, t0=float(t_start),
             t_end=float(t_end), jacobian=M, transfer_matrices=transfer,
-            _dense=np.concatenate(dense) if deg else None, _ikind=np.concatenate(ikind),
-            _y=Y, provenance={"model": self.model.name, "model_hash": self.model.hash,
+            dense=np.concatenate(dense) if deg else None, interval_kind=np.concatenate(ikind),
+            y=Y, provenance={"model": self.model.name, "model_hash": self.model.hash,
                               "pwsdyn_version": _version()})
         return traj, transfer, M
 
@@ -1565,13 +1568,21 @@ class OrbitSensitivity:
     u: np.ndarray
 
 
+def _is_mode(text) -> bool:
+    """``text`` is a regular mode's state (not sticking, sliding or unreadable)."""
+    try:
+        return DiscreteState.parse(text).is_mode
+    except ValueError:
+        return False
+
+
 def _nearest(values, target):
     values = np.atleast_1d(values)
     return values[int(np.argmin(np.abs(values - target)))]
 
 
 def _version():
-    from .. import __version__
+    from .._version import __version__
 
     return __version__
 
@@ -1584,8 +1595,6 @@ def locked_orbit(model, x0, *, params, T, Tf, t0, mode, signature, phase, tol, m
                  options):
     """``find_periodic_orbit(..., signature=...)``: the orbit solved on a fixed signature
     (arguments validated by the caller)."""
-    from ._shooting import OrbitError
-
     if isinstance(signature, str):
         try:
             signature = Signature.parse(signature)
@@ -1713,14 +1722,14 @@ def _guard(ctx, j, t, x) -> bool:
 
 
 def _state_field(ctx, fk: FieldKey, t, x):
-    from ..stability._context import DiscreteState
+    from ..stability._context import KernelState
 
     if fk.kind == "mode":
-        st = DiscreteState(0, -1, fk.index)
+        st = KernelState(0, -1, fk.index)
     elif fk.kind == "stick":
-        st = DiscreteState(1, fk.index, fk.mode)
+        st = KernelState(1, fk.index, fk.mode)
     else:
-        st = DiscreteState(2, fk.index, int(ctx.stab[fk.index, 1]))
+        st = KernelState(2, fk.index, int(ctx.stab[fk.index, 1]))
     return ctx.field(t, x, st)
 
 

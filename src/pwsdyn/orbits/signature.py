@@ -23,14 +23,16 @@ from __future__ import annotations
 import re
 from typing import NamedTuple
 
+from ..integrate.trajectory import EVENT_KINDS, DiscreteState
+
 #: Event kinds of a signature (those of the event log).
-KINDS = ("impact", "transition", "chatter", "stick", "release", "crossing", "slide_start",
-         "slide_end")
+KINDS = EVENT_KINDS
 
 
 class SignatureEvent(NamedTuple):
     """One event of a signature: its kind, the model event or switch it belongs to, and the
-    discrete states before and after it (a mode name, ``stick:<event>``, ``slide:<switch>``)."""
+    discrete states before and after it (:class:`~pwsdyn.integrate.trajectory.DiscreteState`:
+    a mode name, ``stick:<event>``, ``slide:<switch>``)."""
 
     kind: str
     name: str
@@ -83,6 +85,12 @@ class Signature(tuple):
             if e.kind not in KINDS:
                 raise ValueError(f"unknown event kind {e.kind!r} in a signature; kinds are "
                                  f"{list(KINDS)}")
+        # the states as values of the one discrete-state type (equal to their text)
+        items = [e if isinstance(e.mode_before, DiscreteState)
+                 and isinstance(e.mode_after, DiscreteState)
+                 else e._replace(mode_before=DiscreteState.parse(e.mode_before),
+                                 mode_after=DiscreteState.parse(e.mode_after))
+                 for e in items]
         return super().__new__(cls, items)
 
     # ---- construction -------------------------------------------------------------------

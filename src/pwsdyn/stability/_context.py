@@ -1,16 +1,21 @@
-"""Model quantities at a point, for the stability and shooting code (Python side).
+"""A compiled model with parameter values: the one context of the analyses (Python side).
 
-:class:`ModelContext` holds a compiled model with one parameter vector and evaluates what the
-projections of thesis eq. 2.25 and 2.36 and the shooting Jacobians need: the vector field of a
-discrete state (the kernel's own :func:`~pwsdyn.integrate._kernel.state_field`, so sticking and
-sliding fields are the ones integrated), surfaces ``h`` with ``h_x``, ``h_t``, resets ``g``
-with ``g_x``, ``g_t``. It also maps the discrete-state names of a trajectory (``"flight"``,
-``"stick:impact"``, ``"slide:slip"``) to the kernel's codes.
+:class:`ModelContext` holds a compiled model (a flow or a map) with one parameter vector. For
+a flow it evaluates what the projections of thesis eq. 2.25 and 2.36 and the shooting
+Jacobians need: the vector field of a discrete state (the kernel's own
+:func:`~pwsdyn.integrate._kernel.state_field`, so sticking and sliding fields are the ones
+integrated), surfaces ``h`` with ``h_x``, ``h_t``, resets ``g`` with ``g_x``, ``g_t``. It
+also maps the discrete states of a trajectory
+(:class:`~pwsdyn.integrate.trajectory.DiscreteState`: ``"flight"``, ``"stick:impact"``,
+``"slide:slip"``) to the kernel's codes (:class:`KernelState`).
+
+The global analyses (:mod:`pwsdyn.explore`) build one context per model and process with
+:meth:`ModelContext.get`, from a model or from the spec a worker receives.
 """
 
 from __future__ import annotations
 
-import math
+import threading
 from dataclasses import dataclass
 from typing import Mapping
 
@@ -22,63 +27,102 @@ from ..errors import ArgumentError
 from ..integrate._load import kernel
 from ..integrate._start import REGULAR, SLIDE, STICK
 from ..integrate.simulate import kernel_tables
-from ..model import compile_model
+from ..integrate.trajectory import DiscreteState
+from ..model import compile_model, load_model
 from ..model.codegen import W_F, W_G, W_GT, W_GX, W_H, W_HT, W_HX
-
-
-_FORCING_FUNCTIONS: dict = {}
+from ..model.spec import as_model
 
 
 @dataclass(frozen=True)
-class DiscreteState:
-    """A discrete state of the kernel: ``kind`` 0 regular mode, 1 sticking on impact event
-    ``index``, 2 sliding on switch ``index``; ``mode`` the mode index (for sticking the mode
-    whose field is constrained)."""
+class KernelState:
+    """A discrete state as the kernel codes it: ``kind`` 0 regular mode, 1 sticking on impact
+    event ``index``, 2 sliding on switch ``index``; ``mode`` the mode index (for sticking the
+    mode whose field is constrained). :meth:`ModelContext.state` and
+    :meth:`ModelContext.state_name` translate to and from :class:`DiscreteState`."""
 
     kind: int
     index: int
     mode: int
 
 
+#: The contexts of this process by model hash (:meth:`ModelContext.get`); worker threads
+#: share them, so each model is built once per process.
+_CONTEXTS: dict = {}
+_CONTEXTS_LOCK = threading.RLock()
+
+
 class ModelContext:
-    """A compiled model with parameter values: point evaluations for stability code.
+    """A compiled model with parameter values: point evaluations for the analyses.
 
     Parameters
     ----------
-    model : Model, str, path or dict
+    model : Model, MapModel, str, path or dict
         Anything :func:`pwsdyn.load_model` accepts.
     params : dict, optional
         Parameter values by name (defaults of the model otherwise).
     sliding : str
         The sliding method of Filippov switches (the ``sliding`` option of
         :func:`pwsdyn.simulate`).
+    kind : {'flow', 'map', None}
+        The kind of model required (None: either).
+
+    Attributes
+    ----------
+    model : Model or MapModel
+    is_map : bool
+    cm : CompiledModel or CompiledMap
+    p : numpy.ndarray
+        The parameter vector; ``params`` the same by name.
     """
 
     def __init__(self, model, params: Mapping[str, float] | None = None,
-                 sliding: str = "convex"):
-        self.model = V.model(model, kind="flow")
-        self.cm = compile_model(self.model)
+                 sliding: str = "convex", *, kind: str | None = "flow"):
+        self.model = as_model(model, kind=kind)
+        self.is_map = bool(getattr(self.model, "is_map", False))
         self.p = self.model.parameter_vector(params)
+        self.params = dict(zip(self.model.parameters, (float(v) for v in self.p)))
+        self.n = self.model.n_states
+        if self.is_map:
+            from ..model.maps import compile_map
+
+            self.cm = compile_map(self.model)
+            return
+        self.cm = compile_model(self.model)
         self._pv = np.ascontiguousarray(self.p if self.p.size else np.zeros(1), dtype=float)
         self.etab, self.eact, self.stab = kernel_tables(self.cm, sliding)
-        self.n = self.model.n_states
         self.nm = len(self.model.modes)
-        self.params = dict(zip(self.model.parameters, (float(v) for v in self.p)))
+
+    @classmethod
+    def get(cls, payload_or_model) -> "ModelContext":
+        """The context of a model in this process, built once: from a model (anything
+        :func:`pwsdyn.load_model` accepts) or from the payload a worker receives (``spec``,
+        ``origin`` and ``hash`` of the model: a worker never receives compiled functions).
+        A flow or a map, with the model's default parameters."""
+        with _CONTEXTS_LOCK:
+            if isinstance(payload_or_model, dict):
+                key = payload_or_model["hash"]
+                if key not in _CONTEXTS:
+                    from ..model.spec import model_from_dict
+
+                    model = model_from_dict(dict(payload_or_model["spec"]),
+                                            origin=payload_or_model["origin"])
+                    if model.hash != key:
+                        raise RuntimeError(f"model {model.name!r} rebuilt on a worker has hash "
+                                           f"{model.hash}, expected {key} (different pwsdyn "
+                                           "versions on the client and the workers?)")
+                    _CONTEXTS[key] = cls(model, kind=None)
+                return _CONTEXTS[key]
+            model = load_model(payload_or_model)
+            if model.hash not in _CONTEXTS:
+                _CONTEXTS[model.hash] = cls(model, kind=None)
+            return _CONTEXTS[model.hash]
 
     # ---- identity -----------------------------------------------------------------------
     @property
     def forcing_period(self) -> float | None:
-        """``model.forcing_period_value(params)``, through a cached compiled expression (the
-        SymPy substitution costs milliseconds per call, as much as a shooting step)."""
-        fp = self.model.forcing_period
-        if fp is None:
-            return None
-        key = (self.model.hash, str(fp))
-        fn = _FORCING_FUNCTIONS.get(key)
-        if fn is None:
-            fn = sp.lambdify(self.model.parameter_symbols, fp, modules="math")
-            _FORCING_FUNCTIONS[key] = fn
-        return forcing_period(self.model, self.p, fn)
+        """The forcing period at the context's parameters (:meth:`Model.forcing_period_at
+        <pwsdyn.model.Model.forcing_period_at>`)."""
+        return self.model.forcing_period_at(self.p)
 
     @property
     def autonomous(self) -> bool:
@@ -119,7 +163,7 @@ class ModelContext:
     def mode_field(self, mode: int, t: float, x) -> np.ndarray:
         return self._eval(W_F, mode, t, x, self.n)
 
-    def field(self, t: float, x, state: DiscreteState, sliding_gain: float = 0.0) -> np.ndarray:
+    def field(self, t: float, x, state: KernelState, sliding_gain: float = 0.0) -> np.ndarray:
         """The vector field the kernel integrates in discrete state ``state``."""
         out = np.zeros(self.n)
         kernel().state_field(self.cm.evaluate, self._pv, int(state.kind), int(state.index),
@@ -146,92 +190,69 @@ class ModelContext:
             return int(self.stab[self.switch_index(name), 0])
         return int(self.etab[self.event_index(name), 0])
 
-    def state(self, name: str, mode_hint: str | int | None = None) -> DiscreteState:
-        """The kernel code of a discrete-state name (``Trajectory.state`` entries).
+    def state(self, name, mode_hint: str | int | None = None) -> KernelState:
+        """The kernel code of a discrete state (a :class:`DiscreteState` or its text, as in
+        ``Trajectory.state``).
 
         ``mode_hint`` is the regular mode a sticking state constrains (the ``mode_before`` of
         the ``stick`` event that started it); by default the first mode of the impact event.
         """
-        if ":" not in name:
-            return DiscreteState(REGULAR, -1, self.model.mode_index(name))
-        kind, ref = name.split(":", 1)
-        if kind == "stick":
-            j = self.event_index(ref)
+        st = DiscreteState.parse(name)
+        if st.kind == "mode":
+            return KernelState(REGULAR, -1, self.model.mode_index(st.name))
+        if st.kind == "stick":
+            j = self.event_index(st.name)
             if mode_hint is None:
                 mode = self.model.events[j].modes[0]
             elif isinstance(mode_hint, str):
                 mode = self.model.mode_index(mode_hint)
             else:
                 mode = int(mode_hint)
-            return DiscreteState(STICK, j, mode)
-        if kind == "slide":
-            s = self.switch_index(ref)
-            # the kernel keeps the `above` mode while sliding (only the switch index matters
-            # for the sliding field)
-            return DiscreteState(SLIDE, s, int(self.stab[s, 1]))
-        raise ValueError(f"unknown discrete state {name!r}")
+            return KernelState(STICK, j, mode)
+        s = self.switch_index(st.name)
+        # the kernel keeps the `above` mode while sliding (only the switch index matters
+        # for the sliding field)
+        return KernelState(SLIDE, s, int(self.stab[s, 1]))
 
-    def state_name(self, st: DiscreteState) -> str:
+    def state_name(self, st: KernelState) -> DiscreteState:
         if st.kind == REGULAR:
-            return self.model.modes[st.mode].name
+            return DiscreteState("mode", self.model.modes[st.mode].name)
         if st.kind == STICK:
-            return f"stick:{self.model.events[st.index].name}"
-        return f"slide:{self.model.switches[st.index].name}"
-
-
-def forcing_period(model, p, fn=None) -> float | None:
-    """The forcing period of ``model`` at the parameter vector ``p`` (``None`` for an
-    autonomous model); an :class:`ArgumentError` naming the parameters where it is not a
-    positive finite number (``2*pi/omega`` at ``omega = 0``)."""
-    if model.forcing_period is None:
-        return None
-    fn = fn or model.forcing_period_function
-    try:
-        val = float(fn(*(float(q) for q in p)))
-        got = repr(val)
-    except (ArithmeticError, ValueError, TypeError) as exc:
-        val, got = math.nan, f"undefined ({exc})"
-    if not (math.isfinite(val) and val > 0):
-        where = ", ".join(f"{k}={float(v):.17g}" for k, v in zip(model.parameters, p))
-        raise ArgumentError(f"the forcing period {model.forcing_period} of model "
-                            f"{model.name!r} must be a positive finite number, got {got} at "
-                            f"the parameters ({where}): choose parameters where it is")
-    return val
+            return DiscreteState("stick", self.model.events[st.index].name)
+        return DiscreteState("slide", self.model.switches[st.index].name)
 
 
 def check_state_name(model, mode, name: str = "mode") -> None:
     """``mode`` names a discrete state of the (symbolic) flow ``model``: None, a
-    :class:`DiscreteState`, a mode name, ``stick:<event>`` or ``slide:<switch>``. Checked
-    before anything is compiled; :func:`initial_state` then makes the kernel's code."""
-    if mode is None or isinstance(mode, DiscreteState):
+    :class:`KernelState`, a mode name, ``stick:<event>`` or ``slide:<switch>`` (a
+    :class:`DiscreteState` or its text). Checked before anything is compiled;
+    :func:`initial_state` then makes the kernel's code."""
+    if mode is None or isinstance(mode, KernelState):
         return
     must = (f"None or a discrete state of model {model.name!r}: a mode "
             f"{list(model.mode_names)}, 'stick:<event>' with an event "
             f"{[e.name for e in model.events]} or 'slide:<switch>' with a switch "
             f"{[s.name for s in model.switches]}")
-    if not isinstance(mode, str):
-        raise V.fail(name, must, mode)
-    kind, sep, ref = mode.partition(":")
     try:
-        if not sep:
-            model.mode_index(mode)
-            return
+        st = DiscreteState.parse(mode)
     except ValueError:
         raise V.fail(name, must, mode) from None
-    if kind == "stick" and ref in [e.name for e in model.events]:
+    if st.kind == "mode" and st.name in model.mode_names:
         return
-    if kind == "slide" and ref in [s.name for s in model.switches]:
+    if st.kind == "stick" and st.name in [e.name for e in model.events]:
+        return
+    if st.kind == "slide" and st.name in [s.name for s in model.switches]:
         return
     raise V.fail(name, must, mode)
 
 
-def initial_state(ctx, mode, name: str = "mode") -> DiscreteState:
-    """The discrete state named by ``mode`` (None: the model's initial mode; a
-    :class:`DiscreteState`; a mode name, ``stick:<event>`` or ``slide:<switch>``), with an
-    :class:`ArgumentError` naming ``name`` otherwise."""
+def initial_state(ctx, mode, name: str = "mode") -> KernelState:
+    """The kernel code of the discrete state named by ``mode`` (None: the model's initial
+    mode; a :class:`KernelState`; a mode name, ``stick:<event>`` or ``slide:<switch>``), with
+    an :class:`ArgumentError` naming ``name`` otherwise."""
     if mode is None:
-        return DiscreteState(0, -1, ctx.model.initial_mode)
-    if isinstance(mode, DiscreteState):
+        return KernelState(REGULAR, -1, ctx.model.initial_mode)
+    if isinstance(mode, KernelState):
         return mode
     if not isinstance(mode, str):
         raise V.fail(name, "None, a mode name, 'stick:<event>' or 'slide:<switch>'", mode)
@@ -243,8 +264,9 @@ def initial_state(ctx, mode, name: str = "mode") -> DiscreteState:
                             f"'stick:<impact event>' or 'slide:<switch>'): {exc}") from None
 
 
-def event_states(ctx: ModelContext, events, start: DiscreteState):
-    """The discrete states before and after each event of a log, starting in ``start``.
+def event_states(ctx: ModelContext, events, start: KernelState):
+    """The kernel codes of the discrete states before and after each event of a log,
+    starting in ``start``.
 
     Sticking states take their constrained mode from the regular mode before them.
     """
@@ -253,7 +275,7 @@ def event_states(ctx: ModelContext, events, start: DiscreteState):
     last_mode = ctx.model.modes[start.mode].name
     for e in events:
         before = cur
-        if ":" not in e.mode_after:
+        if DiscreteState.parse(e.mode_after).is_mode:
             last_mode = e.mode_after
         after = ctx.state(e.mode_after, mode_hint=last_mode)
         out.append((before, after))
@@ -261,12 +283,13 @@ def event_states(ctx: ModelContext, events, start: DiscreteState):
     return out
 
 
-def trajectory_start_state(ctx: ModelContext, traj) -> DiscreteState:
-    """Discrete state of a trajectory at its start (from its first node)."""
-    name = traj.state[0]
+def trajectory_start_state(ctx: ModelContext, traj) -> KernelState:
+    """Kernel code of the discrete state of a trajectory at its start (its first node)."""
+    name = DiscreteState.parse(str(traj.state[0]))
     hint = None
-    if name.startswith("stick:") and traj.events:
+    if name.kind == "stick" and traj.events:
         # a run that starts sticking releases (or leaves) into the constrained mode
         e = traj.events[0]
-        hint = next((m for m in (e.mode_before, e.mode_after) if ":" not in m), None)
+        hint = next((m for m in (e.mode_before, e.mode_after)
+                     if DiscreteState.parse(m).is_mode), None)
     return ctx.state(name, mode_hint=hint)

@@ -26,10 +26,11 @@ import numpy as np
 
 from .. import _validate as V
 from ..errors import ArgumentError, PwsdynError, SolveError, Status
-from ..integrate.simulate import integrator_options, _simulate_compiled, state_vector
+from ..integrate.simulate import integrator_options, _simulate_compiled
+from ..model.spec import as_model
 from ..integrate.trajectory import EVENT_KINDS
-from ._context import (DiscreteState, ModelContext, check_state_name, event_states,
-                       forcing_period, initial_state, trajectory_start_state)
+from ._context import (KernelState, ModelContext, check_state_name, event_states,
+                       initial_state, trajectory_start_state)
 
 if TYPE_CHECKING:
     from .._typing import ModelLike, StateLike
@@ -107,11 +108,11 @@ class PoincareResult:
     event: object = None
 
 
-def _initial_state(ctx: ModelContext, mode) -> DiscreteState:
+def _initial_state(ctx: ModelContext, mode) -> KernelState:
     return initial_state(ctx, mode)
 
 
-def _run(ctx, x0, t0, t_end, st0: DiscreteState, opts, stop=None):
+def _run(ctx, x0, t0, t_end, st0: KernelState, opts, stop=None):
     return _simulate_compiled(ctx.cm, np.asarray(x0, dtype=float), float(t0), float(t_end),
                               ctx.p, opts, mode0=st0.mode, dkind0=st0.kind, didx0=st0.index,
                               stop=stop)
@@ -192,9 +193,9 @@ def poincare_map(model: ModelLike, x0: StateLike, section: str, *,
     """
     dense = V.flag("dense", options.pop("dense", True))
     opts = _options(options, dense=dense)
-    model = V.model(model, kind="flow", caller="poincare_map()")
+    model = as_model(model, kind="flow", caller="poincare_map()")
     p = model.parameter_vector(params)
-    x0 = state_vector(model, x0)
+    x0 = V.state_vector(model, x0)
     names = ["stroboscopic"] + [e.name for e in model.events] + [s.name for s in model.switches]
     if not isinstance(section, str) or section not in names:
         raise ArgumentError(f"unknown section {V.describe(section)}: `section` must be "
@@ -206,7 +207,7 @@ def poincare_map(model: ModelLike, x0: StateLike, section: str, *,
     side = V.choice("side", side, ("after", "before"))
     check_state_name(model, mode)
     t_max = V.number("t_max", t_max, allow_none=True)
-    Tf = forcing_period(model, p)
+    Tf = model.forcing_period_at(p)
     if section == "stroboscopic":
         if Tf is None:
             raise ArgumentError(f"model {model.name!r} has no `forcing_period`: it has no "
@@ -280,7 +281,7 @@ def poincare_map(model: ModelLike, x0: StateLike, section: str, *,
                           dt[1:].copy(), ext, phi, side, int(returns), traj, ev)
 
 
-def _end_state(ctx: ModelContext, traj, st0: DiscreteState) -> DiscreteState:
+def _end_state(ctx: ModelContext, traj, st0: KernelState) -> KernelState:
     if not traj.events:
         return st0
     return event_states(ctx, traj.events, st0)[-1][1]

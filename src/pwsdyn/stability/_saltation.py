@@ -43,7 +43,9 @@ from .. import _validate as V
 from ..errors import ArgumentError
 from ..integrate._load import kernel
 from ..integrate._start import REGULAR, SLIDE
-from ._context import (DiscreteState, ModelContext, check_state_name, event_states,
+from ..integrate.trajectory import DiscreteState
+from ..model.spec import as_model
+from ._context import (KernelState, ModelContext, check_state_name, event_states,
                        trajectory_start_state)
 
 if TYPE_CHECKING:
@@ -82,7 +84,7 @@ def _chatter_full(ctx: ModelContext, name: str, t: float, x_before, mode: int,
 
 
 def _saltation_pair(ctx: ModelContext, kind: str, name: str, t: float, x_before, x_after,
-                    st_before: DiscreteState, st_after: DiscreteState, sliding_gain: float = 0.0):
+                    st_before: KernelState, st_after: KernelState, sliding_gain: float = 0.0):
     """Full and projected saltation matrices at one event from the model's derivatives
     (for ``chatter`` the kernel's full matrix and ``None``: it has no projected form)."""
     n = ctx.n
@@ -171,7 +173,7 @@ def saltation_matrix(model: ModelLike, event: str, t: float, x: StateLike, *,
     if chatter and form != "full":
         raise ArgumentError("the complete-chattering map has no projected saltation matrix: "
                             "use form='full' with chatter=True")
-    model = V.model(model, kind="flow", caller="saltation_matrix()")
+    model = as_model(model, kind="flow", caller="saltation_matrix()")
     model.parameter_vector(params)
     names = [e.name for e in model.events] + [s.name for s in model.switches]
     if not isinstance(event, str) or event not in names:
@@ -180,7 +182,7 @@ def saltation_matrix(model: ModelLike, event: str, t: float, x: StateLike, *,
     t = V.number("t", t)
     x = V.vector("x", x, size=model.n_states)
     check_state_name(model, mode)
-    if mode is not None and (not isinstance(mode, str) or ":" in mode):
+    if mode is not None and not (isinstance(mode, str) and DiscreteState.parse(mode).is_mode):
         raise V.fail("mode", f"None or a mode of model {model.name!r} "
                      f"{list(model.mode_names)}", mode)
     sliding = V.choice("sliding", sliding, ("convex", "utkin"))
@@ -191,8 +193,8 @@ def saltation_matrix(model: ModelLike, event: str, t: float, x: StateLike, *,
         j = names.index(event)
         ev = ctx.model.events[j]
         m = ctx.model.mode_index(mode) if mode is not None else ev.modes[0]
-        st_b = DiscreteState(REGULAR, -1, m)
-        st_a = DiscreteState(REGULAR, -1, ev.target if ev.target is not None else m)
+        st_b = KernelState(REGULAR, -1, m)
+        st_a = KernelState(REGULAR, -1, ev.target if ev.target is not None else m)
         kind = ev.kind
         x_after = ctx.g(j, t, x)
         if chatter:
@@ -215,11 +217,11 @@ def saltation_matrix(model: ModelLike, event: str, t: float, x: StateLike, *,
             m = arrive[0]
         else:
             m = ctx.model.mode_index(mode)
-        st_b = DiscreteState(REGULAR, -1, m)
+        st_b = KernelState(REGULAR, -1, m)
         if ha < 0 and hb > 0:
-            kind, st_a = "slide_start", DiscreteState(SLIDE, s, a)
+            kind, st_a = "slide_start", KernelState(SLIDE, s, a)
         else:
-            kind, st_a = "crossing", DiscreteState(REGULAR, -1, b if m == a else a)
+            kind, st_a = "crossing", KernelState(REGULAR, -1, b if m == a else a)
         x_after = x
     full, proj = _saltation_pair(ctx, kind, event, t, x, x_after, st_b, st_a, sliding_gain)
     return full if form == "full" else proj

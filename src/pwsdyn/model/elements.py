@@ -1,0 +1,86 @@
+"""The parts a flow model is made of: modes, surfaces, events and switches (symbolic).
+
+Values only, with no parsing: the model definition (:mod:`pwsdyn.model.spec`) builds them,
+and the expansion of discontinuous fields (:mod:`pwsdyn.model.discontinuities`) makes more
+of them, each reading them from here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+
+@dataclass(frozen=True)
+class Mode:
+    """A smooth mode: its name and vector field ``f(t, x, p)`` (one expression per state)."""
+
+    name: str
+    rhs: tuple
+
+
+@dataclass(frozen=True)
+class Surface:
+    """A scalar event function ``h(t, x, p)``; its zero set is a discontinuity surface."""
+
+    name: str
+    expr: Any
+
+
+@dataclass(frozen=True)
+class Event:
+    """A transition fired when ``h`` crosses zero in ``direction`` while in one of ``modes``.
+
+    Attributes
+    ----------
+    name : str
+    kind : {'impact', 'transition'}
+    surface : int
+        Index into ``Model.surfaces``.
+    direction : int
+        -1: ``h`` decreasing through zero; +1 increasing; 0 either.
+    modes : tuple[int, ...]
+        Modes in which the event is active.
+    guard : sympy Boolean or None
+        The event fires only where the guard holds.
+    reset : tuple or None
+        The new state ``g(t, x, p)``, one expression per state (identity where not given).
+    target : int or None
+        The mode after the event (``None``: the same mode).
+    terminal : bool
+        Stop the simulation after this event.
+    """
+
+    name: str
+    kind: str
+    surface: int
+    direction: int
+    modes: tuple
+    guard: Any = None
+    reset: tuple | None = None
+    target: int | None = None
+    terminal: bool = False
+
+
+@dataclass(frozen=True)
+class Switch:
+    """A switching surface: mode ``above`` where ``h > 0``, ``below`` where ``h < 0``.
+
+    Attributes
+    ----------
+    kind : {'filippov', 'continuous'}
+        ``filippov``: the field jumps across the surface; the flow crosses or slides (thesis
+        eq. 2.6-2.8). ``continuous``: only a derivative jumps (``Abs``, ``Max``, ``Min``); the
+        crossing is located, there is no sliding.
+    family : tuple or None
+        The field ``f(t, x, u)`` with the switching term replaced by
+        :data:`pwsdyn.model.discontinuities.U_SYMBOL` (``u = +1`` above, ``-1`` below), for
+        Utkin's equivalent control; ``None``: ``(1 + u)/2 f_above + (1 - u)/2 f_below``.
+    """
+
+    name: str
+    surface: int
+    above: int
+    below: int
+    kind: str = "filippov"
+    family: tuple | None = None
