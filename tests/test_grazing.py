@@ -180,3 +180,20 @@ def test_grazing_sliding_of_a_forced_friction_oscillator():
     assert abs(ratios[0][1] / const - 1) < 0.01            # the square-root law, within 1%
     assert abs(ratios[0][1] / const - 1) < abs(ratios[-1][1] / const - 1)   # converging
     assert br.admissible.all()
+
+
+def test_grazing_sliding_curve_in_two_parameters():
+    """The grazing-sliding followed in (omega, F): F_GS(omega) = V D(omega) / omega."""
+    m_, k, c, w, V, mu = 1.0, 1.0, 0.1, 1.5, 0.5, 0.3
+    model = pwsdyn.load_model(FRICTION)
+    D = math.hypot(k - m_ * w * w, c * w)
+    F0 = 0.5 * V * D / w
+    X, Y = np.linalg.solve(np.array([[k - m_ * w * w, c * w], [-c * w, k - m_ * w * w]]),
+                           [F0, 0.0])
+    orb = pwsdyn.find_periodic_orbit(model, [mu / k + X, w * Y], t0=0.0, params={"F": F0})
+    br = pwsdyn.continue_orbit(model, orb, "F", span=(0.0, 1.0), ds=0.05, on_dib="stop")
+    cur = pwsdyn.continue_bifurcation(model, br.special("GS")[0], ("omega", "F"),
+                                      span=(1.3, 2.0), ds=0.05, max_points=10)
+    assert cur.curve == "GS" and len(cur) >= 5 and np.ptp(cur.values) > 0.2
+    for om, F in zip(cur.values, cur.values_of("F")):
+        assert abs(F - V * math.hypot(k - m_ * om * om, c * om) / om) < 1e-8

@@ -14,8 +14,8 @@ from ..errors import ArgumentError
 from ..model.spec import as_model
 from .branch import Branch, SpecialPoint
 from .engine import Continuation, ContinuationError, ContinuationSettings, null_space
-from .problems import (CURVE_KINDS, BifurcationCurveProblem, OrbitBranchProblem,
-                       equilibrium_problem)
+from .problems import (CURVE_KINDS, MONITOR_KINDS, BifurcationCurveProblem,
+                       OrbitBranchProblem, equilibrium_problem)
 
 _SETTING_NAMES = {f.name for f in dataclasses.fields(ContinuationSettings)}
 
@@ -203,15 +203,20 @@ def _parameter(model, param):
 
 
 def _with_options(prob, options):
+    """The problem with integrator options changed (those given to continue_orbit)."""
     from ..orbits.problem import OrbitProblem
 
-    u_keep = dict(prob.opts)
-    u_keep.update(options)
-    drop = ("variational", "dense", "throw", "mode", "sliding")
-    opts = {k: v for k, v in options.items() if k not in drop}
+    opts = {k: v for k, v in prob.opts.items() if k not in
+            ("variational", "dense", "throw", "mode", "sliding")}
+    opts.update(options)
+    from ..integrate.simulate import DEFAULTS
+
+    opts = {k: v for k, v in opts.items() if k in DEFAULTS}
+    kw = {} if prob.signature else {"state": str(prob.state_names[0])}
     return OrbitProblem(prob.model, prob.signature, params=prob.params,
                         parameters=list(prob.parameters), periods=prob.periods,
-                        t_ref=prob.t_ref, sliding=prob.sliding, **opts)
+                        t_ref=prob.t_ref, sliding=prob.sliding, phase_ref=prob.phase_ref,
+                        phase_normal=prob.phase_normal, **kw, **opts)
 
 
 def _from_special(sp: SpecialPoint, model, param, settings, progress, params, options,
@@ -231,9 +236,9 @@ def _from_special(sp: SpecialPoint, model, param, settings, progress, params, op
         all_params.update(params)
     if param != base.parameter or params:
         # the same orbit, another parameter (or other values): a new problem, corrected there
-        prob = OrbitProblem(op.model, op.signature, params=all_params, parameters=[param],
-                            periods=op.periods, t_ref=op.t_ref, sliding=op.sliding,
-                            **_problem_options(op, options))
+        prob = op.replace(params=all_params, parameters=[param])
+        if options:
+            prob = _with_options(prob, options)
         return _run(OrbitBranchProblem(prob), pt.u, all_params[param], settings,
                     progress=progress, model=model, on_dib=on_dib, options=options)
     if sp.kind == "PD":
@@ -245,16 +250,6 @@ def _from_special(sp: SpecialPoint, model, param, settings, progress, params, op
                 tangent=pt.tangent * np.sign(settings.ds), correct_start=False,
                 progress=progress, model=model, start_kind=sp.kind, on_dib=on_dib,
                 options=options)
-
-
-def _problem_options(op, options):
-    drop = ("variational", "dense", "throw", "mode", "sliding")
-    opts = {k: v for k, v in op.opts.items() if k not in drop}
-    opts.update(options or {})
-    from ..integrate.simulate import DEFAULTS
-
-    # only what differs from the integrator's defaults is passed on (validated again)
-    return {k: v for k, v in opts.items() if k in DEFAULTS}
 
 
 def _switch_period_doubling(sp, model, settings, progress, options, on_dib="switch"):
@@ -270,9 +265,10 @@ def _switch_period_doubling(sp, model, settings, progress, options, on_dib="swit
     pt = sp.point
     params = dict(op.params)
     params[base.parameter] = pt.lam
-    prob2 = OrbitProblem(op.model, op.signature.doubled(), params=params,
-                         parameters=[base.parameter], periods=2 * op.periods, t_ref=op.t_ref,
-                         sliding=op.sliding, **_problem_options(op, options))
+    prob2 = op.replace(signature=op.signature.doubled(), params=params,
+                       periods=2 * op.periods)
+    if options:
+        prob2 = _with_options(prob2, options)
     t0, xs, Ts = op.unpack(pt.u)
     u2 = prob2.pack(t0, list(xs) + list(xs), list(Ts) + list(Ts))
     bp2 = OrbitBranchProblem(prob2)
@@ -459,8 +455,8 @@ def load_branch(path) -> Branch:
 def continue_bifurcation(model, special_point: SpecialPoint, params, *, span=None, span2=None,
                          ds: float | None = None, max_points: int = 200,
                          progress: bool = False, **options) -> Branch:
-    """Follow a fold (``LP``), period doubling (``PD``), Neimark-Sacker point (``NS``) or
-    graze (``GR``) of a periodic orbit in two parameters: the curve of that bifurcation in the
+    """Follow a fold (``LP``), period doubling (``PD``), Neimark-Sacker point (``NS``),
+    graze (``GR``) or grazing-sliding (``GS``) of a periodic orbit in two parameters: the curve of that bifurcation in the
     parameter plane.
 
     Each point is an orbit at which the bifurcation's test function (of the multipliers, or
@@ -471,7 +467,7 @@ def continue_bifurcation(model, special_point: SpecialPoint, params, *, span=Non
     ----------
     model : Model, str, path or dict
     special_point : SpecialPoint
-        A located ``LP``, ``PD``, ``NS`` or ``GR`` of an orbit branch
+        A located ``LP``, ``PD``, ``NS``, ``GR`` or ``GS`` of an orbit branch
         (:attr:`Branch.special_points`).
     params : (str, str)
         The two parameters; the branch's parameter must be one of them. The first is the
@@ -515,10 +511,11 @@ def continue_bifurcation(model, special_point: SpecialPoint, params, *, span=Non
     op = base.orbit_problem
     all_params = dict(op.params)
     all_params[base.parameter] = sp.value
-    prob = OrbitProblem(op.model, op.signature, params=all_params, parameters=[p1, p2],
-                        periods=op.periods, t_ref=op.t_ref, sliding=op.sliding,
-                        **_problem_options(op, options))
-    curve = BifurcationCurveProblem(prob, sp.kind, key=sp.key if sp.kind == "GR" else "")
+    prob = op.replace(params=all_params, parameters=[p1, p2])
+    if options:
+        prob = _with_options(prob, options)
+    curve = BifurcationCurveProblem(prob, sp.kind,
+                                    key=sp.key if sp.kind in MONITOR_KINDS else "")
     U0 = np.append(sp.point.u, all_params[p2])
     cont = Continuation(curve, U0, all_params[p1], settings, progress=progress)
     lo2, hi2 = (-math.inf, math.inf) if span2 is None else span2

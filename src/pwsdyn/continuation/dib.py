@@ -37,7 +37,7 @@ def insert_impact(op, u, lam, seg: int, surface_name: str):
     """The problem with an impact on ``surface_name`` added inside segment ``seg`` and its
     ``u`` at ``lam`` from the old signature's solution there (which crosses the surface):
     ``(problem, u)`` or a reason string."""
-    from ..orbits.problem import OrbitProblem, _context
+    from ..orbits.problem import _context
     from ..orbits.signature import Signature, SignatureEvent
 
     m = op.model
@@ -73,14 +73,11 @@ def insert_impact(op, u, lam, seg: int, surface_name: str):
     mname = op.state_names[seg]
     new_ev = SignatureEvent("impact", e.name, mname, mname)
     if not op.m:
-        sig = Signature([new_ev])
-        prob = OrbitProblem(m, sig, params=op.params, parameters=list(op.parameters),
-                            periods=op.periods, sliding=op.sliding, **_opts(op))
+        prob = op.replace(signature=Signature([new_ev]))
         P = op.period_value(p)
         return prob, prob.pack(ta, [xr], [P])
-    sig = Signature(list(op.signature[:seg]) + [new_ev] + list(op.signature[seg:]))
-    prob = OrbitProblem(m, sig, params=op.params, parameters=list(op.parameters),
-                        periods=op.periods, t_ref=op.t_ref, sliding=op.sliding, **_opts(op))
+    prob = op.replace(signature=list(op.signature[:seg]) + [new_ev] +
+                      list(op.signature[seg:]))
     xs2 = xs[:seg + 1] + [xr] + xs[seg + 1:]
     Ts2 = Ts[:seg] + [ta - s.t, s.t + s.T - ta] + Ts[seg + 1:]
     return prob, prob.pack(t0, xs2, Ts2)
@@ -89,10 +86,6 @@ def insert_impact(op, u, lam, seg: int, surface_name: str):
 def remove_impact(op, u, lam, seg: int):
     """The problem with the impact ending segment ``seg`` removed (its velocity went to zero)
     and its ``u`` at ``lam`` from the old solution there: ``(problem, u)`` or a reason."""
-    from ..orbits.problem import OrbitProblem
-    from ..orbits.signature import Signature
-
-    m = op.model
     if len(op.bounds) != len(op.signature):
         return "only orbits whose boundaries are single events are re-segmented"
     p = np.array([lam])
@@ -104,15 +97,13 @@ def remove_impact(op, u, lam, seg: int):
         s = ev.segs[0]
         if op.fields[0].kind != "mode":
             return "the segment is not in a mode"
-        prob = OrbitProblem(m, Signature([]), params=op.params, parameters=list(op.parameters),
-                            periods=op.periods, t_ref=float(s.te), state=op.state_names[0],
-                            sliding=op.sliding, **_opts(op))
+        prob = op.replace(signature=[], t_ref=float(s.te), state=str(op.state_names[0]))
         return prob, prob.pack(float(s.te), [np.asarray(s.y[:op.n], dtype=float)],
                                [op.period_value(p)])
     nxt = (seg + 1) % mm
     if op.fields[seg] != op.fields[nxt]:
         return "the segments on either side of the impact are in different states"
-    sig = Signature([e for k, e in enumerate(op.signature) if k != seg])
+    sig = [e for k, e in enumerate(op.signature) if k != seg]
     if nxt == 0:
         # the removed impact ends the last segment: the first segment now starts where the
         # last one did
@@ -122,8 +113,7 @@ def remove_impact(op, u, lam, seg: int):
     else:
         xs2 = xs[:nxt] + xs[nxt + 1:]
         Ts2 = Ts[:seg] + [Ts[seg] + Ts[nxt]] + Ts[nxt + 1:]
-    prob = OrbitProblem(m, sig, params=op.params, parameters=list(op.parameters),
-                        periods=op.periods, t_ref=op.t_ref, sliding=op.sliding, **_opts(op))
+    prob = op.replace(signature=sig)
     return prob, prob.pack(t0, xs2, Ts2)
 
 
@@ -133,8 +123,8 @@ def insert_sliding(op, u, lam, seg: int, surface_name: str):
     signature's solution there, which crosses the surface and comes back: sliding from where
     it enters to where it returns (Newton moves the exit to where the sliding field leaves):
     ``(problem, u)`` or a reason string."""
-    from ..orbits.problem import OrbitProblem, _context
-    from ..orbits.signature import Signature, SignatureEvent
+    from ..orbits.problem import _context
+    from ..orbits.signature import SignatureEvent
 
     m = op.model
     n = op.n
@@ -176,13 +166,10 @@ def insert_sliding(op, u, lam, seg: int, surface_name: str):
     xs, Ts = [np.asarray(x, dtype=float) for x in xs], list(Ts)
     if not op.m:
         P = op.period_value(p)
-        prob = OrbitProblem(m, Signature([start, end]), params=op.params,
-                            parameters=list(op.parameters), periods=op.periods,
-                            sliding=op.sliding, **_opts(op))
+        prob = op.replace(signature=[start, end])
         return prob, prob.pack(tb, [xb, xa], [ta + P - tb, tb - ta])
-    sig = Signature(list(op.signature[:seg]) + [start, end] + list(op.signature[seg:]))
-    prob = OrbitProblem(m, sig, params=op.params, parameters=list(op.parameters),
-                        periods=op.periods, t_ref=op.t_ref, sliding=op.sliding, **_opts(op))
+    prob = op.replace(signature=list(op.signature[:seg]) + [start, end] +
+                      list(op.signature[seg:]))
     xs2 = xs[:seg + 1] + [xa, xb] + xs[seg + 1:]
     Ts2 = Ts[:seg] + [ta - s.t, tb - ta, s.t + s.T - tb] + Ts[seg + 1:]
     return prob, prob.pack(t0, xs2, Ts2)

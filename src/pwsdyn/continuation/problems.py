@@ -243,7 +243,10 @@ class EquilibriumProblem(_PointProblem):
 
 
 #: Test functions of the bifurcations of periodic orbits followed in two parameters.
-CURVE_KINDS = ("LP", "PD", "NS", "GR")
+CURVE_KINDS = ("LP", "PD", "NS", "GR", "GS")
+#: Curves whose defining condition is a monitor of the orbit problem (a graze), not a test
+#: function of the multipliers.
+MONITOR_KINDS = ("GR", "GS")
 
 
 def orbit_test_function(kind: str, mu) -> float:
@@ -276,8 +279,8 @@ class BifurcationCurveProblem:
     kind = "orbit"
 
     def __init__(self, problem, curve: str, *, fd_step: float = 1e-6, key: str = ""):
-        if curve == "GR" and not key.startswith("GR/"):
-            raise ArgumentError("a grazing curve needs the key of its monitor (GR/...)")
+        if curve in MONITOR_KINDS and not key.startswith(curve + "/"):
+            raise ArgumentError(f"a {curve} curve needs the key of its monitor ({curve}/...)")
         self.key = key
         if curve not in CURVE_KINDS:
             raise ArgumentError(f"no two-parameter curve of kind {curve!r}; kinds: "
@@ -300,7 +303,7 @@ class BifurcationCurveProblem:
             raise TrialRejected(str(exc), "simulation") from None
 
     def _psi(self, u, p, ev) -> float:
-        if self.curve == "GR":
+        if self.curve in MONITOR_KINDS:
             # the grazing monitor itself: the segment's interior minimum of h (or an impact's
             # normal velocity) is zero on the grazing curve
             mon = self.orbit_problem.grazing_monitors(u, p, evaluation=ev).get(self.key)

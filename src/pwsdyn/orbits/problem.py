@@ -288,6 +288,29 @@ class OrbitProblem:
             self._Tf_p = [sp.lambdify(syms, sp.diff(fp, sp.Symbol(k, real=True)), modules="math")
                           for k in self.parameters]
 
+    def replace(self, *, signature=None, params=None, parameters=None, periods=None,
+                t_ref=None, state=None) -> "OrbitProblem":
+        """The same problem (model, integrator options, sliding method, phase condition) with
+        some of its definition changed: another signature (an event added or removed, the
+        period doubled), other parameter values or continued parameters, another period or
+        start time. An orbit without events keeps its discrete state unless ``state`` is
+        given."""
+        from ..integrate.simulate import DEFAULTS
+
+        opts = {k: v for k, v in self.opts.items() if k in DEFAULTS
+                and k not in ("variational", "dense", "throw", "mode", "sliding")}
+        sig = self.signature if signature is None else Signature(signature)
+        kw = {}
+        if not sig:
+            kw["state"] = state if state is not None else str(self.state_names[0])
+        return OrbitProblem(self.model, sig, params=self.params if params is None else params,
+                            parameters=list(self.parameters if parameters is None
+                                            else parameters),
+                            periods=self.periods if periods is None else periods,
+                            t_ref=self.t_ref if t_ref is None else t_ref,
+                            phase_ref=self.phase_ref, phase_normal=self.phase_normal,
+                            sliding=self.sliding, **kw, **opts)
+
     @classmethod
     def from_orbit(cls, orbit, *, parameters=None, params=None):
         """The problem of an orbit's signature and the ``u`` of that orbit.
