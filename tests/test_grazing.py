@@ -230,3 +230,46 @@ def test_square_root_law_of_near_grazing_impact_velocities():
         assert errors[-1] < 0.01
     assert errors[-1] < 1e-4                          # the error vanishes as v0 -> 0
     assert abs(vs[1] / math.sqrt(vs[0]) / C - 1) < 2e-3   # v1 ~ C sqrt(v0)
+
+
+def _friction_branch(ds, span=(0.0, 0.6), **kw):
+    m_, k, c, w, V, mu = 1.0, 1.0, 0.1, 1.5, 0.5, 0.3
+    model = pwsdyn.load_model(FRICTION)
+    F0 = 0.5 * V * math.hypot(k - m_ * w * w, c * w) / w
+    X, Y = np.linalg.solve(np.array([[k - m_ * w * w, c * w], [-c * w, k - m_ * w * w]]),
+                           [F0, 0.0])
+    orb = pwsdyn.find_periodic_orbit(model, [mu / k + X, w * Y], t0=0.0, params={"F": F0})
+    return model, pwsdyn.continue_orbit(model, orb, "F", span=span, ds=ds, **kw)
+
+
+@pytest.mark.parametrize("ds", [0.01, 0.1])
+def test_switching_sliding_and_the_orbits_on_both_sides(ds):
+    """Further up in F the point where the orbit reaches the belt's velocity leaves the
+    sliding region through its other boundary (the field above stops pointing back):
+    switching-sliding. Past it the block overtakes the belt for a short arc before sticking.
+    Each DIB is located once whatever the step; the event sequences on both sides are those
+    a direct simulation settles on, and the orbits past them are the simulated ones."""
+    model, br = _friction_branch(ds, ds_max=10 * ds, max_points=400)
+    assert [s.kind for s in br.special_points if s.kind != "EP"] == ["GS", "SS"]
+    sigs = [str(s) for s in br.signatures]
+    assert sigs == ["()",
+                    "(block[vrel<0]) slide_start:vrel (slide:vrel) slide_end:vrel "
+                    "(block[vrel<0])",
+                    "(block[vrel<0]) crossing:vrel (block[vrel>0]) slide_start:vrel "
+                    "(slide:vrel) slide_end:vrel (block[vrel<0])"]
+    assert br.admissible.all() and br.values.max() == pytest.approx(0.6)
+    ss = br.special("SS")[0]
+    assert abs(ss.monitor.value) < 1e-9
+    P = 2 * math.pi / 1.5
+    o = ss.orbit
+    for dF, n_events in ((-2e-3, 2), (2e-3, 3)):
+        tr = pwsdyn.simulate(model, o.x0, (o.t0, o.t0 + 60 * P), params={"F": ss.value + dF},
+                             rtol=1e-12, atol=1e-12)
+        last = [e for e in tr.events if e.t > o.t0 + 59 * P + 1e-9]
+        assert len(last) == n_events
+    # a point past the switching-sliding: the orbit the simulation settles on
+    p = next(q for q in br.points if q.signature_index == 2 and q.lam > ss.value + 0.02)
+    orb = br.problem_of(p).orbit(p.u, p.lam)
+    tr = pwsdyn.simulate(model, orb.x0, (orb.t0, orb.t0 + 80 * P), params={"F": p.lam},
+                         rtol=1e-12, atol=1e-12)
+    assert np.max(np.abs(tr(orb.t0 + 80 * P) - orb.x0)) < 1e-8

@@ -33,7 +33,7 @@ def _split_options(options: dict, span, ds, max_points):
 
 
 #: Kinds of discontinuity-induced bifurcations at which an orbit branch changes signature.
-DIB_KINDS = ("GR", "GS")
+DIB_KINDS = ("GR", "GS", "SS", "AS")
 ON_DIB = ("switch", "stop", "continue")
 
 
@@ -55,7 +55,7 @@ def _run(problem, u0, lam0, settings, *, tangent=None, correct_start=True, progr
            and len(points) < settings.max_points):
         nxt = _after_graze(problems[-1], cont.stop_point, st, options or {})
         if isinstance(nxt, str):
-            reason = f"{reason}; no orbit on the other side of the graze: {nxt}"
+            reason = f"{reason}; {nxt}"
             break
         prob2, u1, lam1, ds = nxt
         problems.append(prob2)

@@ -21,6 +21,9 @@ KINDS = {
           "h, or an impact's normal velocity, reaches zero)",
     "GS": "grazing-sliding: the orbit touches a Filippov surface where the field beyond it "
           "points back, and a sliding segment is born",
+    "SS": "switching-sliding: the point where the orbit reaches a Filippov surface crosses the "
+          "other boundary of the sliding region",
+    "AS": "adding-sliding: the orbit leaves a sliding segment with a cubic tangency",
     "BEB": "boundary equilibrium bifurcation: an equilibrium reaches the boundary of its "
            "mode's region, or a pseudo-equilibrium that of the sliding region",
     "EP": "end point of the branch",

@@ -1,7 +1,7 @@
 """Past a discontinuity-induced bifurcation: the orbit's new signature and a start on it.
 
 At a graze located on an orbit branch (monitor ``GR`` of
-:meth:`pwsdyn.orbits.OrbitProblem.grazing_monitors`) the orbit's sequence of events changes:
+:meth:`pwsdyn.orbits.OrbitProblem.dib_monitors`) the orbit's sequence of events changes:
 
 * a segment touching an impact surface inside it (``GR/<surface>/<i>``): past the graze it
   hits the surface -- an impact is added, splitting segment ``i``;
@@ -9,7 +9,10 @@ At a graze located on an orbit branch (monitor ``GR`` of
   longer reaches the surface -- the impact is removed, joining segments ``i`` and ``i + 1``;
 * a segment touching a Filippov surface where the field beyond points back
   (``GS/<surface>/<i>``, grazing-sliding): past it the orbit slides on the surface -- a
-  sliding segment (``slide_start``, ``slide_end``) is added inside segment ``i``.
+  sliding segment (``slide_start``, ``slide_end``) is added inside segment ``i``;
+* a sliding entry reaching the other boundary of the sliding region (``SS/<switch>@<i>``,
+  switching-sliding): past it the orbit crosses, runs a short arc in the other mode and
+  comes back to slide -- the entry becomes a crossing and an entry from the other side.
 
 The new problem is singular at the graze itself (its event condition's derivative
 ``h_x f`` vanishes there) and the new orbit lies a square root of the parameter distance
@@ -182,12 +185,63 @@ def _opts(op):
     return {k: v for k, v in op.opts.items() if k in DEFAULTS and k not in drop}
 
 
+def insert_crossing(op, u, lam, seg: int):
+    """Past a switching-sliding at the sliding entry ending segment ``seg``: the orbit now
+    reaches the surface where the field beyond it points away, crosses, runs a short arc in
+    the other mode and comes back to slide. The entry is replaced by a crossing and an entry
+    from the other side; the arc's guessed duration is the parabola's return time
+    ``2 |hdot / hddot|`` of the other mode's normal velocity and acceleration there:
+    ``(problem, u)`` or a reason string."""
+    from ..orbits.problem import _acc, _context, _hd
+    from ..orbits.signature import SignatureEvent
+
+    m = op.model
+    b = op.bounds[seg]
+    fk = op.fields[seg]
+    if b.kind != "slide_start" or fk.kind != "mode" or len(op.bounds) != len(op.signature):
+        return "only a sliding entry from a mode is re-segmented"
+    sw = m.switches[b.ref]
+    other = sw.above if fk.index == sw.below else sw.below
+    p = np.array([lam])
+    ev = op.evaluate(u, p, jacobian=False)
+    s = ev.segs[seg]
+    te, y = float(s.te), np.asarray(s.y[:op.n], dtype=float)
+    ctx = _context(m, op.param_dict(p), op.sliding)
+    hd = _hd(ctx, b.surface, other)(te, y)
+    acc = _acc(ctx, b.surface, other)(te, y)
+    if hd * acc >= 0.0 or acc == 0.0:
+        return "the other mode's arc does not come back to the surface"
+    tau = 2.0 * abs(hd / acc)
+    m1, m2 = op.state_names[seg], m.mode_names[other]
+    old = op.signature[seg]
+    new = [SignatureEvent("crossing", sw.name, m1, m2),
+           SignatureEvent("slide_start", sw.name, m2, old.mode_after)]
+    prob = op.replace(signature=list(op.signature[:seg]) + new + list(op.signature[seg + 1:]))
+    t0, xs, Ts = op.unpack(u)
+    xs, Ts = [np.asarray(x, dtype=float) for x in xs], list(Ts)
+    nxt = (seg + 1) % len(Ts)
+    xs2 = xs[:seg + 1] + [y] + xs[seg + 1:]
+    Ts2 = Ts[:seg + 1] + [tau] + Ts[seg + 1:]
+    # the segment after the entry (the sliding one) starts tau later
+    if nxt == 0:
+        t0 += tau
+        Ts2[0] -= tau
+    else:
+        Ts2[nxt + 1] -= tau
+    return prob, prob.pack(t0, xs2, Ts2)
+
+
 def past_graze(op, key: str, u, lam):
     """The new signature's problem and solution just past the graze ``key`` at ``lam``:
     ``(problem, u)``, or a reason string. ``u`` solves the old signature at ``lam``."""
     kind, body = key.split("/", 1)
+    if kind not in ("GR", "GS", "SS"):
+        return (f"the orbit's new event sequence past a {kind} is not built yet (the branch "
+                f"stops here; on_dib='continue' follows the old one, not admissible beyond)")
     try:
-        if "@" in body:
+        if kind == "SS":
+            made = insert_crossing(op, u, lam, int(body.rsplit("@", 1)[1]))
+        elif "@" in body:
             seg = int(body.rsplit("@", 1)[1])
             made = remove_impact(op, u, lam, seg)
         elif kind == "GS":
@@ -197,9 +251,9 @@ def past_graze(op, key: str, u, lam):
             surface, seg = body.rsplit("/", 1)
             made = insert_impact(op, u, lam, int(seg), surface)
     except TrialRejected as exc:
-        return exc.message
+        return f"no orbit past the {kind}: {exc.message}"
     if isinstance(made, str):
-        return made
+        return f"no orbit past the {kind}: {made}"
     prob, u2 = made
     res = prob.solve(u2, np.array([lam]))
     if not res.converged:

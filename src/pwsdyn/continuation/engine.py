@@ -98,7 +98,7 @@ class ContinuationSettings:
     max_iter: int = 10
     target_iter: int = 3
     max_angle: float = 0.35
-    locate: tuple = ("LP", "BP", "PD", "NS", "HB", "GR", "GS", "BEB")
+    locate: tuple = ("LP", "BP", "PD", "NS", "HB", "GR", "GS", "SS", "AS", "BEB")
     locate_tol: float = 1e-11
     predictor: str = "tangent"
     stop_at: tuple = ()

@@ -86,7 +86,7 @@ class OrbitBranchProblem:
         out = {"multipliers": mu, "stable": stable, "admissible": bool(adm),
                "reason": adm.reason or "", "period": float(ev.period)}
         if self.monitors:
-            out["monitors"] = prob.grazing_monitors(u, np.array([lam]), evaluation=ev)
+            out["monitors"] = prob.dib_monitors(u, np.array([lam]), evaluation=ev)
         return out
 
     def test_functions(self, data) -> dict:
@@ -306,7 +306,7 @@ class BifurcationCurveProblem:
         if self.curve in MONITOR_KINDS:
             # the grazing monitor itself: the segment's interior minimum of h (or an impact's
             # normal velocity) is zero on the grazing curve
-            mon = self.orbit_problem.grazing_monitors(u, p, evaluation=ev).get(self.key)
+            mon = self.orbit_problem.dib_monitors(u, p, evaluation=ev).get(self.key)
             if mon is None:
                 raise TrialRejected(f"the graze {self.key} is no longer an interior minimum",
                                     "monitor")

@@ -1137,10 +1137,10 @@ class OrbitProblem:
     # ==================================================================================
     # monitors of discontinuity-induced bifurcations
     # ==================================================================================
-    def grazing_monitors(self, u, p=None, evaluation: ProblemEvaluation | None = None
-                         ) -> dict:
-        """Monitors of grazing on a solution: ``{key: Monitor}``, each a signed distance from
-        a graze, positive on the side where the orbit keeps its signature.
+    def dib_monitors(self, u, p=None, evaluation: ProblemEvaluation | None = None) -> dict:
+        """Monitors of discontinuity-induced bifurcations on a solution: ``{key: Monitor}``,
+        each a signed distance from the bifurcation, positive on the side where the orbit
+        keeps its signature.
 
         * ``"GR/<surface>/<i>"``: the smallest interior local minimum of ``h`` (or ``-h``
           below a switching surface) along segment ``i`` in a mode -- a graze of the surface
@@ -1151,7 +1151,13 @@ class OrbitProblem:
           the slides' "sliding bifurcations");
         * ``"GR/<event>@<i>"``: ``-(h_t + h_x f)`` at the impact ending segment ``i`` -- the
           impact's normal velocity going to zero (the end of a branch of impacting orbits
-          at a graze).
+          at a graze);
+        * ``"SS/<switch>@<i>"`` at a sliding entry: the normal velocity of the field beyond the
+          surface, signed to be positive while it points back (switching-sliding where it
+          vanishes);
+        * ``"AS/<switch>@<i>"`` at a sliding exit: the normal acceleration of the field the
+          orbit leaves with, positive while it curves away (adding-sliding where it
+          vanishes).
 
         A segment with no interior local minimum of a surface gives no monitor for it.
         """
@@ -1198,14 +1204,32 @@ class OrbitProblem:
                         rate = _hd(ctx, k, other)(tg, xg)
                         kind = "GS" if sign * rate > 0 else "GR"
                     out[f"{kind}/{name}/{i}"] = Monitor(float(hg), i, name, float(tg), xg)
-            if i < len(self.bounds) and self.bounds[i].kind == "impact":
-                b = self.bounds[i]
+            b = self.bounds[i] if i < len(self.bounds) else None
+            if b is None:
+                continue
+            te, y = s.te, np.asarray(s.y[:n], dtype=float)
+            if b.kind == "impact":
                 e = m.events[b.ref]
-                te, y = s.te, s.y[:n]
                 f_in = _state_field(ctx, fk, te, y)
                 rate = ctx.h_t(b.surface, te, y) + ctx.h_x(b.surface, te, y) @ f_in
-                out[f"GR/{e.name}@{i}"] = Monitor(float(-rate), i, e.name, float(te),
-                                                  np.asarray(y, dtype=float))
+                out[f"GR/{e.name}@{i}"] = Monitor(float(-rate), i, e.name, float(te), y)
+            elif b.kind == "slide_start" and fk.kind == "mode":
+                # switching-sliding: the point where the orbit reaches the surface leaves the
+                # sliding region through its other boundary (the field beyond stops pointing
+                # back); past it the orbit crosses, runs in the other mode and returns
+                sw = m.switches[b.ref]
+                other = sw.above if fk.index == sw.below else sw.below
+                sign = -1.0 if other == sw.above else 1.0
+                rate = _hd(ctx, b.surface, other)(te, y)
+                out[f"SS/{sw.name}@{i}"] = Monitor(float(sign * rate), i, sw.name, float(te), y)
+            elif b.kind == "slide_end":
+                # adding-sliding: the field the orbit leaves the surface with is tangent to it
+                # at the exit (h_x f = 0) and its normal acceleration vanishes too (a cubic
+                # tangency, the slides' <<h_x, f1>_x, f1> = 0): past it the orbit comes back
+                sw = m.switches[b.ref]
+                acc = _acc(ctx, b.surface, b.mode)(te, y)
+                sign = 1.0 if b.mode == sw.above else -1.0
+                out[f"AS/{sw.name}@{i}"] = Monitor(float(sign * acc), i, sw.name, float(te), y)
         return out
 
     # ==================================================================================
