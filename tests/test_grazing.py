@@ -273,3 +273,21 @@ def test_switching_sliding_and_the_orbits_on_both_sides(ds):
     tr = pwsdyn.simulate(model, orb.x0, (orb.t0, orb.t0 + 80 * P), params={"F": p.lam},
                          rtol=1e-12, atol=1e-12)
     assert np.max(np.abs(tr(orb.t0 + 80 * P) - orb.x0)) < 1e-8
+
+
+def test_switching_sliding_curve_in_two_parameters():
+    """The switching-sliding followed in (F, mu): along the curve the monitor (the normal
+    velocity of the field above at the sliding entry) stays zero and the orbit keeps its
+    signature; checked by solving the orbit problem afresh at points of the curve."""
+    model, br = _friction_branch(0.05, on_dib="stop", span=(0.0, 0.6))
+    br = pwsdyn.continue_orbit(model, br.special("GS")[0], "F", span=(0.0, 0.6), ds=0.05,
+                               on_dib="stop")
+    ss = br.special("SS")[0]
+    cur = pwsdyn.continue_bifurcation(model, ss, ("mu", "F"), span=(0.25, 0.35), ds=0.01,
+                                      max_points=8)
+    assert cur.curve == "SS" and len(cur) >= 4 and np.ptp(cur.values) > 0.02
+    for p in cur.points[1:]:
+        op = cur.problem.orbit_problem
+        u, P = p.u[:-1], np.array([p.lam, p.u[-1]])
+        mon = op.dib_monitors(u, P)[ss.key]
+        assert abs(mon.value) < 1e-9 and np.max(np.abs(op.residual(u, P))) < 1e-9

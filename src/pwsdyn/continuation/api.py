@@ -123,8 +123,10 @@ def continue_orbit(model, orbit, param: str, *, span=None, ds: float | None = No
     orbit : PeriodicOrbit, SpecialPoint or Branch
         Where to start: a converged orbit (:func:`pwsdyn.find_periodic_orbit`); a special
         point of an orbit branch -- a ``PD`` starts the period-doubled branch born there, a
-        ``BP`` the other branch through it, any other kind the same branch from there; or a
-        branch (from a file too), continued from its last point.
+        ``BP`` the other branch through it, a discontinuity-induced bifurcation (``GR``,
+        ``GS``, ``SS``) the orbit with its new event sequence past it (in the direction the
+        branch was going), any other kind the same branch from there; or a branch (from a
+        file too), continued from its last point.
     param : str
         The parameter continued.
     span : (float, float), optional
@@ -243,6 +245,16 @@ def _from_special(sp: SpecialPoint, model, param, settings, progress, params, op
                     progress=progress, model=model, on_dib=on_dib, options=options)
     if sp.kind == "PD":
         return _switch_period_doubling(sp, model, settings, progress, options, on_dib)
+    if sp.kind in DIB_KINDS:
+        # from a discontinuity-induced bifurcation: on with the orbit's new event sequence
+        st = dataclasses.replace(settings, ds=math.copysign(settings.ds, pt.tangent[-1] or 1.0)
+                                 if settings.ds > 0 else settings.ds)
+        nxt = _after_graze(base, pt, st, options)
+        if isinstance(nxt, str):
+            raise ContinuationError(nxt)
+        prob1, u1, lam1, ds1 = nxt
+        return _run(prob1, u1, lam1, dataclasses.replace(settings, ds=ds1),
+                    progress=progress, model=model, on_dib=on_dib, options=options)
     if sp.kind == "BP":
         J = np.column_stack(base.evaluate(pt.u, pt.lam)[1:])
         return _switch_branch_point(base, pt, J, model, settings, progress, on_dib)
@@ -455,8 +467,9 @@ def load_branch(path) -> Branch:
 def continue_bifurcation(model, special_point: SpecialPoint, params, *, span=None, span2=None,
                          ds: float | None = None, max_points: int = 200,
                          progress: bool = False, **options) -> Branch:
-    """Follow a fold (``LP``), period doubling (``PD``), Neimark-Sacker point (``NS``),
-    graze (``GR``) or grazing-sliding (``GS``) of a periodic orbit in two parameters: the curve of that bifurcation in the
+    """Follow a fold (``LP``), period doubling (``PD``), Neimark-Sacker point (``NS``), or a
+    discontinuity-induced bifurcation (graze ``GR``, grazing-, switching- or adding-sliding
+    ``GS``, ``SS``, ``AS``) of a periodic orbit in two parameters: the curve of that bifurcation in the
     parameter plane.
 
     Each point is an orbit at which the bifurcation's test function (of the multipliers, or
@@ -467,7 +480,7 @@ def continue_bifurcation(model, special_point: SpecialPoint, params, *, span=Non
     ----------
     model : Model, str, path or dict
     special_point : SpecialPoint
-        A located ``LP``, ``PD``, ``NS``, ``GR`` or ``GS`` of an orbit branch
+        A located ``LP``, ``PD``, ``NS``, ``GR``, ``GS``, ``SS`` or ``AS`` of an orbit branch
         (:attr:`Branch.special_points`).
     params : (str, str)
         The two parameters; the branch's parameter must be one of them. The first is the
