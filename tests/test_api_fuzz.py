@@ -30,6 +30,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 import pwsdyn
 from pwsdyn import PeriodicOrbit
+from pwsdyn.continuation import Branch
 from pwsdyn.errors import ArgumentError, PwsdynError
 from pwsdyn.explore._lyapunov import LyapunovSpectrum
 from pwsdyn.integrate.trajectory import Trajectory
@@ -80,6 +81,17 @@ _NEVER_VALID = [0, -1, 1.5, NAN, INF, "", b"x", True, 10**20, [1], {}, 1j]
 @functools.lru_cache(maxsize=None)
 def _trajectory():
     return pwsdyn.simulate(IO, [0.0, -0.5], (0.0, 30.0))
+
+
+@functools.lru_cache(maxsize=None)
+def _orbit():
+    return pwsdyn.find_periodic_orbit(IO, [-0.7, 0.0], params={"sigma": -0.5, "eps": 0.1,
+                                                              "omega": 2.8})
+
+
+#: A fold x' = p - x^2 (closed-form equilibria sqrt(p)).
+FOLD = {"name": "fold", "states": ["x"], "parameters": {"p": 1.0},
+        "modes": {"m": {"x": "p - x**2"}}}
 
 
 @functools.lru_cache(maxsize=None)
@@ -156,6 +168,15 @@ def _entries():
               dict(model=MAP, x0=[0.0], transient=5, duration=50),
               ["x0", "params", "transient", "duration", "segment", "t0", "bound"], [],
               LyapunovSpectrum),
+        Entry("continue_orbit", pwsdyn.continue_orbit, ("model", "orbit", "param"),
+              dict(model=IO, orbit="ORBIT", param="omega", span=(2.7, 2.9), max_points=3),
+              ["model", "orbit", "param", "span", "ds", "max_points", "params", "on_dib",
+               "ds_min", "ds_max", "tol", "max_iter", "target_iter", "max_angle", "locate",
+               "locate_tol", "predictor", "max_arclength", "rtol"], [], Branch),
+        Entry("continue_equilibrium", pwsdyn.continue_equilibrium, ("model", "x0", "param"),
+              dict(model=FOLD, x0=[1.0], param="p", span=(0.5, 1.5), max_points=4),
+              ["model", "x0", "param", "span", "ds", "max_points", "params", "mode",
+               "ds_min", "ds_max", "tol", "locate"], [], Branch),
         Entry("iterate", iterate, ("model", "x0", "n"),
               dict(model=MAP, x0=[0.1], n=5, params={"mu": 0.2, "lam": 0.3}),
               ["model", "x0", "n", "params", "transient", "bound"], [], tuple),
@@ -176,6 +197,8 @@ def _resolve(value):
         return _trajectory()
     if isinstance(value, str) and value == "VTRAJ":
         return _variational_trajectory()
+    if isinstance(value, str) and value == "ORBIT":
+        return _orbit()
     return value
 
 
@@ -310,3 +333,9 @@ def main(argv=None) -> None:
 
 if __name__ == "__main__":
     main()
+
+
+@pytest.mark.parametrize("bad", _FIXED + ["ORBIT"], ids=lambda v: type(v).__name__)
+def test_discontinuity_map_refuses_what_is_not_a_graze(bad):
+    with pytest.raises(ArgumentError, match="GR special point"):
+        pwsdyn.discontinuity_map(_resolve(bad))

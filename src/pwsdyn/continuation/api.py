@@ -21,15 +21,33 @@ _SETTING_NAMES = {f.name for f in dataclasses.fields(ContinuationSettings)}
 
 
 def _split_options(options: dict, span, ds, max_points):
-    """Continuation settings and the remaining (integrator) options."""
+    """Continuation settings and the remaining (integrator) options, every value checked
+    (an :class:`~pwsdyn.ArgumentError` naming it) before any work."""
+    from .engine import _span
+
     st = {k: options.pop(k) for k in list(options) if k in _SETTING_NAMES}
-    lo, hi = (-math.inf, math.inf) if span is None else span
+    lo, hi = _span(span)
+    ds = V.number("ds", ds, allow_none=True)
+    max_points = V.integer("max_points", max_points, lo=1)
     if ds is None:
         width = hi - lo if math.isfinite(hi - lo) else 10.0
         ds = min(0.02, 0.01 * width)
+    if "locate" in st:
+        loc = st["locate"]
+        loc = (loc,) if isinstance(loc, str) else loc
+        if not isinstance(loc, (tuple, list)) or not all(isinstance(k, str) for k in loc):
+            raise V.fail("locate", "a sequence of kinds of special points", st["locate"])
+        st["locate"] = tuple(loc)
+    for name in ("stop_at",):
+        if name in st:
+            raise ArgumentError(f"`{name}` is set by `on_dib`, not by hand")
+    if "ds_max" in st:
+        st["ds_max"] = V.positive("ds_max", st["ds_max"])
+    if "ds_min" in st:
+        st["ds_min"] = V.positive("ds_min", st["ds_min"])
     st.setdefault("ds_max", max(abs(ds), 0.2))
-    st.setdefault("ds_min", min(1e-7, abs(ds)))
-    return ContinuationSettings(ds=ds, span=span, max_points=max_points, **st), options
+    st.setdefault("ds_min", min(1e-7, abs(ds)) if ds else 1e-7)
+    return ContinuationSettings(ds=ds, span=(lo, hi), max_points=max_points, **st), options
 
 
 #: Kinds of discontinuity-induced bifurcations at which an orbit branch changes signature.
@@ -162,7 +180,13 @@ def continue_orbit(model, orbit, param: str, *, span=None, ds: float | None = No
     model = as_model(model, kind="flow", caller="continue_orbit()")
     param = _parameter(model, param)
     on_dib = V.choice("on_dib", on_dib, ON_DIB)
+    if params is not None:
+        model.parameter_vector(params)          # names and values checked
     settings, options = _split_options(dict(options), span, ds, max_points)
+    if options:
+        from ..integrate.simulate import integrator_options
+
+        integrator_options(options, "continue_orbit()")
     if isinstance(orbit, Branch):
         return _resume(orbit, model, param, settings, progress)
     if isinstance(orbit, SpecialPoint):
@@ -365,6 +389,10 @@ def continue_equilibrium(model, x0, param: str, *, span=None, ds: float | None =
     """
     model = as_model(model, kind="flow", caller="continue_equilibrium()")
     param = _parameter(model, param)
+    if params is not None:
+        model.parameter_vector(params)
+    if mode is not None and not isinstance(mode, str):
+        raise V.fail("mode", "a mode name, 'slide:<switch>' or None", mode)
     settings, options = _split_options(dict(options), span, ds, max_points)
     if options:
         raise ArgumentError(f"unknown options for continue_equilibrium(): {sorted(options)}")
