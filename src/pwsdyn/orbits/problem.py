@@ -566,6 +566,20 @@ class OrbitProblem:
     # ==================================================================================
     # evaluation
     # ==================================================================================
+    def _dense_segment(self, i, s, p):
+        """Segment ``i`` of an evaluation integrated again with dense output (no variational
+        equations), for the checks along it; the last few are kept, so that the
+        admissibility check and the monitors of one point integrate each segment once."""
+        key = (i, float(s.t), np.asarray(s.z).tobytes(), float(s.T),
+               np.asarray(p, dtype=float).tobytes())
+        cache = self.__dict__.setdefault("_dense_cache", {})
+        if key not in cache:
+            if len(cache) > 4 * max(self.m, 1):
+                cache.clear()
+            cache[key] = self._flow(i, s.t, s.z, s.T,
+                                    self._seg_opts(p, dense=True, variational=False))[2]
+        return cache[key]
+
     def _flow(self, i, t, z, T, opts, dense=False):
         """``(y, Phi, traj)`` of segment field ``i`` from ``(t, z)`` for duration ``T``."""
         fidx = self._fidx[i]
@@ -995,7 +1009,6 @@ class OrbitProblem:
         p = self._p(p)
         ev = evaluation if evaluation is not None else self.evaluate(u, p, jacobian=False)
         ctx = _context(self.model, self.param_dict(p), self.sliding)
-        opts = self._seg_opts(p, dense=True, variational=False)
         out = []
         for i, s in enumerate(ev.segs):
             name = self.state_names[i]
@@ -1004,14 +1017,14 @@ class OrbitProblem:
                            f"event that should end it comes before its start")
                 continue
             if s.T > 0:
-                out += self._interior(i, s, ctx, opts)
+                out += self._interior(i, s, ctx, p)
             if i < len(self.bounds):
                 out += self._at_boundary(i, s, ctx)
         return Admissibility(not out, out[0] if out else None, tuple(out))
 
-    def _interior(self, i, s, ctx, opts):
+    def _interior(self, i, s, ctx, p):
         n = self.n
-        _, _, tr = self._flow(i, s.t, s.z, s.T, opts)
+        tr = self._dense_segment(i, s, p)
         if tr is None:
             return []
         ts = _sample_times(tr)[1:-1]
@@ -1164,13 +1177,12 @@ class OrbitProblem:
         p = self._p(p)
         ev = evaluation if evaluation is not None else self.evaluate(u, p, jacobian=False)
         ctx = _context(self.model, self.param_dict(p), self.sliding)
-        opts = self._seg_opts(p, dense=True, variational=False)
         m, n = self.model, self.n
         out = {}
         for i, s in enumerate(ev.segs):
             fk = self.fields[i]
             if fk.kind == "mode" and s.T > 0:
-                _, _, tr = self._flow(i, s.t, s.z, s.T, opts)
+                tr = self._dense_segment(i, s, p)
                 if tr is None:
                     continue
                 ts = _sample_times(tr)[1:-1]
