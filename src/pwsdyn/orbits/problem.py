@@ -1070,7 +1070,7 @@ class OrbitProblem:
                                    j))
         out = []
         for what, label, fn, rule in checks:
-            vals = np.array([fn(tt, x) for tt, x in zip(ts, Y)])
+            vals = fn.rows(ts, Y)
             band = ADMISSIBILITY_RTOL * scale * fn.gscale
             if what == "side":
                 worst = _worst(fn, tr, ts, vals, rule, n, limit=-band)
@@ -1202,7 +1202,7 @@ class OrbitProblem:
                                         other if sw.kind == "filippov" else -1))
                 for name, k, sign, other in dict.fromkeys(watched):
                     fn = _h(ctx, k)
-                    vals = sign * np.array([fn(tt, x) for tt, x in zip(ts, Y)])
+                    vals = sign * fn.rows(ts, Y)
                     found = _interior_minimum(lambda tt: sign * fn(tt, tr(tt)[:n]), ts, vals)
                     if found is None:
                         continue
@@ -1740,20 +1740,28 @@ def _context(model, params, sliding):
 
 
 class _Fn:
-    """A scalar function of ``(t, x)`` with the size of its gradient (for its zero band)."""
+    """A scalar function of ``(t, x)`` with the size of its gradient (for its zero band), and
+    optionally a compiled evaluation at many points."""
 
-    def __init__(self, fn, gscale=1.0):
+    def __init__(self, fn, gscale=1.0, rows=None):
         self.fn = fn
         self.gscale = gscale
+        self._rows = rows
 
     def __call__(self, t, x):
         return self.fn(t, x)
+
+    def rows(self, ts, X) -> np.ndarray:
+        """The function at the points ``(ts[i], X[i])``."""
+        if self._rows is not None:
+            return self._rows(ts, X)
+        return np.array([self.fn(t, x) for t, x in zip(ts, X)])
 
 
 def _h(ctx, k):
     def fn(t, x):
         return ctx.h(k, t, x)
-    return _Fn(fn)
+    return _Fn(fn, rows=lambda ts, X: ctx.h_rows(k, ts, X))
 
 
 def _hd(ctx, k, mode):

@@ -144,6 +144,17 @@ class ModelContext:
         """Surface ``k`` at ``(t, x)``."""
         return float(self._eval(W_H, k, t, x, 1)[0])
 
+    def h_rows(self, k: int, ts, X) -> np.ndarray:
+        """Surface ``k`` at the points ``(ts[i], X[i])``, in one compiled loop."""
+        from ..model._rows import first_of_rows
+
+        ts = np.ascontiguousarray(ts, dtype=float)
+        X = np.ascontiguousarray(X, dtype=float)
+        out = np.empty(ts.shape[0])
+        buf = np.zeros(max(self.n * self.n, self.n, 2))
+        first_of_rows(self.cm.evaluate, W_H, int(k), ts, X, self._pv, buf, out)
+        return out
+
     def h_x(self, k: int, t: float, x) -> np.ndarray:
         return self._eval(W_HX, k, t, x, self.n)
 
