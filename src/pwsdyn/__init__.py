@@ -35,7 +35,7 @@ _LAZY = {
     "Branch": "continuation", "continue_bifurcation": "continuation",
     "continue_equilibrium": "continuation",
     "continue_orbit": "continuation", "load_branch": "continuation",
-    "discontinuity_map": "grazing",
+    "discontinuity_map": "grazing", "design_control": "grazing",
 }
 
 __all__ = ["ArgumentError", "ExpressionError", "ModelError", "OutputExistsError", "PwsdynError",
@@ -45,7 +45,7 @@ if TYPE_CHECKING:  # what static checkers and IDEs see; at run time see __getatt
     from .continuation import (Branch, continue_bifurcation, continue_equilibrium,
                                continue_orbit, load_branch)
     from .explore import basins, lyapunov_spectrum, sweep
-    from .grazing import discontinuity_map
+    from .grazing import design_control, discontinuity_map
     from .integrate import EventRecord, Trajectory, simulate
     from .model import Model, compile_model, load_model, with_discrete_control, zoo_names
     from .orbits import OrbitError, PeriodicOrbit, RecurrenceWarning, find_periodic_orbit
