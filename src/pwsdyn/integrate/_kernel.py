@@ -1653,6 +1653,126 @@ def state_field(ev, p, dkind, didx, mode, nm, t, x, etab, stab, slide_c, out):
 
 
 # --------------------------------------------------------------------------------------
+# steppers: one step from (t, y) of length h, Runge-Kutta or exact, behind one interface
+# --------------------------------------------------------------------------------------
+
+@_hot
+def _rk_step(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, E, method, s_fsal,
+             ytmp, ynew, kst, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft, rtol, atol):
+    """One step of the embedded pair from ``K[0] = f(t, y)``: stages 1..s_fsal into ``K`` (the
+    last one, FSAL, is ``f(t + h, ynew)``), the new state into ``ynew`` and the scaled error
+    (the state and, with variational equations, ``Phi`` each meeting the tolerances; inf for a
+    non-finite stage). Returns ``(err, finite, nfev)``."""
+    fast = dkind == REGULAR and nvar == 0
+    for st in range(1, s_fsal + 1):
+        cst = t + C[st] * h
+        for i in range(nY):
+            acc = 0.0
+            for m in range(st):
+                acc += A[st, m] * K[m, i]
+            ytmp[i] = y[i] + h * acc
+        # into a scratch vector: passing the row K[st] makes an array view, whose reference
+        # counting (two atomic updates) measured 30% of a step
+        if fast:
+            ev(W_F, mode, cst, ytmp, p, kst)
+        else:
+            _rhs(ev, p, dkind, didx, mode, nm, cst, ytmp, n, nvar, kst, etab, stab, slide_c,
+                 w1, w2, gx, hdx, jac, xt, ft)
+        for i in range(nY):
+            K[st, i] = kst[i]
+    # the FSAL stage was evaluated at y + h sum B K = the new solution
+    finite = True
+    for i in range(nY):
+        ynew[i] = ytmp[i]
+        if not (np.isfinite(K[s_fsal, i]) and np.isfinite(ynew[i])):
+            finite = False
+    if not finite:
+        return np.inf, False, s_fsal
+    err = _error_norm(K, E, method, s_fsal, y, ynew, h, 0, n, rtol, atol)
+    if nvar:
+        err = max(err, _error_norm(K, E, method, s_fsal, y, ynew, h, n, nY, rtol, atol))
+    return err, True, s_fsal
+
+
+@_hot
+def _exact_stepper(ev, p, mode, t, y, h, n, K, s_fsal, ynew, kst, Q, aff_M, aff_s, aff_w,
+                   aff_P, aff_ph, aff_full, nz, zv, zv1, T1, T2):
+    """One exact step of affine mode ``mode`` (see "Exact propagation" in the module
+    docstring), with the interface of :func:`_rk_step`: the new state into ``ynew``, the FSAL
+    stage ``f(t + h, ynew)`` into ``K[s_fsal]``. The error is zero (the step is limited only
+    by the convergence of the Taylor sum, the largest step and the events). A full step
+    (``h == aff_full``) is one product with the propagator made once per mode and length; a
+    shorter one sums the Taylor series of the vector, whose terms are the dense output in
+    ``Q``. Returns ``(err, finite, dense_made, nfev)``."""
+    q_made = False
+    if h == aff_full:
+        if h != aff_ph[mode]:
+            _exact_propagator(aff_M, aff_w, mode, nz, h, aff_P, T1, T2)
+            aff_ph[mode] = h
+        _exact_apply(aff_M, aff_s, aff_P, mode, nz, n, t, y, zv, ynew)
+    else:
+        _exact_step(aff_M, aff_s, aff_w, mode, nz, n, t, y, h, zv, zv1, Q, ynew)
+        q_made = True
+    ev(W_F, mode, t + h, ynew, p, kst)
+    finite = True
+    for i in range(n):
+        K[s_fsal, i] = kst[i]
+        if not (np.isfinite(kst[i]) and np.isfinite(ynew[i])):
+            finite = False
+    return (0.0 if finite else np.inf), finite, q_made, 1
+
+
+@_hot
+def _step_dense(ev, p, exact, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_fsal, P,
+                Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft, aff_M, aff_s, aff_w,
+                nz, zv, zv1, xe):
+    """The dense output ``Q`` (power form) of the step of length ``h`` just taken from
+    ``(t, y)`` with stages ``K``: the Taylor terms of the exact flow for an exact step, else
+    the interpolant of the tableau (with its extra stages). Made only where it is needed
+    (stored steps, samples, event search). Returns the number of function evaluations."""
+    if exact:
+        _exact_step(aff_M, aff_s, aff_w, mode, nz, n, t, y, h, zv, zv1, Q, xe)
+        return 0
+    return _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_fsal, P,
+                       Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
+
+
+@_hot
+def _landing_step(ev, p, exact, dkind, didx, mode, nm, t, y, h, h_ev, nY, n, nvar, K, A, C,
+                  s_fsal, Q, deg, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft):
+    """The step retaken from ``(t, y)`` to an event at ``t + h_ev`` (``h_ev <= h``), its end
+    state into ``ytmp`` and its FSAL stage into ``K[s_fsal]`` (``K[0]`` is given), so the
+    event state comes from the integrator, not from an interpolant. On an exact step the
+    dense output ``Q`` of the full step is the exact flow: the landing is its evaluation.
+    Returns the number of function evaluations."""
+    if exact:
+        _dense_eval(y, Q, h_ev / h, nY, deg, ytmp)
+        ev(W_F, mode, t + h_ev, ytmp, p, K[s_fsal])
+        return 1
+    _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, nvar, K, A, C, s_fsal, ytmp,
+               etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
+    return s_fsal
+
+
+@_hot
+def _landing_dense(ev, p, exact, dkind, didx, mode, nm, t, y, h, h_ev, nY, n, nvar, K, A, C,
+                   s_fsal, P, Q, deg, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft):
+    """Dense output of the landing step of :func:`_landing_step`: the Taylor terms of the full
+    exact step rescaled to the interval ``h_ev`` (term k scales by ``(h_ev / h)^k``), or the
+    tableau's interpolant with its extra stages. Returns the number of function evaluations."""
+    if exact:
+        ratio = h_ev / h
+        scale = 1.0
+        for k in range(deg):
+            scale *= ratio
+            for i in range(n):
+                Q[i, k] *= scale
+        return 0
+    return _make_dense(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, nvar, K, A, C, s_fsal, P,
+                       Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
+
+
+# --------------------------------------------------------------------------------------
 # dense output on demand
 # --------------------------------------------------------------------------------------
 
@@ -1702,15 +1822,15 @@ def _dense_coefficients(ev, p, etab, stab, iopt, fopt, A, C, P, s_fsal, t0, x0, 
         t = nodes_t[i]
         for c in range(nY):
             y[c] = nodes_y[i, c]
-        if nz > 0 and dkind == REGULAR and nvar == 0 and aff_ok[mode] == 1:
-            _exact_step(aff_M, aff_s, aff_w, mode, nz, n, t, y, h, zv, zv1, Q, xe)
-        else:
+        exact = nz > 0 and dkind == REGULAR and nvar == 0 and aff_ok[mode] == 1
+        if not exact:
             _rhs(ev, p, dkind, didx, mode, nm, t, y, n, nvar, K[0], etab, stab, slide_c,
                  w1, w2, gx, hdx, jac, xt, ft)
             _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_fsal,
                        ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
-            _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_fsal, P,
-                        Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
+        _step_dense(ev, p, exact, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_fsal, P,
+                    Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft, aff_M, aff_s,
+                    aff_w, nz, zv, zv1, xe)
         for c in range(nY):
             for k in range(deg):
                 out[r, c, k] = Q[c, k]
@@ -2197,62 +2317,17 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 status = ST_STEP_TOO_SMALL
                 break
 
-            q_made = False
+            # ---- one step: the exact flow of an affine mode or the Runge-Kutta pair
             if exact_now:
-                # ---- one exact step of an affine mode (no error: the step is limited only by
-                # the convergence of the Taylor sum, the largest step and the events)
-                if h == min(aff_h[mode], hmax):
-                    # a full step: one product with the propagator, made once per mode and run
-                    if h != aff_ph[mode]:
-                        _exact_propagator(aff_M, aff_w, mode, nz, h, aff_P, T1, T2)
-                        aff_ph[mode] = h
-                    _exact_apply(aff_M, aff_s, aff_P, mode, nz, n, t, y, zv, ynew)
-                else:
-                    # a shorter one (before an event, t_end, or a moving surface): the Taylor sum
-                    # of the vector, whose terms are the dense output
-                    _exact_step(aff_M, aff_s, aff_w, mode,
-                                nz, n, t, y, h, zv, zv1, Q, ynew)
-                    q_made = True
-                ev(W_F, mode, t + h, ynew, p, kst)
-                for i in range(n):
-                    K[s_fsal, i] = kst[i]
-                stats[2] += 1
-                err = 0.0
-                for i in range(n):
-                    if not (np.isfinite(K[s_fsal, i]) and np.isfinite(ynew[i])):
-                        err = np.inf
-                finite = err == 0.0
+                err, finite, q_made, nf = _exact_stepper(
+                    ev, p, mode, t, y, h, n, K, s_fsal, ynew, kst, Q, aff_M, aff_s, aff_w, aff_P,
+                    aff_ph, min(aff_h[mode], hmax), nz, zv, zv1, T1, T2)
             else:
-                # ---- one RK step (stages written out here: this is the hot loop)
-                fast = dkind == REGULAR and nvar == 0
-                for st in range(1, s_fsal + 1):
-                    cst = t + C[st] * h
-                    for i in range(nY):
-                        acc = 0.0
-                        for m in range(st):
-                            acc += A[st, m] * K[m, i]
-                        ytmp[i] = y[i] + h * acc
-                    # into a scratch vector: passing the row K[st] makes an array view, whose
-                    # reference counting (two atomic updates) measured 30% of a step
-                    if fast:
-                        ev(W_F, mode, cst, ytmp, p, kst)
-                    else:
-                        _rhs(ev, p, dkind, didx, mode, nm, cst, ytmp, n, nvar, kst, etab, stab,
-                             slide_c, w1, w2, gx, hdx, jac, xt, ft)
-                    for i in range(nY):
-                        K[st, i] = kst[i]
-                stats[2] += s_fsal
-                # the FSAL stage was evaluated at y + h sum B K = the new solution
-                finite = True
-                for i in range(nY):
-                    ynew[i] = ytmp[i]
-                    if not (np.isfinite(K[s_fsal, i]) and np.isfinite(ynew[i])):
-                        finite = False
-                err = (_error_norm(K, E, method, s_fsal, y, ynew, h, 0, n, rtol, atol) if finite
-                       else np.inf)
-                if nvar and finite:
-                    err = max(err, _error_norm(K, E, method, s_fsal, y, ynew, h, n, nY, rtol,
-                              atol))
+                q_made = False
+                err, finite, nf = _rk_step(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K,
+                                           A, C, E, method, s_fsal, ytmp, ynew, kst, etab, stab,
+                                           slide_c, w1, w2, gx, hdx, jac, xt, ft, rtol, atol)
+            stats[2] += nf
             if not (err <= 1.0):
                 stats[1] += 1
                 if not finite or err != err:
@@ -2267,12 +2342,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             # dense output coefficients are made only when needed (stored steps, interior samples)
             q_ready = q_made
             if store_q and not q_ready:
-                if exact_now:
-                    _exact_step(aff_M, aff_s, aff_w, mode, nz, n, t, y, h, zv, zv1, Q, xe)
-                else:
-                    stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K,
-                                            A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2,
-                                            gx, hdx, jac, xt, ft)
+                stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h, nY, n,
+                    nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac,
+                    xt, ft, aff_M, aff_s, aff_w, nz, zv, zv1, xe)
                 q_ready = True
             t_new = t + h
             if t_new > t_end or h >= t_end - t:
@@ -2335,14 +2407,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                         # Hermite fit must reproduce h at the midpoint, or the step is retaken
                         # shorter.
                         if not q_ready:
-                            if exact_now:
-                                _exact_step(aff_M, aff_s, aff_w, mode,
-                                            nz, n, t, y, h, zv, zv1, Q, xe)
-                            else:
-                                stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY,
-                                                        n, nvar, K, A, C, s_fsal, P, Q, ytmp, etab,
-                                                        stab, slide_c, w1, w2, gx, hdx, jac, xt,
-                                                        ft)
+                            stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y,
+                                h, nY, n, nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c,
+                                w1, w2, gx, hdx, jac, xt, ft, aff_M, aff_s, aff_w, nz, zv, zv1, xe)
                             q_ready = True
                         _dense_eval(y, Q, 0.5, nY, deg, xs)
                         hm = _watch_value(ev, p, WF_SURFACE, widx[w], wmode[w], nm, t + 0.5 * h,
@@ -2382,13 +2449,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                             thetas[ns] = rb
                             ns += 1
                     if ns > 1 and not q_ready:
-                        if exact_now:
-                            _exact_step(aff_M, aff_s, aff_w, mode,
-                                        nz, n, t, y, h, zv, zv1, Q, xe)
-                        else:
-                            stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n,
-                                                    nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab,
-                                                    slide_c, w1, w2, gx, hdx, jac, xt, ft)
+                        stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h,
+                            nY, n, nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2,
+                            gx, hdx, jac, xt, ft, aff_M, aff_s, aff_w, nz, zv, zv1, xe)
                         q_ready = True
                     rates[0] = r0
                     for q in range(1, ns):
@@ -2434,13 +2497,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                             # changed sign at the instant of the event just handled (see below)
                             vals[w, 0] = 0.0
                     if not q_ready:
-                        if exact_now:
-                            _exact_step(aff_M, aff_s, aff_w, mode,
-                                        nz, n, t, y, h, zv, zv1, Q, xe)
-                        else:
-                            stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n,
-                                                    nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab,
-                                                    slide_c, w1, w2, gx, hdx, jac, xt, ft)
+                        stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h,
+                            nY, n, nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2,
+                            gx, hdx, jac, xt, ft, aff_M, aff_s, aff_w, nz, zv, zv1, xe)
                         q_ready = True
                     _dense_eval(y, Q, 0.5, nY, deg, xs)
                     vals[w, 1] = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t + 0.5 * h,
@@ -2514,14 +2573,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                         continue
                     if _crosses(prev_v, vq, wdir[w]):
                         if not q_ready:
-                            if exact_now:
-                                _exact_step(aff_M, aff_s, aff_w, mode,
-                                            nz, n, t, y, h, zv, zv1, Q, xe)
-                            else:
-                                stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY,
-                                                        n, nvar, K, A, C, s_fsal, P, Q, ytmp, etab,
-                                                        stab, slide_c, w1, w2, gx, hdx, jac, xt,
-                                                        ft)
+                            stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y,
+                                h, nY, n, nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c,
+                                w1, w2, gx, hdx, jac, xt, ft, aff_M, aff_s, aff_w, nz, zv, zv1, xe)
                             q_ready = True
                         # locate by Illinois on the dense output within [prev_th, th]
                         a_th = prev_th
@@ -2624,13 +2678,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     n_nodes += 1
                 if sdt > 0.0 and s0 + sk * sdt <= t_new:
                     if not q_ready:
-                        if exact_now:
-                            _exact_step(aff_M, aff_s, aff_w, mode,
-                                        nz, n, t, y, h, zv, zv1, Q, xe)
-                        else:
-                            stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n,
-                                                    nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab,
-                                                    slide_c, w1, w2, gx, hdx, jac, xt, ft)
+                        stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h,
+                            nY, n, nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2,
+                            gx, hdx, jac, xt, ft, aff_M, aff_s, aff_w, nz, zv, zv1, xe)
                         q_ready = True
                     n_samp, sk = _take_samples(t, h, y, Q, nY, n, deg, s0, sdt, sk, t_end,
                                                      samp, n_samp, xs, max_samp)
@@ -2664,14 +2714,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             for i in range(nY):
                 Kland[0, i] = K[0, i]
             for polish in range(8):
-                if exact_now:
-                    _dense_eval(y, Q, h_ev / h, nY, deg, ytmp)
-                    ev(W_F, mode, t + h_ev, ytmp, p, Kland[s_fsal])
-                    stats[2] += 1
-                else:
-                    _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, nvar, Kland, A, C,
-                               s_fsal, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
-                    stats[2] += s_fsal
+                stats[2] += _landing_step(ev, p, exact_now, dkind, didx, mode, nm, t, y, h, h_ev,
+                                          nY, n, nvar, Kland, A, C, s_fsal, Q, deg, ytmp, etab,
+                                          stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
                 stats[5] += 1
                 for i in range(nY):
                     ynew[i] = ytmp[i]
@@ -2703,17 +2748,10 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 h_ev += dt
             # landing-step dense output (extra stages for DOP853; Taylor terms rescaled), where it
             # is stored or sampled
-            if exact_now and (store_q or sdt > 0.0):
-                ratio = h_ev / h
-                scale = 1.0
-                for k in range(deg):
-                    scale *= ratio
-                    for i in range(n):
-                        Q[i, k] *= scale
-            elif store_q or sdt > 0.0:
-                stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, nvar,
-                                        Kland, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1,
-                                        w2, gx, hdx, jac, xt, ft)
+            if store_q or sdt > 0.0:
+                stats[2] += _landing_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h, h_ev,
+                                           nY, n, nvar, Kland, A, C, s_fsal, P, Q, deg, ytmp,
+                                           etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
             t_ev = min(t + h_ev, t_end)
             # Events at one instant: another watched function (an event surface, a release or a
             # sliding exit) that changed sign between the step's start and the polished event
