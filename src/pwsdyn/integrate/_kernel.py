@@ -143,48 +143,22 @@ from numba import njit
 from ..model.codegen import (W_AFFINE, W_F, W_FU, W_FX, W_G, W_GUARD, W_GX, W_GT, W_H, W_HD,
                              W_HDT, W_HDU, W_HDUD, W_HDX, W_HHD, W_HT, W_HX)
 
-# discrete states
-REGULAR, STICK, SLIDE = 0, 1, 2
-# watch function types
-WF_SURFACE, WF_HDOT, WF_HDDOT = 0, 1, 2
-# actions of watch functions
-ACT_EVENT, ACT_SWITCH, ACT_RELEASE, ACT_EXIT_ABOVE, ACT_EXIT_BELOW, ACT_INTERSECTION = 0, 1, 2, 3, 4, 5
-# event log kinds (kept in sync with trajectory.EVENT_KINDS)
-K_IMPACT, K_TRANSITION, K_CHATTER, K_STICK, K_RELEASE, K_CROSSING, K_SLIDE_START, K_SLIDE_END = (
-    0, 1, 2, 3, 4, 5, 6, 7)
-# event kinds in the model tables
-EV_IMPACT, EV_TRANSITION = 0, 1
-# status codes (errors.Status)
-ST_SUCCESS, ST_TERMINAL, ST_MAX_STEPS, ST_MAX_EVENTS, ST_STEP_TOO_SMALL, ST_NONFINITE = 0, 1, 2, 3, 4, 5
-ST_INTERSECTION = 6
-ST_ZENO = 7
-# integer options
-IO_MODE0, IO_NMODES, IO_MAXSTEPS, IO_MAXEVENTS, IO_METHOD, IO_VAR, IO_CHATTER, IO_SAVE = range(8)
-# optional integer options, read only when ``iopt`` is long enough: stop after the
-# IO_STOP_COUNT-th logged event whose kind K_* has its bit set in IO_STOP_MASK and whose event
-# (or switch) index is IO_STOP_REF (-1: any); the initial discrete state kind and index
-IO_STOP_MASK, IO_STOP_REF, IO_STOP_COUNT, IO_DKIND0, IO_DIDX0 = range(8, 13)
-# exact propagation of the affine modes (1) instead of the Runge-Kutta pair (0)
-IO_EXACT = 13
-# values of iopt[IO_SAVE]: the nodes of events and the end only; every step with its dense
-# output (power-form coefficients, ``dense``); every step with its length only (``hstep``:
-# the dense output is rebuilt on demand from the node by :func:`dense_coefficients`)
-SAVE_EVENTS, SAVE_DENSE, SAVE_NODES = 0, 1, 2
-IO_N = 14
-# values of iopt[IO_VAR]: no variational equations; Phi = dx(t)/dx0 through every event; or per
-# segment: Phi restarts at the identity after each event and each event record carries the
-# segment's Phi (variational part of x_before) and the saltation matrix S (of x_after)
-VAR_NONE, VAR_GLOBAL, VAR_SEGMENTS = 0, 1, 2
-# float options
-FO_RTOL, FO_ATOL, FO_H0, FO_HMAX, FO_CHAT_REL, FO_CHAT_ABS, FO_SLIDE_C = range(7)
-# sampling at t = FO_SAMPLE_T0 + k FO_SAMPLE_DT (k >= 0) on the dense output; DT <= 0: off
-FO_SAMPLE_T0, FO_SAMPLE_DT = 7, 8
-FO_N = 9
-# switch table columns: surface, above mode, below mode, and optionally the kind (SW_FILIPPOV:
-# cross or slide; SW_CONTINUOUS: only a derivative jumps, always cross) and the sliding method
-# (SLIDE_CONVEX: Filippov's convex combination; SLIDE_UTKIN: Utkin's equivalent control)
-SW_FILIPPOV, SW_CONTINUOUS = 0, 1
-SLIDE_CONVEX, SLIDE_UTKIN = 0, 1
+# The integer codes (discrete states, watch types, actions, log kinds, statuses, options) are
+# defined once in ._codes, shared with the Python side; numba reads them as compile-time
+# constants. Numba's on-disk cache is keyed on this file, not on ._codes: after changing a
+# code there, clear the cache (or touch this file) so the kernel is recompiled.
+from ._codes import (ACT_EVENT, ACT_EXIT_ABOVE, ACT_EXIT_BELOW,  # noqa: F401 (re-exported)
+                     ACT_INTERSECTION, ACT_RELEASE, ACT_SWITCH, EV_IMPACT, EV_TRANSITION,
+                     FO_ATOL, FO_CHAT_ABS, FO_CHAT_REL, FO_H0, FO_HMAX, FO_N, FO_RTOL,
+                     FO_SAMPLE_DT, FO_SAMPLE_T0, FO_SLIDE_C, IO_CHATTER, IO_DIDX0, IO_DKIND0,
+                     IO_EXACT, IO_MAXEVENTS, IO_MAXSTEPS, IO_METHOD, IO_MODE0, IO_N, IO_NMODES,
+                     IO_SAVE, IO_STOP_COUNT, IO_STOP_MASK, IO_STOP_REF, IO_VAR, IV_CHATTER,
+                     IV_JUMP, IV_STEP, K_CHATTER, K_CROSSING, K_IMPACT, K_RELEASE, K_SLIDE_END,
+                     K_SLIDE_START, K_STICK, K_TRANSITION, REGULAR, SAVE_DENSE, SAVE_EVENTS,
+                     SAVE_NODES, SLIDE, SLIDE_CONVEX, SLIDE_UTKIN, ST_INTERSECTION,
+                     ST_MAX_EVENTS, ST_MAX_STEPS, ST_NONFINITE, ST_STEP_TOO_SMALL, ST_SUCCESS,
+                     ST_TERMINAL, ST_ZENO, STICK, SW_CONTINUOUS, SW_FILIPPOV, VAR_GLOBAL,
+                     VAR_NONE, VAR_SEGMENTS, WF_HDDOT, WF_HDOT, WF_SURFACE)
 
 #: The decorator of the helpers that allocate nothing: compiled without numba's reference
 #: counting (``_nrt=False``). With it every call increfs and decrefs each array argument
@@ -2669,7 +2643,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                                 dense[n_nodes - 1, i, k] = Q[i, k]
                     for i in range(nY):
                         nodes_y[n_nodes, i] = ynew[i]
-                    ikind[n_nodes - 1] = 0
+                    ikind[n_nodes - 1] = IV_STEP
                     hstep[n_nodes - 1] = h
                     nodes_t[n_nodes] = t_new
                     nodes_s[n_nodes, 0] = dkind
@@ -2783,7 +2757,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 for i in range(nY):
                     for k in range(deg):
                         dense[n_nodes - 1, i, k] = Q[i, k]
-            ikind[n_nodes - 1] = 0 if save_all else 1
+            ikind[n_nodes - 1] = IV_STEP if save_all else IV_JUMP
             hstep[n_nodes - 1] = h_ev
             nodes_t[n_nodes] = t_ev
             for i in range(nY):
@@ -2857,7 +2831,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                         last_depth = 4.0 * abs(buf[0])
                     last_t = t
                     # the interval [t_ev, ...] continues smoothly: mark the stored interval as step
-                    ikind[n_nodes - 2] = 0 if save_all else 1
+                    ikind[n_nodes - 2] = IV_STEP if save_all else IV_JUMP
                     restart = True
                     continue
                 k = etab[j, 0]
@@ -3019,7 +2993,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     last_type = wtype[w]; last_idx = widx[w]; last_mode = wmode[w]
                     last_sign = new_sign
                     last_t = t
-                    ikind[n_nodes - 2] = 0 if save_all else 1
+                    ikind[n_nodes - 2] = IV_STEP if save_all else IV_JUMP
                     restart = True
                     continue
                 if filippov and sa < 0.0 and sb > 0.0:
@@ -3137,7 +3111,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 nodes_s[n_nodes, 0] = dkind
                 nodes_s[n_nodes, 1] = didx
                 nodes_s[n_nodes, 2] = mode
-                ikind[n_nodes - 1] = 2 if log_kind == K_CHATTER else 1
+                ikind[n_nodes - 1] = IV_CHATTER if log_kind == K_CHATTER else IV_JUMP
                 hstep[n_nodes - 1] = 0.0
                 if store_q:
                     for i in range(nY):
@@ -3284,7 +3258,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
         nodes_s = _grow2(nodes_s, n_nodes + 1)
         ikind = _grow1(ikind, n_nodes + 1)
         hstep = _grow1(hstep, n_nodes + 1)
-        ikind[n_nodes - 1] = 1
+        ikind[n_nodes - 1] = IV_JUMP
         hstep[n_nodes - 1] = 0.0
         if store_q:
             dense = _grow3(dense, n_nodes + 1)
