@@ -1629,55 +1629,28 @@ def state_field(ev, p, dkind, didx, mode, nm, t, x, etab, stab, slide_c, out):
 # --------------------------------------------------------------------------------------
 # steppers: one step from (t, y) of length h, Runge-Kutta or exact, behind one interface
 # --------------------------------------------------------------------------------------
+# The Runge-Kutta step itself is written out in the stepping loop of run_kernel (its cost is
+# that of a few multiply-adds and field calls, and any call costs a visible fraction of it);
+# the exact stepper, the dense output and the landing step are functions with the same
+# arguments. Each is a plain call of a ``_hot`` function with at most 30 arguments: longer
+# calls are made by Python as ``f(*args)``, for which numba builds a tuple of the arrays (a
+# reference-count update per array: measured 1.7x the cost of an RK45 step), and numba's
+# inlining assigns each array argument to a new variable (the same updates). The work vectors
+# of the vector fields travel as one tuple ``wk = (w1, w2, gx, hdx, jac, xt, ft)`` and the
+# affine tables as ``aff = (M, sc, wt, z, v)``, both built once per run.
 
 @_hot
-def _rk_step(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, E, method, s_fsal,
-             ytmp, ynew, kst, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft, rtol, atol):
-    """One step of the embedded pair from ``K[0] = f(t, y)``: stages 1..s_fsal into ``K`` (the
-    last one, FSAL, is ``f(t + h, ynew)``), the new state into ``ynew`` and the scaled error
-    (the state and, with variational equations, ``Phi`` each meeting the tolerances; inf for a
-    non-finite stage). Returns ``(err, finite, nfev)``."""
-    fast = dkind == REGULAR and nvar == 0
-    for st in range(1, s_fsal + 1):
-        cst = t + C[st] * h
-        for i in range(nY):
-            acc = 0.0
-            for m in range(st):
-                acc += A[st, m] * K[m, i]
-            ytmp[i] = y[i] + h * acc
-        # into a scratch vector: passing the row K[st] makes an array view, whose reference
-        # counting (two atomic updates) measured 30% of a step
-        if fast:
-            ev(W_F, mode, cst, ytmp, p, kst)
-        else:
-            _rhs(ev, p, dkind, didx, mode, nm, cst, ytmp, n, nvar, kst, etab, stab, slide_c,
-                 w1, w2, gx, hdx, jac, xt, ft)
-        for i in range(nY):
-            K[st, i] = kst[i]
-    # the FSAL stage was evaluated at y + h sum B K = the new solution
-    finite = True
-    for i in range(nY):
-        ynew[i] = ytmp[i]
-        if not (np.isfinite(K[s_fsal, i]) and np.isfinite(ynew[i])):
-            finite = False
-    if not finite:
-        return np.inf, False, s_fsal
-    err = _error_norm(K, E, method, s_fsal, y, ynew, h, 0, n, rtol, atol)
-    if nvar:
-        err = max(err, _error_norm(K, E, method, s_fsal, y, ynew, h, n, nY, rtol, atol))
-    return err, True, s_fsal
-
-
-@_hot
-def _exact_stepper(ev, p, mode, t, y, h, n, K, s_fsal, ynew, kst, Q, aff_M, aff_s, aff_w,
-                   aff_P, aff_ph, aff_full, nz, zv, zv1, T1, T2):
+def _exact_stepper(ev, p, mode, t, y, h, K, s_fsal, ynew, kst, Q, aff, aff_P, aff_ph, aff_full,
+                   nz, T1, T2):
     """One exact step of affine mode ``mode`` (see "Exact propagation" in the module
-    docstring), with the interface of :func:`_rk_step`: the new state into ``ynew``, the FSAL
+    docstring), with the outputs of the Runge-Kutta step of run_kernel: the new state into ``ynew``, the FSAL
     stage ``f(t + h, ynew)`` into ``K[s_fsal]``. The error is zero (the step is limited only
     by the convergence of the Taylor sum, the largest step and the events). A full step
     (``h == aff_full``) is one product with the propagator made once per mode and length; a
     shorter one sums the Taylor series of the vector, whose terms are the dense output in
     ``Q``. Returns ``(err, finite, dense_made, nfev)``."""
+    aff_M, aff_s, aff_w, zv, zv1 = aff
+    n = y.shape[0]   # (exact steps carry no variational equations)
     q_made = False
     if h == aff_full:
         if h != aff_ph[mode]:
@@ -1697,53 +1670,63 @@ def _exact_stepper(ev, p, mode, t, y, h, n, K, s_fsal, ynew, kst, Q, aff_M, aff_
 
 
 @_hot
-def _step_dense(ev, p, exact, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_fsal, P,
-                Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft, aff_M, aff_s, aff_w,
-                nz, zv, zv1, xe):
+def _step_dense(ev, p, exact, dkind, didx, mode, nm, t, y, h, K, A, C, s_fsal, P, Q, ytmp, etab,
+                stab, slide_c, wk, nz, aff):
     """The dense output ``Q`` (power form) of the step of length ``h`` just taken from
     ``(t, y)`` with stages ``K``: the Taylor terms of the exact flow for an exact step, else
     the interpolant of the tableau (with its extra stages). Made only where it is needed
     (stored steps, samples, event search). Returns the number of function evaluations."""
+    w1, w2, gx, hdx, jac, xt, ft = wk
+    nY = y.shape[0]
+    n = w1.shape[0]
     if exact:
-        _exact_step(aff_M, aff_s, aff_w, mode, nz, n, t, y, h, zv, zv1, Q, xe)
+        aff_M, aff_s, aff_w, zv, zv1 = aff
+        # (the end state of the series goes to the scratch ytmp: the step's is in ynew)
+        _exact_step(aff_M, aff_s, aff_w, mode, nz, n, t, y, h, zv, zv1, Q, ytmp)
         return 0
-    return _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_fsal, P,
-                       Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
+    return _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, 1 if nY > n else 0, K, A, C,
+                       s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
 
 
 @_hot
-def _landing_step(ev, p, exact, dkind, didx, mode, nm, t, y, h, h_ev, nY, n, nvar, K, A, C,
-                  s_fsal, Q, deg, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft):
+def _landing_step(ev, p, exact, dkind, didx, mode, nm, t, y, h, h_ev, K, A, C, s_fsal, Q, ytmp,
+                  etab, stab, slide_c, wk):
     """The step retaken from ``(t, y)`` to an event at ``t + h_ev`` (``h_ev <= h``), its end
     state into ``ytmp`` and its FSAL stage into ``K[s_fsal]`` (``K[0]`` is given), so the
     event state comes from the integrator, not from an interpolant. On an exact step the
     dense output ``Q`` of the full step is the exact flow: the landing is its evaluation.
     Returns the number of function evaluations."""
+    w1, w2, gx, hdx, jac, xt, ft = wk
+    nY = y.shape[0]
+    n = w1.shape[0]
     if exact:
-        _dense_eval(y, Q, h_ev / h, nY, deg, ytmp)
+        _dense_eval(y, Q, h_ev / h, nY, Q.shape[1], ytmp)
         ev(W_F, mode, t + h_ev, ytmp, p, K[s_fsal])
         return 1
-    _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, nvar, K, A, C, s_fsal, ytmp,
-               etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
+    _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, 1 if nY > n else 0, K, A, C,
+               s_fsal, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
     return s_fsal
 
 
 @_hot
-def _landing_dense(ev, p, exact, dkind, didx, mode, nm, t, y, h, h_ev, nY, n, nvar, K, A, C,
-                   s_fsal, P, Q, deg, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft):
+def _landing_dense(ev, p, exact, dkind, didx, mode, nm, t, y, h, h_ev, K, A, C, s_fsal, P, Q,
+                   ytmp, etab, stab, slide_c, wk):
     """Dense output of the landing step of :func:`_landing_step`: the Taylor terms of the full
     exact step rescaled to the interval ``h_ev`` (term k scales by ``(h_ev / h)^k``), or the
     tableau's interpolant with its extra stages. Returns the number of function evaluations."""
+    w1, w2, gx, hdx, jac, xt, ft = wk
+    nY = y.shape[0]
+    n = w1.shape[0]
     if exact:
         ratio = h_ev / h
         scale = 1.0
-        for k in range(deg):
+        for k in range(Q.shape[1]):
             scale *= ratio
             for i in range(n):
                 Q[i, k] *= scale
         return 0
-    return _make_dense(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, nvar, K, A, C, s_fsal, P,
-                       Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
+    return _make_dense(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, 1 if nY > n else 0, K, A,
+                       C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
 
 
 # --------------------------------------------------------------------------------------
@@ -1783,8 +1766,9 @@ def _dense_coefficients(ev, p, etab, stab, iopt, fopt, A, C, P, s_fsal, t0, x0, 
     ft = np.zeros(n)
     zv = np.zeros(max(nz, 1))
     zv1 = np.zeros(max(nz, 1))
-    xe = np.zeros(n)
     out = np.zeros((which.shape[0], nY, deg))
+    wk = (w1, w2, gx, hdx, jac, xt, ft)
+    aff = (aff_M, aff_s, aff_w, zv, zv1)
     for r in range(which.shape[0]):
         i = which[r]
         h = hstep[i]
@@ -1802,9 +1786,8 @@ def _dense_coefficients(ev, p, etab, stab, iopt, fopt, A, C, P, s_fsal, t0, x0, 
                  w1, w2, gx, hdx, jac, xt, ft)
             _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_fsal,
                        ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
-        _step_dense(ev, p, exact, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_fsal, P,
-                    Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft, aff_M, aff_s,
-                    aff_w, nz, zv, zv1, xe)
+        _step_dense(ev, p, exact, dkind, didx, mode, nm, t, y, h, K, A, C, s_fsal, P, Q, ytmp,
+                etab, stab, slide_c, wk, nz, aff)
         for c in range(nY):
             for k in range(deg):
                 out[r, c, k] = Q[c, k]
@@ -1923,7 +1906,6 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
         deg = max(deg, _EXACT_TERMS)
     zv = np.zeros(max(nz, 1))
     zv1 = np.zeros(max(nz, 1))
-    xe = np.zeros(n)
     # propagator exp(h M) per mode for the step length aff_ph (most steps have the same one)
     aff_P = np.zeros((nm, max(nz, 1), max(nz, 1)))
     aff_ph = np.full(nm, -1.0)
@@ -1952,6 +1934,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     Kland = np.zeros((s_ext, nY))
     S = np.zeros((n, n))
     Phi = np.zeros((n, n))
+    # the vector fields' work vectors and the affine tables, passed as one argument each
+    wk = (w1, w2, gx, hdx, jac, xt, ft)
+    aff = (aff_M, aff_s, aff_w, zv, zv1)
 
     # outputs
     cap = 256
@@ -2293,14 +2278,42 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
 
             # ---- one step: the exact flow of an affine mode or the Runge-Kutta pair
             if exact_now:
-                err, finite, q_made, nf = _exact_stepper(
-                    ev, p, mode, t, y, h, n, K, s_fsal, ynew, kst, Q, aff_M, aff_s, aff_w, aff_P,
-                    aff_ph, min(aff_h[mode], hmax), nz, zv, zv1, T1, T2)
+                err, finite, q_made, nf = _exact_stepper(ev, p, mode, t, y, h, K, s_fsal, ynew,
+                        kst, Q, aff, aff_P, aff_ph, min(aff_h[mode], hmax), nz, T1, T2)
             else:
+                # the Runge-Kutta step, written out here (the stepper with the interface of
+                # _exact_stepper): as a call it passes ~20 arrays per step, measured 10-15% of
+                # an RK45 step on a two-state model
                 q_made = False
-                err, finite, nf = _rk_step(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K,
-                                           A, C, E, method, s_fsal, ytmp, ynew, kst, etab, stab,
-                                           slide_c, w1, w2, gx, hdx, jac, xt, ft, rtol, atol)
+                nf = s_fsal
+                fast = dkind == REGULAR and nvar == 0
+                for st in range(1, s_fsal + 1):
+                    cst = t + C[st] * h
+                    for i in range(nY):
+                        acc = 0.0
+                        for m in range(st):
+                            acc += A[st, m] * K[m, i]
+                        ytmp[i] = y[i] + h * acc
+                    # into a scratch vector: passing the row K[st] makes an array view, whose
+                    # reference counting (two atomic updates) measured 30% of a step
+                    if fast:
+                        ev(W_F, mode, cst, ytmp, p, kst)
+                    else:
+                        _rhs(ev, p, dkind, didx, mode, nm, cst, ytmp, n, nvar, kst, etab, stab,
+                             slide_c, w1, w2, gx, hdx, jac, xt, ft)
+                    for i in range(nY):
+                        K[st, i] = kst[i]
+                # the FSAL stage was evaluated at y + h sum B K = the new solution
+                finite = True
+                for i in range(nY):
+                    ynew[i] = ytmp[i]
+                    if not (np.isfinite(K[s_fsal, i]) and np.isfinite(ynew[i])):
+                        finite = False
+                err = (_error_norm(K, E, method, s_fsal, y, ynew, h, 0, n, rtol, atol) if finite
+                       else np.inf)
+                if nvar and finite:
+                    err = max(err, _error_norm(K, E, method, s_fsal, y, ynew, h, n, nY, rtol,
+                              atol))
             stats[2] += nf
             if not (err <= 1.0):
                 stats[1] += 1
@@ -2316,9 +2329,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             # dense output coefficients are made only when needed (stored steps, interior samples)
             q_ready = q_made
             if store_q and not q_ready:
-                stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h, nY, n,
-                    nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac,
-                    xt, ft, aff_M, aff_s, aff_w, nz, zv, zv1, xe)
+                stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h, K, A, C,
+                        s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz, aff)
                 q_ready = True
             t_new = t + h
             if t_new > t_end or h >= t_end - t:
@@ -2382,8 +2394,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                         # shorter.
                         if not q_ready:
                             stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y,
-                                h, nY, n, nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c,
-                                w1, w2, gx, hdx, jac, xt, ft, aff_M, aff_s, aff_w, nz, zv, zv1, xe)
+                                    h, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz,
+                                    aff)
                             q_ready = True
                         _dense_eval(y, Q, 0.5, nY, deg, xs)
                         hm = _watch_value(ev, p, WF_SURFACE, widx[w], wmode[w], nm, t + 0.5 * h,
@@ -2424,8 +2436,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                             ns += 1
                     if ns > 1 and not q_ready:
                         stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h,
-                            nY, n, nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2,
-                            gx, hdx, jac, xt, ft, aff_M, aff_s, aff_w, nz, zv, zv1, xe)
+                                K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz, aff)
                         q_ready = True
                     rates[0] = r0
                     for q in range(1, ns):
@@ -2472,8 +2483,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                             vals[w, 0] = 0.0
                     if not q_ready:
                         stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h,
-                            nY, n, nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2,
-                            gx, hdx, jac, xt, ft, aff_M, aff_s, aff_w, nz, zv, zv1, xe)
+                                K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz, aff)
                         q_ready = True
                     _dense_eval(y, Q, 0.5, nY, deg, xs)
                     vals[w, 1] = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t + 0.5 * h,
@@ -2548,8 +2558,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     if _crosses(prev_v, vq, wdir[w]):
                         if not q_ready:
                             stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y,
-                                h, nY, n, nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c,
-                                w1, w2, gx, hdx, jac, xt, ft, aff_M, aff_s, aff_w, nz, zv, zv1, xe)
+                                    h, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz,
+                                    aff)
                             q_ready = True
                         # locate by Illinois on the dense output within [prev_th, th]
                         a_th = prev_th
@@ -2653,8 +2663,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 if sdt > 0.0 and s0 + sk * sdt <= t_new:
                     if not q_ready:
                         stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h,
-                            nY, n, nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2,
-                            gx, hdx, jac, xt, ft, aff_M, aff_s, aff_w, nz, zv, zv1, xe)
+                                K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz, aff)
                         q_ready = True
                     n_samp, sk = _take_samples(t, h, y, Q, nY, n, deg, s0, sdt, sk, t_end,
                                                      samp, n_samp, xs, max_samp)
@@ -2689,8 +2698,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 Kland[0, i] = K[0, i]
             for polish in range(8):
                 stats[2] += _landing_step(ev, p, exact_now, dkind, didx, mode, nm, t, y, h, h_ev,
-                                          nY, n, nvar, Kland, A, C, s_fsal, Q, deg, ytmp, etab,
-                                          stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
+                        Kland, A, C, s_fsal, Q, ytmp, etab, stab, slide_c, wk)
                 stats[5] += 1
                 for i in range(nY):
                     ynew[i] = ytmp[i]
@@ -2724,8 +2732,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             # is stored or sampled
             if store_q or sdt > 0.0:
                 stats[2] += _landing_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h, h_ev,
-                                           nY, n, nvar, Kland, A, C, s_fsal, P, Q, deg, ytmp,
-                                           etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
+                        Kland, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk)
             t_ev = min(t + h_ev, t_end)
             # Events at one instant: another watched function (an event surface, a release or a
             # sliding exit) that changed sign between the step's start and the polished event
