@@ -1730,6 +1730,436 @@ def _landing_dense(ev, p, exact, dkind, didx, mode, nm, t, y, h, h_ev, K, A, C, 
 
 
 # --------------------------------------------------------------------------------------
+# event actions: one function per action, called from the one dispatch in run_kernel
+# --------------------------------------------------------------------------------------
+# Each takes the state at the event (``t``, ``y``; ``xs`` the copy before it), updates ``y``
+# in place, writes the saltation matrix ``S`` when the variational equations are on, and
+# returns the new discrete state ``(dkind, didx, mode)`` and the kind of the log record
+# (``K_*``; -1: none). At most 30 arguments each (see the steppers above). The saltation
+# matrix of every action is made by :func:`_action_saltation`, called after the action where
+# the variational equations are on: the saltation helpers allocate, so they keep numba's
+# reference counting, which the actions (like every other per-step or per-event helper) are
+# compiled without (measured 5-10% of an event-dominated run).
+
+@_hot
+def _event_fires(ev, p, w, nw, wact, wtype, widx, wdir, wref, new_sign, dkind, didx, mode, nm,
+                 t, y, n, etab, stab, slide_c, buf, fbuf, wk):
+    """Whether the crossing found by watch ``w`` (an event surface) is an event. Events on one
+    surface with complementary guards (stick or reverse at v = 0, thesis eq. 5.4): the
+    crossing belongs to the one whose guard holds, which may be another watch. A crossing
+    whose normal velocity points against the event direction is round-off around a previous
+    event (the state is already leaving), unless that velocity is itself round-off (a state
+    on the surface and tangent to it is not leaving: the sign of the round-off must not
+    decide). Returns ``(w, fires, moving_away, hdot)`` with ``w`` the watch it belongs to."""
+    w1, w2, gx, hdx, jac, xt, ft = wk
+    j = wref[w]
+    ev(W_GUARD, j, t, y, p, buf)
+    guard_ok = buf[0] != 0.0
+    if not guard_ok:
+        for ww in range(nw):
+            if (ww != w and wact[ww] == ACT_EVENT and wtype[ww] == WF_SURFACE
+                    and widx[ww] == widx[w]
+                    and (wdir[ww] == 0 or wdir[ww] * new_sign > 0.0)):
+                ev(W_GUARD, wref[ww], t, y, p, buf)
+                if buf[0] != 0.0:
+                    w = ww
+                    j = wref[ww]
+                    guard_ok = True
+                    break
+    if dkind == REGULAR:
+        ev(W_HD, widx[w] * nm + mode, t, y, p, buf)
+        vn = buf[0]
+    else:
+        _field(ev, p, dkind, didx, mode, nm, t, y, n, fbuf, etab, stab, slide_c, w1, w2, gx,
+               hdx)
+        vn = _surface_rate(ev, p, dkind, widx[w], mode, nm, t, y, fbuf, n, buf, hdx)
+    moving_away = etab[j, 1] != 0 and vn * etab[j, 1] < 0.0
+    if moving_away and abs(vn) <= _rate_band(ev, p, widx[w], mode, nm, t, y, n, hdx):
+        moving_away = False
+    return w, guard_ok and not moving_away, moving_away, vn
+
+
+@_hot
+def _act_impact(ev, p, j, dkind, didx, mode, nm, t, y, xs, n, etab, t_end, fopt, chatter_on,
+                chain_event, chain_vmax, buf, fbuf, ytmp, wk):
+    """Impact on event ``j``: the reset ``g``, or the complete-chattering map where the
+    sequence of impacts accumulates (:func:`_act_chatter`), or, where the accumulation point
+    lies past ``t_end`` and the bounces are below the velocity floor, the end of the run on
+    the chord of the chattering gap. ``chain_event``/``chain_vmax``: the impacts of the
+    current sequence and its largest normal speed (the relative chattering threshold).
+    Returns ``(dkind, didx, mode, log_kind, t_after, chatter_tail, chain_event, chain_vmax,
+    chattered)``."""
+    w1, w2, gx, hdx, jac, xt, ft = wk
+    rtol = fopt[FO_RTOL]
+    atol = fopt[FO_ATOL]
+    chat_rel = fopt[FO_CHAT_REL]
+    # a negative ratio is the default one, applied only where the chattering map is accurate
+    chat_gated = chat_rel < 0.0
+    chat_rel = abs(chat_rel)
+    chat_abs = fopt[FO_CHAT_ABS]
+    k = etab[j, 0]
+    # normal velocity and acceleration at impact, impact direction W, restitution r
+    ev(W_HD, k * nm + mode, t, y, p, buf)
+    vin = buf[0]
+    ev(W_F, mode, t, y, p, fbuf)
+    ev(W_HDX, k * nm + mode, t, y, p, hdx)
+    ev(W_HDT, k * nm + mode, t, y, p, buf)
+    acc = buf[0] + _dot(hdx, fbuf, n)
+    hw = _impact_direction(ev, p, j, k, mode, nm, t, y, n, w1, gx, hdx)
+    r = -(1.0 + hw)
+    if chain_event != j:
+        chain_event = j
+        chain_vmax = 0.0
+    chain_vmax = max(chain_vmax, abs(vin))
+    # velocity floor: a bounce of speed v rises v^2 / (2|a|); below the position tolerance it
+    # cannot be told from sticking (default when chat_abs < 0)
+    vfloor = chat_abs
+    if vfloor < 0.0:
+        xmax = 0.0
+        for i in range(n):
+            xmax = max(xmax, abs(y[i]))
+        vfloor = np.sqrt(2.0 * abs(acc) * (atol + rtol * xmax))
+    do_chatter = (chatter_on == 1 and acc < 0.0 and r >= 0.0 and r < 1.0
+                  and (abs(vin) <= vfloor or r == 0.0))
+    if (chatter_on == 1 and not do_chatter and acc < 0.0 and 0.0 <= r < 1.0
+            and abs(vin) <= chat_rel * chain_vmax and not chat_gated):
+        do_chatter = True
+    elif (chatter_on == 1 and not do_chatter and acc < 0.0 and 0.0 <= r < 1.0
+            and abs(vin) <= chat_rel * chain_vmax):
+        # the map takes the normal acceleration as constant over the sequence: jump only
+        # where its change over the sequence's duration moves the state by less than the
+        # position tolerance, dt^2 |a(t + dt) - a(t)| (a table whose acceleration varies put
+        # the accumulation point 3e-6 off when entered at 1e-4 of the first impact's speed;
+        # below the floor the bounces are unresolvable anyway)
+        dtq = 2.0 * r * vin / ((1.0 - r) * acc)
+        for i in range(n):
+            xt[i] = y[i] + dtq * fbuf[i]
+        acc2 = _free_normal_acc(ev, p, k, mode, nm, t + dtq, xt, n, buf, ft, w2)
+        xmax = 0.0
+        for i in range(n):
+            xmax = max(xmax, abs(y[i]))
+        do_chatter = dtq * dtq * abs(acc2 - acc) <= atol + rtol * xmax
+    # complete-chattering map (Nordmark & Piiroinen 2009; slides):
+    # x_out = x_in + (2 r f_in / a + W) hdot_in / (1 - r),
+    # t_out = t_in + 2 r hdot_in / ((1 - r) a)
+    dtc = 2.0 * r * vin / ((1.0 - r) * acc) if do_chatter else 0.0
+    chatter_tail = False
+    if do_chatter and not (t + dtc <= t_end):
+        # the accumulation point lies beyond t_end: up to t_end the motion is a finite number
+        # of ordinary impacts, so take this one (and the next ones) as an impact and
+        # integrate on; jumping would end the run past t_end with the state of a time not
+        # asked for
+        do_chatter = False
+        # ... unless the bounces are below the velocity floor: they rise less than the
+        # position tolerance, so the event search cannot resolve them (their crossings drown
+        # in the round-off band of the re-trigger guard and the state would fall through the
+        # surface). Up to t_end the motion then is the start of the chattering sequence,
+        # within the resolution of the run: end at t_end on the chord from x_in to the
+        # accumulation state (Q(x_in) projected onto the sticking manifold, as below) that a
+        # chattering gap is drawn with (error O(floor) in hdot, O(tolerance) in h)
+        chatter_tail = abs(vin) <= vfloor and dtc > 0.0
+    log_kind = -1
+    t_after = t
+    chattered = 0
+    if chatter_tail:
+        _chatter_jump(ev, p, k, mode, nm, t + dtc, xs, ytmp, n, r, vin, acc, fbuf, w1, hdx, w2,
+                      buf)
+        th = (t_end - t) / dtc
+        for i in range(n):
+            y[i] = (1.0 - th) * xs[i] + th * ytmp[i]
+    elif do_chatter:
+        t_after = t + dtc
+        _chatter_jump(ev, p, k, mode, nm, t_after, xs, y, n, r, vin, acc, fbuf, w1, hdx, w2, buf)
+        log_kind = K_CHATTER
+        dkind = STICK
+        didx = j
+        chattered = 1
+        chain_event = -1
+    else:
+        mode = _apply_reset(ev, p, j, mode, t, y, xs, n, etab, ytmp)
+        log_kind = K_IMPACT
+    return dkind, didx, mode, log_kind, t_after, chatter_tail, chain_event, chain_vmax, chattered
+
+
+@_hot
+def _chatter_jump(ev, p, k, mode, nm, t_out, xs, out, n, r, vin, acc, f, W, hdx, w2, buf):
+    """The complete-chattering map ``Q(x_in) = x_in + (2 r f_in / a + W) hdot_in / (1 - r)``
+    (Nordmark & Piiroinen 2009) into ``out``. Q is first order in hdot; the accumulation point
+    lies on the sticking manifold {h = 0, hdot = 0} by definition, so it is projected onto
+    it at ``t_out``."""
+    for i in range(n):
+        out[i] = xs[i] + (2.0 * r * f[i] / acc + W[i]) * vin / (1.0 - r)
+    _project_stick(ev, p, k, mode, nm, t_out, out, n, hdx, w2, buf)
+
+
+@_hot
+def _apply_reset(ev, p, j, mode, t, y, xs, n, etab, ytmp):
+    """The reset ``x+ = g_j(t, x-)`` of event ``j`` into ``y`` and its target mode (the mode
+    unchanged where the event has none). Returns the mode."""
+    ev(W_G, j, t, xs, p, ytmp)
+    for i in range(n):
+        y[i] = ytmp[i]
+    if etab[j, 3] >= 0:
+        return etab[j, 3]
+    return mode
+
+
+@_hot
+def _after_reset(ev, p, j, log_kind, chatter_tail, dkind, didx, mode, nm, t, y, n, etab, stab,
+                 buf, fbuf, wk):
+    """After an impact or a transition: the switching variant the new state lies in (a reset
+    or a new mode may put the state on the other side of a switching surface, or on one: take
+    the variant on the right side, or slide; an event without reset or target while sliding,
+    a section or a terminal event, leaves the sliding motion alone); sticking where an impact
+    left the normal velocity at round-off while the free motion presses into the surface (a
+    plastic impact on an oblique or curved surface, an impact at rest: constrained motion
+    along the surface, released where the constraint force vanishes; the impact's saltation
+    matrix then maps into the sticking field). Returns ``(dkind, didx, mode,
+    contact_stick)``."""
+    w1, w2, gx, hdx, jac, xt, ft = wk
+    k = etab[j, 0]
+    contact_stick = False
+    if (log_kind != K_CHATTER and not chatter_tail and stab.shape[0] > 0
+            and (dkind == REGULAR or etab[j, 5] == 1 or etab[j, 3] >= 0)):
+        dkind, didx, mode = _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx)
+    if (log_kind == K_IMPACT and dkind == REGULAR
+            and _stays_in_contact(ev, p, k, mode, nm, t, y, n, buf, fbuf, hdx)):
+        contact_stick = True
+        dkind = STICK
+        didx = j
+        _project_stick(ev, p, k, mode, nm, t, y, n, hdx, w2, buf)
+    return dkind, didx, mode, contact_stick
+
+
+@_hot
+def _act_release(ev, p, k, mode, nm, t, y, n, stab, buf, wk):
+    """Release from sticking on surface ``k``: the flight starts on the sticking manifold
+    {h = 0, hdot = 0} (the sticking steps drift off it by their local error, and a drift to
+    the far side, deeper than the re-trigger guard's round-off band, would hide a short
+    flight's landing), in the switching variant on the side the released motion takes (a
+    kink surface held at zero while sticking, e.g. the relative velocity of bilinear damping).
+    Returns ``(dkind, didx, mode, log_kind)``."""
+    w1, w2, gx, hdx, jac, xt, ft = wk
+    _project_stick(ev, p, k, mode, nm, t, y, n, hdx, w2, buf)
+    dkind = REGULAR
+    didx = -1
+    if stab.shape[0] > 0:
+        dkind, didx, mode = _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx)
+    return dkind, didx, mode, K_RELEASE
+
+
+@_hot
+def _act_switch(ev, p, s, old_kind, old_idx, old_mode, nm, t, y, n, stab, buf, hdx):
+    """Arrival at switching surface ``s``: sliding starts where both fields point into the
+    surface (h_t + h_x f_above < 0 < h_t + h_x f_below), otherwise the flow crosses (thesis
+    eq. 2.6-2.8); kink surfaces (SW_CONTINUOUS) always cross. Arriving with the own field
+    tangent (hdot = 0) while the other one points back is a graze: no event. Returns
+    ``(dkind, didx, mode, log_kind, graze)``."""
+    k = stab[s, 0]
+    a_m = stab[s, 1]
+    b_m = stab[s, 2]
+    ev(W_HD, k * nm + a_m, t, y, p, buf)
+    sa = buf[0]
+    ev(W_HD, k * nm + b_m, t, y, p, buf)
+    sb = buf[0]
+    filippov = stab.shape[1] <= 3 or stab[s, 3] == SW_FILIPPOV
+    graze = filippov and ((old_mode == a_m and sa >= 0.0 and sb > 0.0)
+                          or (old_mode == b_m and sb <= 0.0 and sa < 0.0))
+    if graze:
+        return old_kind, old_idx, old_mode, -1, True
+    dkind = old_kind
+    didx = old_idx
+    if filippov and sa < 0.0 and sb > 0.0:
+        dkind = SLIDE
+        didx = s
+        mode = a_m
+        log_kind = K_SLIDE_START
+        _project_surface(ev, p, k, t, y, n, hdx, buf)
+    else:
+        log_kind = K_CROSSING
+        mode = b_m if old_mode == a_m else a_m
+    return dkind, didx, mode, log_kind, False
+
+
+@_hot
+def _act_slide_exit(s, above, stab):
+    """End of sliding on switch ``s`` into the mode above (``alpha -> 0``) or below
+    (``alpha -> 1``). Returns ``(dkind, didx, mode, log_kind)``."""
+    return REGULAR, -1, (stab[s, 1] if above else stab[s, 2]), K_SLIDE_END
+
+
+@_hot
+def _act_intersection(ev, p, k2, new_sign, log_ref, old_kind, old_idx, old_mode, nm, t, y, n,
+                      etab, stab, slide_c, buf, fbuf, wk):
+    """Sliding on switch ``old_idx`` reached surface ``k2`` of another switch. Across ``k2``
+    the sliding pair (a, b) becomes (a2, b2): if the flow slides on the first surface there
+    too and its sliding field carries the state away from k2, it crosses k2 while sliding; if
+    both pairs leave the first surface to one side, the sliding ends; if the sliding field on
+    the far side points back into k2 the motion would slide on the intersection of the two
+    surfaces, which is not supported (``ST_INTERSECTION``). Returns ``(status, dkind, didx,
+    mode, log_kind, log_ref)``."""
+    w1, w2, gx, hdx, jac, xt, ft = wk
+    dkind = old_kind
+    didx = old_idx
+    mode = old_mode
+    log_kind = -1
+    k1 = stab[old_idx, 0]
+    a2 = _partner(stab, k2, stab[old_idx, 1])
+    b2 = _partner(stab, k2, stab[old_idx, 2])
+    s_new = _find_switch(stab, k1, a2, b2) if a2 >= 0 and b2 >= 0 else -1
+    if s_new >= 0:
+        ev(W_HD, k1 * nm + a2, t, y, p, buf)
+        sa = buf[0]
+        ev(W_HD, k1 * nm + b2, t, y, p, buf)
+        sb = buf[0]
+        if sa < 0.0 and sb > 0.0:
+            _field(ev, p, SLIDE, s_new, a2, nm, t, y, n, fbuf, etab, stab, slide_c, w1, w2, gx,
+                   hdx)
+            rate = _surface_rate(ev, p, SLIDE, k2, a2, nm, t, y, fbuf, n, buf, hdx)
+            if rate * new_sign > 0.0:
+                dkind = SLIDE
+                didx = s_new
+                mode = a2
+                log_kind = K_CROSSING
+        elif sa >= 0.0 and sb > 0.0:
+            dkind = REGULAR
+            didx = -1
+            mode = a2
+            log_kind = K_SLIDE_END
+            log_ref = old_idx
+        elif sa < 0.0 and sb <= 0.0:
+            dkind = REGULAR
+            didx = -1
+            mode = b2
+            log_kind = K_SLIDE_END
+            log_ref = old_idx
+    if log_kind < 0:
+        return ST_INTERSECTION, dkind, didx, mode, log_kind, log_ref
+    return ST_SUCCESS, dkind, didx, mode, log_kind, log_ref
+
+
+@njit(cache=True)
+def _action_saltation(ev, p, act, log_kind, chatter_tail, ref, k, old_kind, old_idx, old_mode,
+                      dkind, didx, mode, nm, t, xs, y, n, S, etab, stab, slide_c, buf, fbuf,
+                      ytmp, wk):
+    """The saltation matrix ``S`` of the action just taken (slides, "Saltation matrices";
+    Adolfsson et al. 2001): of the reset or transition (:func:`_event_saltation`), of the
+    complete-chattering map (:func:`_chatter_saltation`), of a Filippov crossing or sliding
+    entry on surface ``k`` (:func:`_switch_saltation`); release and sliding exit leave the
+    field continuous (``S = I``). ``ref``: the event or switch index of the action; ``xs``
+    the state before it, ``y`` after it."""
+    w1, w2, gx, hdx, jac, xt, ft = wk
+    if act == ACT_EVENT:
+        if log_kind == K_CHATTER:
+            _chatter_saltation(ev, p, ref, k, old_mode, nm, t, xs, n, S, etab, stab, slide_c)
+        elif not chatter_tail:
+            _event_saltation(ev, p, ref, k, old_mode, mode, nm, t, xs, y, n, S, gx, hdx, buf, fbuf,
+                             w1, w2, etab, stab, slide_c, old_kind, old_idx, ytmp, dkind, didx)
+    elif act == ACT_SWITCH or act == ACT_INTERSECTION:
+        _switch_saltation(ev, p, dkind, didx, old_mode, mode, nm, k, t, y, n, S, hdx, buf, fbuf,
+                          w1, w2, gx, etab, stab, slide_c, old_kind, old_idx)
+    else:
+        _identity(S, n)
+
+
+@_hot
+def _identity(S, n):
+    for i in range(n):
+        for c in range(n):
+            S[i, c] = 1.0 if i == c else 0.0
+
+
+@_hot
+def _apply_saltation(y, S, Phi, n, seg_var):
+    """The variational part of ``y`` after an event: ``Phi+ = S Phi-`` (slides, "Saltation
+    matrices"); per segment the record keeps ``S`` (the segment's ``Phi`` is in x_before)."""
+    if seg_var:
+        for i in range(n):
+            for c in range(n):
+                y[n + i * n + c] = S[i, c]
+        return
+    for i in range(n):
+        for c in range(n):
+            Phi[i, c] = y[n + i * n + c]
+    for i in range(n):
+        for c in range(n):
+            acc = 0.0
+            for m in range(n):
+                acc += S[i, m] * Phi[m, c]
+            y[n + i * n + c] = acc
+
+
+@_hot
+def _guard_after_event(ev, p, act, wtype_w, widx_w, wref_w, new_sign, last_sign, dkind, mode, nm,
+                       t, y, n, etab, stab, buf, hdx):
+    """The re-trigger guard after an event: the function that fired and the side of it the
+    state is on now, so round-off around the event is not taken for a new crossing. Returns
+    ``(last_type, last_idx, last_sign)`` (``last_type`` -1: no guard)."""
+    last_type = wtype_w
+    last_idx = widx_w
+    if act == ACT_EVENT:
+        # after a reset the surface value is ~0; its new side is given by hdot after reset
+        if dkind == REGULAR:
+            ev(W_HD, widx_w * nm + mode, t, y, p, buf)
+            last_sign = 1.0 if buf[0] > 0.0 else -1.0
+            vout = buf[0]
+            if etab[wref_w, 2] == EV_IMPACT and vout != 0.0:
+                # hdot after an impact within round-off (a plastic impact that does not stick:
+                # the free motion leaves tangentially): its sign is noise, the state is on the
+                # allowed side
+                if abs(vout) <= _rate_band(ev, p, widx_w, mode, nm, t, y, n, hdx):
+                    vout = 0.0
+            if vout == 0.0:
+                # tangent after the event: an impact leaves the state on the admissible side,
+                # a transition has crossed into the event direction
+                if etab[wref_w, 2] == EV_IMPACT or etab[wref_w, 1] == 0:
+                    last_sign = 1.0 if etab[wref_w, 1] <= 0 else -1.0
+                else:
+                    last_sign = 1.0 if etab[wref_w, 1] > 0 else -1.0
+        else:
+            last_sign = 1.0
+    elif act == ACT_RELEASE:
+        last_sign = 1.0
+        last_type = WF_SURFACE
+        last_idx = etab[wref_w, 0]
+    elif act == ACT_SWITCH:
+        if dkind == SLIDE:
+            last_type = -1
+        else:
+            last_sign = 1.0 if mode == stab[wref_w, 1] else -1.0
+    elif act == ACT_INTERSECTION:
+        # crossed surface widx_w while sliding: we are on the new side of it
+        last_type = WF_SURFACE
+        last_sign = new_sign
+    else:
+        # sliding exit: we leave into the mode's side of the surface
+        last_type = WF_SURFACE
+        last_idx = stab[wref_w, 0]
+        last_sign = 1.0 if act == ACT_EXIT_ABOVE else -1.0
+    return last_type, last_idx, last_sign
+
+
+@_hot
+def _push_node(nodes_t, nodes_y, nodes_s, ikind, hstep, dense, n_nodes, t, y, dkind, didx, mode,
+               iv):
+    """Append the node ``(t, y)`` in discrete state ``(dkind, didx, mode)`` after an interval
+    of kind ``iv`` without a step (a jump at an event, a chattering gap): no dense output."""
+    nodes_t[n_nodes] = t
+    for i in range(y.shape[0]):
+        nodes_y[n_nodes, i] = y[i]
+    nodes_s[n_nodes, 0] = dkind
+    nodes_s[n_nodes, 1] = didx
+    nodes_s[n_nodes, 2] = mode
+    ikind[n_nodes - 1] = iv
+    hstep[n_nodes - 1] = 0.0
+    if dense.shape[0] > 0:
+        for i in range(dense.shape[1]):
+            for k in range(dense.shape[2]):
+                dense[n_nodes - 1, i, k] = 0.0
+    return n_nodes + 1
+
+
+# --------------------------------------------------------------------------------------
 # dense output on demand
 # --------------------------------------------------------------------------------------
 
@@ -1889,11 +2319,6 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     rtol = fopt[FO_RTOL]
     atol = fopt[FO_ATOL]
     hmax = fopt[FO_HMAX]
-    chat_rel = fopt[FO_CHAT_REL]
-    # a negative ratio is the default one, applied only where the chattering map is accurate
-    chat_gated = chat_rel < 0.0
-    chat_rel = abs(chat_rel)
-    chat_abs = fopt[FO_CHAT_ABS]
     slide_c = fopt[FO_SLIDE_C]
     s_ext = A.shape[0]
     deg = P.shape[1]
@@ -2774,322 +3199,92 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             nodes_s[n_nodes, 2] = mode
             n_nodes += 1
 
-            # ---- handle the event
+            # ---- handle the event: one action per kind of watch function
             n_ev0 = n_ev
             for i in range(nY):
                 y[i] = ynew[i]
+                xs[i] = ynew[i]
             t = t_ev
             old_kind = dkind
             old_idx = didx
             old_mode = mode
             log_kind = -1
-            log_ref = wref[w]
             t_after = t
             act = wact[w]
             new_sign = best_sign
             chatter_tail = False
             contact_stick = False
-            for i in range(nY):
-                xs[i] = y[i]
             if act == ACT_EVENT:
-                j = wref[w]
-                ev(W_GUARD, j, t, y, p, buf)
-                guard_ok = buf[0] != 0.0
-                if not guard_ok:
-                    # events on one surface with complementary guards (stick or reverse at v = 0,
-                    # thesis eq. 5.4): the crossing belongs to the one whose guard holds
-                    for ww in range(nw):
-                        if (ww != w and wact[ww] == ACT_EVENT and wtype[ww] == WF_SURFACE
-                                and widx[ww] == widx[w]
-                                and (wdir[ww] == 0 or wdir[ww] * new_sign > 0.0)):
-                            ev(W_GUARD, wref[ww], t, y, p, buf)
-                            if buf[0] != 0.0:
-                                w = ww
-                                j = wref[ww]
-                                log_ref = j
-                                guard_ok = True
-                                break
-                # a crossing whose normal velocity points against the event direction is
-                # round-off around a previous event (the state is already leaving): not an event
-                if dkind == REGULAR:
-                    ev(W_HD, widx[w] * nm + mode, t, y, p, buf)
-                    vn = buf[0]
-                else:
-                    _field(ev, p, dkind, didx, mode, nm, t, y, n, fbuf, etab, stab, slide_c, w1,
-                           w2, gx, hdx)
-                    vn = _surface_rate(ev, p, dkind, widx[w], mode, nm, t, y, fbuf, n, buf, hdx)
-                moving_away = etab[j, 1] != 0 and vn * etab[j, 1] < 0.0
-                if moving_away:
-                    # ... unless that velocity is round-off: a state on the surface and tangent to
-                    # it (hdot +-1e-16 on an oblique or curved surface) is not leaving; the sign of
-                    # the round-off must not decide (it would let the state sink into the surface
-                    # until the re-trigger guard's noise band is passed)
-                    if abs(vn) <= _rate_band(ev, p, widx[w], mode, nm, t, y, n, hdx):
-                        moving_away = False
-                if not guard_ok or moving_away:
+                w, fires, moving_away, vn = _event_fires(ev, p, w, nw, wact, wtype, widx, wdir,
+                                                         wref, new_sign, dkind, didx, mode, nm,
+                                                         t, y, n, etab, stab, slide_c, buf, fbuf,
+                                                         wk)
+                if not fires:
                     # no event: continue past this crossing
-                    last_type = wtype[w]; last_idx = widx[w]; last_mode = wmode[w]
+                    last_type = wtype[w]
+                    last_idx = widx[w]
+                    last_mode = wmode[w]
                     last_sign = new_sign
                     if moving_away:
                         last_sign = 1.0 if vn > 0.0 else -1.0
-                        # the state sits a little on the far side (round-off of an earlier event)
-                        # and is moving back: values within that depth are not a new crossing
+                        # the state sits a little on the far side (round-off of an earlier
+                        # event) and is moving back: values within that depth are not a new
+                        # crossing
                         ev(W_H, widx[w], t, y, p, buf)
                         last_depth = 4.0 * abs(buf[0])
                     last_t = t
-                    # the interval [t_ev, ...] continues smoothly: mark the stored interval as step
+                    # the interval [t_ev, ...] continues smoothly: the stored one is a step
                     ikind[n_nodes - 2] = IV_STEP if save_all else IV_JUMP
                     restart = True
                     continue
-                k = etab[j, 0]
+                j = wref[w]
                 if etab[j, 2] == EV_IMPACT:
-                    # normal velocity and acceleration at impact, impact direction W, restitution r
-                    ev(W_HD, k * nm + mode, t, y, p, buf)
-                    vin = buf[0]
-                    ev(W_F, mode, t, y, p, fbuf)
-                    ev(W_HDX, k * nm + mode, t, y, p, hdx)
-                    ev(W_HDT, k * nm + mode, t, y, p, buf)
-                    acc = buf[0] + _dot(hdx, fbuf, n)
-                    hw = _impact_direction(ev, p, j, k, mode, nm, t, y, n, w1, gx, hdx)
-                    r = -(1.0 + hw)
-                    if chain_event != j:
-                        chain_event = j
-                        chain_vmax = 0.0
-                    chain_vmax = max(chain_vmax, abs(vin))
-                    # velocity floor: a bounce of speed v rises v^2 / (2|a|); below the position
-                    # tolerance it cannot be told from sticking (default when chat_abs < 0)
-                    vfloor = chat_abs
-                    if vfloor < 0.0:
-                        xmax = 0.0
-                        for i in range(n):
-                            xmax = max(xmax, abs(y[i]))
-                        vfloor = np.sqrt(2.0 * abs(acc) * (atol + rtol * xmax))
-                    do_chatter = (chatter_on == 1 and acc < 0.0 and r >= 0.0 and r < 1.0
-                                  and (abs(vin) <= vfloor or r == 0.0))
-                    if (chatter_on == 1 and not do_chatter and acc < 0.0 and 0.0 <= r < 1.0
-                            and abs(vin) <= chat_rel * chain_vmax and not chat_gated):
-                        do_chatter = True
-                    elif (chatter_on == 1 and not do_chatter and acc < 0.0 and 0.0 <= r < 1.0
-                            and abs(vin) <= chat_rel * chain_vmax):
-                        # the map takes the normal acceleration as constant over the sequence:
-                        # jump only where its change over the sequence's duration moves the state
-                        # by less than the position tolerance, dt^2 |a(t + dt) - a(t)| (a table
-                        # whose acceleration varies put the accumulation point 3e-6 off when
-                        # entered at 1e-4 of the first impact's speed; below the floor the bounces
-                        # are unresolvable anyway)
-                        dtq = 2.0 * r * vin / ((1.0 - r) * acc)
-                        for i in range(n):
-                            xt[i] = y[i] + dtq * fbuf[i]
-                        acc2 = _free_normal_acc(ev, p, k, mode, nm, t + dtq, xt, n, buf, ft, w2)
-                        xmax = 0.0
-                        for i in range(n):
-                            xmax = max(xmax, abs(y[i]))
-                        do_chatter = dtq * dtq * abs(acc2 - acc) <= atol + rtol * xmax
-                    # complete-chattering map (Nordmark & Piiroinen 2009; slides):
-                    # x_out = x_in + (2 r f_in / a + W) hdot_in / (1 - r),
-                    # t_out = t_in + 2 r hdot_in / ((1 - r) a)
-                    dtc = 2.0 * r * vin / ((1.0 - r) * acc) if do_chatter else 0.0
-                    if do_chatter and not (t + dtc <= t_end):
-                        # the accumulation point lies beyond t_end: up to t_end the motion is a
-                        # finite number of ordinary impacts, so take this one (and the next ones)
-                        # as an impact and integrate on; jumping would end the run past t_end
-                        # with the state of a time not asked for
-                        do_chatter = False
-                        # ... unless the bounces are below the velocity floor: they rise less than
-                        # the position tolerance, so the event search cannot resolve them (their
-                        # crossings drown in the round-off band of the re-trigger guard and the
-                        # state would fall through the surface). Up to t_end the motion then is
-                        # the start of the chattering sequence, within the resolution of the run:
-                        # end at t_end on the chord from x_in to the accumulation state (Q(x_in)
-                        # projected onto the sticking manifold, as below) that a chattering gap
-                        # is drawn with (error O(floor) in hdot, O(tolerance) in h)
-                        chatter_tail = abs(vin) <= vfloor and dtc > 0.0
-                    if chatter_tail:
-                        for i in range(n):
-                            ytmp[i] = xs[i] + (2.0 * r * fbuf[i] / acc + w1[i]) * vin / (1.0 - r)
-                        _project_stick(ev, p, k, mode, nm, t + dtc, ytmp, n, hdx, w2, buf)
-                        th = (t_end - t) / dtc
-                        for i in range(n):
-                            y[i] = (1.0 - th) * xs[i] + th * ytmp[i]
-                        log_kind = -1
-                    elif do_chatter:
-                        for i in range(n):
-                            y[i] = xs[i] + (2.0 * r * fbuf[i] / acc + w1[i]) * vin / (1.0 - r)
-                        if nvar:
-                            _chatter_saltation(ev, p, j, k, mode, nm, t, xs, n, S, etab, stab,
-                                               slide_c)
-                        t_after = t + dtc
-                        # Q is first order in hdot; the accumulation point lies on the sticking
-                        # manifold {h = 0, hdot = 0} by definition, so we project onto it
-                        _project_stick(ev, p, k, mode, nm, t_after, y, n, hdx, w2, buf)
-                        log_kind = K_CHATTER
-                        dkind = STICK
-                        didx = j
-                        stats[4] += 1
-                        chain_event = -1
-                    else:
-                        ev(W_G, j, t, xs, p, ytmp)
-                        for i in range(n):
-                            y[i] = ytmp[i]
-                        log_kind = K_IMPACT
-                        if etab[j, 3] >= 0:
-                            mode = etab[j, 3]
+                    (dkind, didx, mode, log_kind, t_after, chatter_tail, chain_event, chain_vmax,
+                     chattered) = _act_impact(ev, p, j, dkind, didx, mode, nm, t, y, xs, n, etab,
+                                              t_end, fopt, chatter_on, chain_event, chain_vmax,
+                                              buf, fbuf, ytmp, wk)
+                    stats[4] += chattered
                 else:
-                    ev(W_G, j, t, xs, p, ytmp)
-                    for i in range(n):
-                        y[i] = ytmp[i]
+                    mode = _apply_reset(ev, p, j, mode, t, y, xs, n, etab, ytmp)
                     log_kind = K_TRANSITION
-                    if etab[j, 3] >= 0:
-                        mode = etab[j, 3]
                     chain_event = -1
-                if (log_kind != K_CHATTER and not chatter_tail and n_sw > 0
-                        and (dkind == REGULAR or etab[j, 5] == 1 or etab[j, 3] >= 0)):
-                    # a reset or a new mode may put the state on the other side of a switching
-                    # surface, or on one (an impact that stops the relative motion): take the
-                    # variant on the right side, or slide. An event without reset or target
-                    # while sliding (a section, a terminal event) leaves the sliding motion alone.
-                    dkind, didx, mode = _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx)
-                if (log_kind == K_IMPACT and dkind == REGULAR
-                        and _stays_in_contact(ev, p, k, mode, nm, t, y, n, buf, fbuf, hdx)):
-                    # the reset left hdot at round-off (a plastic impact on an oblique or curved
-                    # surface, an impact at rest) and the free motion presses into the surface:
-                    # the state sticks (constrained motion along the surface, released where the
-                    # constraint force vanishes), logged as a `stick` record after the impact, as
-                    # after a chattering sequence. The impact's saltation matrix maps into the
-                    # sticking field.
-                    contact_stick = True
-                    dkind = STICK
-                    didx = j
-                    _project_stick(ev, p, k, mode, nm, t, y, n, hdx, w2, buf)
-                if nvar and log_kind != K_CHATTER and not chatter_tail:
-                    _event_saltation(ev, p, j, k, old_mode, mode, nm, t, xs, y, n, S, gx, hdx, buf,
-                                     fbuf, w1, w2, etab, stab, slide_c, old_kind, old_idx, ytmp,
-                                     dkind, didx)
+                dkind, didx, mode, contact_stick = _after_reset(
+                    ev, p, j, log_kind, chatter_tail, dkind, didx, mode, nm, t, y, n, etab, stab,
+                    buf, fbuf, wk)
             elif act == ACT_RELEASE:
-                # the flight starts on the sticking manifold {h = 0, hdot = 0}: the sticking steps
-                # drift off it by their local error, and a drift to the far side (deeper than the
-                # re-trigger guard's round-off band) would hide a short flight's landing
-                _project_stick(ev, p, etab[old_idx, 0], mode, nm, t, y, n, hdx, w2, buf)
-                dkind = REGULAR
-                didx = -1
-                log_kind = K_RELEASE
-                if n_sw > 0:
-                    # the variant on the side the released motion takes (a kink surface held at
-                    # zero while sticking, e.g. the relative velocity of bilinear damping)
-                    dkind, didx, mode = _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx)
-                if nvar:
-                    for i in range(n):
-                        for c in range(n):
-                            S[i, c] = 1.0 if i == c else 0.0
+                dkind, didx, mode, log_kind = _act_release(ev, p, etab[old_idx, 0], mode, nm, t,
+                                                           y, n, stab, buf, wk)
             elif act == ACT_SWITCH:
-                s = wref[w]
-                k = stab[s, 0]
-                a_m = stab[s, 1]
-                b_m = stab[s, 2]
-                ev(W_HD, k * nm + a_m, t, y, p, buf)
-                sa = buf[0]
-                ev(W_HD, k * nm + b_m, t, y, p, buf)
-                sb = buf[0]
-                filippov = stab.shape[1] <= 3 or stab[s, 3] == SW_FILIPPOV
-                # thesis eq. 2.6-2.8: both fields pointing into the surface (h_t + h_x f_above < 0
-                # < h_t + h_x f_below) is sliding; otherwise the flow crosses. Arriving with the
-                # own field tangent (hdot = 0) while the other one points back is a graze.
-                graze = filippov and ((old_mode == a_m and sa >= 0.0 and sb > 0.0)
-                                      or (old_mode == b_m and sb <= 0.0 and sa < 0.0))
+                dkind, didx, mode, log_kind, graze = _act_switch(ev, p, wref[w], old_kind,
+                                                                 old_idx, old_mode, nm, t, y, n,
+                                                                 stab, buf, hdx)
                 if graze:
-                    last_type = wtype[w]; last_idx = widx[w]; last_mode = wmode[w]
+                    last_type = wtype[w]
+                    last_idx = widx[w]
+                    last_mode = wmode[w]
                     last_sign = new_sign
                     last_t = t
                     ikind[n_nodes - 2] = IV_STEP if save_all else IV_JUMP
                     restart = True
                     continue
-                if filippov and sa < 0.0 and sb > 0.0:
-                    dkind = SLIDE
-                    didx = s
-                    mode = a_m
-                    log_kind = K_SLIDE_START
-                    _project_surface(ev, p, k, t, y, n, hdx, buf)
-                else:
-                    log_kind = K_CROSSING
-                    mode = b_m if old_mode == a_m else a_m
-                if nvar:
-                    _switch_saltation(ev, p, dkind, didx, old_mode, mode, nm, k, t, y, n, S, hdx,
-                                      buf, fbuf, w1, w2, gx, etab, stab, slide_c, old_kind,
-                                      old_idx)
             elif act == ACT_EXIT_ABOVE or act == ACT_EXIT_BELOW:
-                s = wref[w]
-                mode = stab[s, 1] if act == ACT_EXIT_ABOVE else stab[s, 2]
-                dkind = REGULAR
-                didx = -1
-                log_kind = K_SLIDE_END
-                if nvar:
-                    for i in range(n):
-                        for c in range(n):
-                            S[i, c] = 1.0 if i == c else 0.0
+                dkind, didx, mode, log_kind = _act_slide_exit(wref[w], act == ACT_EXIT_ABOVE,
+                                                              stab)
             else:
-                # sliding on switch old_idx reached surface k2 = widx[w] of another switch. Across
-                # k2 the sliding pair (a, b) becomes (a2, b2): if the flow slides on the first
-                # surface there too and its sliding field carries the state away from k2, it
-                # crosses k2 while sliding; if both pairs leave the first surface to one side, the
-                # sliding ends; if the sliding field on the far side points back into k2 the motion
-                # would slide on the intersection of the two surfaces, which is not supported
-                status = ST_INTERSECTION
-                log_kind = -1
-                k1 = stab[old_idx, 0]
-                k2 = widx[w]
-                a2 = _partner(stab, k2, stab[old_idx, 1])
-                b2 = _partner(stab, k2, stab[old_idx, 2])
-                s_new = _find_switch(stab, k1, a2, b2) if a2 >= 0 and b2 >= 0 else -1
-                if s_new >= 0:
-                    ev(W_HD, k1 * nm + a2, t, y, p, buf)
-                    sa = buf[0]
-                    ev(W_HD, k1 * nm + b2, t, y, p, buf)
-                    sb = buf[0]
-                    if sa < 0.0 and sb > 0.0:
-                        _field(ev, p, SLIDE, s_new, a2, nm, t, y, n, fbuf, etab, stab, slide_c, w1,
-                               w2, gx, hdx)
-                        rate = _surface_rate(ev, p, SLIDE, k2, a2, nm, t, y, fbuf, n, buf, hdx)
-                        if rate * new_sign > 0.0:
-                            dkind = SLIDE
-                            didx = s_new
-                            mode = a2
-                            log_kind = K_CROSSING
-                    elif sa >= 0.0 and sb > 0.0:
-                        dkind = REGULAR
-                        didx = -1
-                        mode = a2
-                        log_kind = K_SLIDE_END
-                        log_ref = old_idx
-                    elif sa < 0.0 and sb <= 0.0:
-                        dkind = REGULAR
-                        didx = -1
-                        mode = b2
-                        log_kind = K_SLIDE_END
-                        log_ref = old_idx
-                if log_kind >= 0:
-                    status = ST_SUCCESS
-                    if nvar:
-                        _switch_saltation(ev, p, dkind, didx, old_mode, mode, nm, k2, t, y, n,
-                                          S, hdx, buf, fbuf, w1, w2, gx, etab, stab, slide_c,
-                                          old_kind, old_idx)
+                status, dkind, didx, mode, log_kind, log_ref = _act_intersection(
+                    ev, p, widx[w], new_sign, wref[w], old_kind, old_idx, old_mode, nm, t, y, n,
+                    etab, stab, slide_c, buf, fbuf, wk)
+            if act != ACT_INTERSECTION:
+                log_ref = wref[w]
 
             if log_kind >= 0:
-                if nvar and seg_var:
-                    # per segment: the record keeps S (the segment's Phi is in x_before)
-                    for i in range(n):
-                        for c in range(n):
-                            y[n + i * n + c] = S[i, c]
-                elif nvar:
-                    # Phi+ = S Phi-
-                    for i in range(n):
-                        for c in range(n):
-                            Phi[i, c] = y[n + i * n + c]
-                    for i in range(n):
-                        for c in range(n):
-                            acc = 0.0
-                            for m in range(n):
-                                acc += S[i, m] * Phi[m, c]
-                            y[n + i * n + c] = acc
+                if nvar:
+                    # the saltation matrix of the action, then Phi+ = S Phi-
+                    _action_saltation(ev, p, act, log_kind, chatter_tail, log_ref,
+                                      widx[w] if act != ACT_SWITCH else stab[wref[w], 0],
+                                      old_kind, old_idx, old_mode, dkind, didx, mode, nm, t, xs,
+                                      y, n, S, etab, stab, slide_c, buf, fbuf, ytmp, wk)
+                    _apply_saltation(y, S, Phi, n, seg_var)
                 rec[0] = log_kind
                 rec[1] = log_ref
                 rec[2] = old_kind
@@ -3102,8 +3297,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 rec[6] = old_idx if log_kind == K_CHATTER else (-1 if contact_stick else didx)
                 rec[7] = old_mode if log_kind == K_CHATTER else mode
                 rec[8] = n_nodes
-                _log_event(ev_t, ev_t2, ev_info, ev_xb, ev_xa,
-                                                                n_ev, t, t_after, rec, xs, y)
+                _log_event(ev_t, ev_t2, ev_info, ev_xb, ev_xa, n_ev, t, t_after, rec, xs, y)
                 n_ev += 1
                 stats[3] += 1
                 if nvar and seg_var:
@@ -3112,44 +3306,27 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                         for c in range(n):
                             y[n + i * n + c] = 1.0 if i == c else 0.0
                 # jump (or chatter gap) interval to the post-event node
-                nodes_t[n_nodes] = t_after
-                for i in range(nY):
-                    nodes_y[n_nodes, i] = y[i]
-                nodes_s[n_nodes, 0] = dkind
-                nodes_s[n_nodes, 1] = didx
-                nodes_s[n_nodes, 2] = mode
-                ikind[n_nodes - 1] = IV_CHATTER if log_kind == K_CHATTER else IV_JUMP
-                hstep[n_nodes - 1] = 0.0
-                if store_q:
-                    for i in range(nY):
-                        for k in range(deg):
-                            dense[n_nodes - 1, i, k] = 0.0
-                n_nodes += 1
-                if contact_stick:
-                    # the impact left the state in contact: sticking starts here (its own record,
-                    # from the mode the reset gave, as after a chattering sequence)
+                n_nodes = _push_node(nodes_t, nodes_y, nodes_s, ikind, hstep, dense, n_nodes,
+                                     t_after, y, dkind, didx, mode,
+                                     IV_CHATTER if log_kind == K_CHATTER else IV_JUMP)
+                if contact_stick or log_kind == K_CHATTER:
+                    # sticking starts here (after an impact that left the state in contact, or
+                    # at the accumulation point of a chattering sequence): its own record, from
+                    # the mode the reset gave
                     rec[0] = K_STICK
-                    rec[2] = REGULAR
-                    rec[3] = -1
-                    rec[4] = mode
+                    if contact_stick:
+                        rec[2] = REGULAR
+                        rec[3] = -1
+                        rec[4] = mode
                     rec[5] = dkind
                     rec[6] = didx
                     rec[7] = mode
                     rec[8] = n_nodes - 1
-                    _log_event(ev_t, ev_t2, ev_info, ev_xb,
-                                                                    ev_xa, n_ev, t, t, rec, y, y)
+                    _log_event(ev_t, ev_t2, ev_info, ev_xb, ev_xa, n_ev, t_after, t_after, rec, y,
+                               y)
                     n_ev += 1
                 if log_kind == K_CHATTER:
-                    # the accumulation is followed by sticking: log it as its own event
-                    rec[0] = K_STICK
-                    rec[5] = dkind
-                    rec[6] = didx
-                    rec[7] = mode
-                    rec[8] = n_nodes - 1
-                    _log_event(ev_t, ev_t2, ev_info, ev_xb,
-                                                                    ev_xa, n_ev, t_after, t_after,
-                                                                    rec, y, y)
-                    n_ev += 1
+                    # samples across the chattering gap on its chord
                     while (sdt > 0.0 and s0 + sk * sdt < t_after and s0 + sk * sdt <= t_end
                            and n_samp < max_samp):
                         ts = s0 + sk * sdt
@@ -3212,50 +3389,11 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             else:
                 n_co = 0
             last_depth = 0.0
-            last_type = wtype[w]
-            last_idx = widx[w]
             last_mode = wmode[w]
             last_t = t
-            if act == ACT_EVENT:
-                # after a reset the surface value is ~0; its new side is given by hdot after reset
-                if dkind == REGULAR:
-                    ev(W_HD, widx[w] * nm + mode, t, y, p, buf)
-                    last_sign = 1.0 if buf[0] > 0.0 else -1.0
-                    vout = buf[0]
-                    if etab[wref[w], 2] == EV_IMPACT and vout != 0.0:
-                        # hdot after an impact within round-off (a plastic impact that does not
-                        # stick: the free motion leaves tangentially): its sign is noise, the
-                        # state is on the allowed side
-                        if abs(vout) <= _rate_band(ev, p, widx[w], mode, nm, t, y, n, hdx):
-                            vout = 0.0
-                    if vout == 0.0:
-                        # tangent after the event: an impact leaves the state on the admissible
-                        # side, a transition has crossed into the event direction
-                        if etab[wref[w], 2] == EV_IMPACT or etab[wref[w], 1] == 0:
-                            last_sign = 1.0 if etab[wref[w], 1] <= 0 else -1.0
-                        else:
-                            last_sign = 1.0 if etab[wref[w], 1] > 0 else -1.0
-                else:
-                    last_sign = 1.0
-            elif act == ACT_RELEASE:
-                last_sign = 1.0
-                last_type = WF_SURFACE
-                last_idx = etab[wref[w], 0]
-            elif act == ACT_SWITCH:
-                if dkind == SLIDE:
-                    last_type = -1
-                else:
-                    last_sign = 1.0 if mode == stab[wref[w], 1] else -1.0
-            elif act == ACT_INTERSECTION:
-                # crossed surface widx[w] while sliding: we are on the new side of it
-                last_type = WF_SURFACE
-                last_idx = widx[w]
-                last_sign = new_sign
-            else:
-                # sliding exit: we leave into the mode's side of the surface
-                last_type = WF_SURFACE
-                last_idx = stab[wref[w], 0]
-                last_sign = 1.0 if act == ACT_EXIT_ABOVE else -1.0
+            last_type, last_idx, last_sign = _guard_after_event(
+                ev, p, act, wtype[w], widx[w], wref[w], new_sign, last_sign, dkind, mode, nm, t, y,
+                n, etab, stab, buf, hdx)
             restart = True
 
     # final node (when only events are saved, the end state still is)
