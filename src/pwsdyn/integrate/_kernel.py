@@ -545,25 +545,6 @@ def _jacobian(ev, p, dkind, didx, mode, nm, t, y, n, f0, etab, stab, slide_c,
 # --------------------------------------------------------------------------------------
 
 @_hot
-def _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_last, ytmp,
-               etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft):
-    """Stages 1..s_last of an explicit RK step (stage 0 = K[0] is given)."""
-    for st in range(1, s_last + 1):
-        for i in range(nY):
-            acc = 0.0
-            for m in range(st):
-                a = A[st, m]
-                if a != 0.0:
-                    acc += a * K[m, i]
-            ytmp[i] = y[i] + h * acc
-        if dkind == REGULAR and nvar == 0:
-            ev(W_F, mode, t + C[st] * h, ytmp, p, K[st])
-        else:
-            _rhs(ev, p, dkind, didx, mode, nm, t + C[st] * h, ytmp, n, nvar, K[st], etab, stab,
-                 slide_c, w1, w2, gx, hdx, jac, xt, ft)
-
-
-@_hot
 def _error_norm(K, E, method, s, y, ynew, h, i0, i1, rtol, atol):
     """Scaled RMS error of the components ``y[i0:i1]``.
 
@@ -609,28 +590,6 @@ def _dense_coeffs(K, P, h, nY, s_ext, deg, out):
                 if pj != 0.0:
                     acc += K[j, i] * pj
             out[i, k] = h * acc
-
-
-@_hot
-def _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_fsal, P, Q, ytmp,
-                etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft):
-    """Dense output of the step just taken: extra stages (DOP853) and power-form
-    coefficients. Returns the number of extra function evaluations."""
-    s_ext = A.shape[0]
-    for st in range(s_fsal + 1, s_ext):
-        for i in range(nY):
-            acc = 0.0
-            for m in range(st):
-                acc += A[st, m] * K[m, i]
-            ytmp[i] = y[i] + h * acc
-        _rhs(ev, p, dkind, didx, mode, nm, t + C[st] * h, ytmp, n, nvar, K[st], etab, stab,
-             slide_c, w1, w2, gx, hdx, jac, xt, ft)
-    _dense_coeffs(K, P, h, nY, s_ext, P.shape[1], Q)
-    # columns beyond the method's degree are used by exact steps only
-    for k in range(P.shape[1], Q.shape[1]):
-        for i in range(nY):
-            Q[i, k] = 0.0
-    return s_ext - s_fsal - 1
 
 
 @njit(cache=True)
@@ -1643,8 +1602,8 @@ def state_field(ev, p, dkind, didx, mode, nm, t, x, etab, stab, slide_c, out):
 def _exact_stepper(ev, p, mode, t, y, h, K, s_fsal, ynew, kst, Q, aff, aff_P, aff_ph, aff_full,
                    nz, T1, T2):
     """One exact step of affine mode ``mode`` (see "Exact propagation" in the module
-    docstring), with the outputs of the Runge-Kutta step of run_kernel: the new state into ``ynew``, the FSAL
-    stage ``f(t + h, ynew)`` into ``K[s_fsal]``. The error is zero (the step is limited only
+    docstring), with the outputs of the Runge-Kutta step of run_kernel: the new state into
+    ``ynew``, the FSAL stage ``f(t + h, ynew)`` into ``K[s_fsal]``. The error is zero (the step is limited only
     by the convergence of the Taylor sum, the largest step and the events). A full step
     (``h == aff_full``) is one product with the propagator made once per mode and length; a
     shorter one sums the Taylor series of the vector, whose terms are the dense output in
@@ -1670,63 +1629,79 @@ def _exact_stepper(ev, p, mode, t, y, h, K, s_fsal, ynew, kst, Q, aff, aff_P, af
 
 
 @_hot
-def _step_dense(ev, p, exact, dkind, didx, mode, nm, t, y, h, K, A, C, s_fsal, P, Q, ytmp, etab,
-                stab, slide_c, wk, nz, aff):
-    """The dense output ``Q`` (power form) of the step of length ``h`` just taken from
-    ``(t, y)`` with stages ``K``: the Taylor terms of the exact flow for an exact step, else
-    the interpolant of the tableau (with its extra stages). Made only where it is needed
-    (stored steps, samples, event search). Returns the number of function evaluations."""
+def _step_stages(ev, p, exact, dkind, didx, mode, nm, t, y, h, h_full, K, A, C, s_fsal, Q, ytmp,
+                 etab, stab, slide_c, wk):
+    """Stages 1..s_fsal of the step of length ``h`` from ``(t, y)`` (``K[0] = f(t, y)`` is
+    given), its end state into ``ytmp``: the step retaken to an event at ``t + h`` inside the
+    accepted step of length ``h_full`` (the landing step: the event state comes from the
+    integrator, not from an interpolant), or a step rebuilt from its node. On an exact step the
+    dense output ``Q`` of the full step is the exact flow: the landing is its evaluation and
+    the FSAL stage ``K[s_fsal]`` its field. Returns the number of function evaluations."""
     w1, w2, gx, hdx, jac, xt, ft = wk
     nY = y.shape[0]
     n = w1.shape[0]
     if exact:
-        aff_M, aff_s, aff_w, zv, zv1 = aff
-        # (the end state of the series goes to the scratch ytmp: the step's is in ynew)
-        _exact_step(aff_M, aff_s, aff_w, mode, nz, n, t, y, h, zv, zv1, Q, ytmp)
-        return 0
-    return _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, 1 if nY > n else 0, K, A, C,
-                       s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
-
-
-@_hot
-def _landing_step(ev, p, exact, dkind, didx, mode, nm, t, y, h, h_ev, K, A, C, s_fsal, Q, ytmp,
-                  etab, stab, slide_c, wk):
-    """The step retaken from ``(t, y)`` to an event at ``t + h_ev`` (``h_ev <= h``), its end
-    state into ``ytmp`` and its FSAL stage into ``K[s_fsal]`` (``K[0]`` is given), so the
-    event state comes from the integrator, not from an interpolant. On an exact step the
-    dense output ``Q`` of the full step is the exact flow: the landing is its evaluation.
-    Returns the number of function evaluations."""
-    w1, w2, gx, hdx, jac, xt, ft = wk
-    nY = y.shape[0]
-    n = w1.shape[0]
-    if exact:
-        _dense_eval(y, Q, h_ev / h, nY, Q.shape[1], ytmp)
-        ev(W_F, mode, t + h_ev, ytmp, p, K[s_fsal])
+        _dense_eval(y, Q, h / h_full, nY, Q.shape[1], ytmp)
+        ev(W_F, mode, t + h, ytmp, p, K[s_fsal])
         return 1
-    _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, 1 if nY > n else 0, K, A, C,
-               s_fsal, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
+    nvar = 1 if nY > n else 0
+    for st in range(1, s_fsal + 1):
+        for i in range(nY):
+            acc = 0.0
+            for m in range(st):
+                a = A[st, m]
+                if a != 0.0:
+                    acc += a * K[m, i]
+            ytmp[i] = y[i] + h * acc
+        if dkind == REGULAR and nvar == 0:
+            ev(W_F, mode, t + C[st] * h, ytmp, p, K[st])
+        else:
+            _rhs(ev, p, dkind, didx, mode, nm, t + C[st] * h, ytmp, n, nvar, K[st], etab, stab,
+                 slide_c, w1, w2, gx, hdx, jac, xt, ft)
     return s_fsal
 
 
 @_hot
-def _landing_dense(ev, p, exact, dkind, didx, mode, nm, t, y, h, h_ev, K, A, C, s_fsal, P, Q,
-                   ytmp, etab, stab, slide_c, wk):
-    """Dense output of the landing step of :func:`_landing_step`: the Taylor terms of the full
-    exact step rescaled to the interval ``h_ev`` (term k scales by ``(h_ev / h)^k``), or the
-    tableau's interpolant with its extra stages. Returns the number of function evaluations."""
+def _step_dense(ev, p, exact, dkind, didx, mode, nm, t, y, h, h_full, K, A, C, s_fsal, P, Q, ytmp,
+                etab, stab, slide_c, wk, nz, aff):
+    """The dense output ``Q`` (power form) of the step of length ``h`` just taken from
+    ``(t, y)`` with stages ``K``: for the Runge-Kutta pair the extra stages of the tableau
+    (DOP853: 3) and the interpolant's coefficients; for an exact step the Taylor terms of the
+    exact flow, made once for the full step (``h == h_full``) and rescaled to a landing step
+    inside it (term k by ``(h / h_full)^k``). Made only where it is needed (stored steps,
+    samples, event search). Returns the number of function evaluations."""
     w1, w2, gx, hdx, jac, xt, ft = wk
     nY = y.shape[0]
     n = w1.shape[0]
     if exact:
-        ratio = h_ev / h
-        scale = 1.0
-        for k in range(Q.shape[1]):
-            scale *= ratio
-            for i in range(n):
-                Q[i, k] *= scale
+        if h == h_full:
+            aff_M, aff_s, aff_w, zv, zv1 = aff
+            # (the end state of the series goes to the scratch ytmp: the step's is in ynew)
+            _exact_step(aff_M, aff_s, aff_w, mode, nz, n, t, y, h, zv, zv1, Q, ytmp)
+        else:
+            ratio = h / h_full
+            scale = 1.0
+            for k in range(Q.shape[1]):
+                scale *= ratio
+                for i in range(n):
+                    Q[i, k] *= scale
         return 0
-    return _make_dense(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, 1 if nY > n else 0, K, A,
-                       C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
+    nvar = 1 if nY > n else 0
+    s_ext = A.shape[0]
+    for st in range(s_fsal + 1, s_ext):
+        for i in range(nY):
+            acc = 0.0
+            for m in range(st):
+                acc += A[st, m] * K[m, i]
+            ytmp[i] = y[i] + h * acc
+        _rhs(ev, p, dkind, didx, mode, nm, t + C[st] * h, ytmp, n, nvar, K[st], etab, stab,
+             slide_c, w1, w2, gx, hdx, jac, xt, ft)
+    _dense_coeffs(K, P, h, nY, s_ext, P.shape[1], Q)
+    # columns beyond the method's degree are used by exact steps only
+    for k in range(P.shape[1], Q.shape[1]):
+        for i in range(nY):
+            Q[i, k] = 0.0
+    return s_ext - s_fsal - 1
 
 
 # --------------------------------------------------------------------------------------
@@ -1740,44 +1715,6 @@ def _landing_dense(ev, p, exact, dkind, didx, mode, nm, t, y, h, h_ev, K, A, C, 
 # the variational equations are on: the saltation helpers allocate, so they keep numba's
 # reference counting, which the actions (like every other per-step or per-event helper) are
 # compiled without (measured 5-10% of an event-dominated run).
-
-@_hot
-def _event_fires(ev, p, w, nw, wact, wtype, widx, wdir, wref, new_sign, dkind, didx, mode, nm,
-                 t, y, n, etab, stab, slide_c, buf, fbuf, wk):
-    """Whether the crossing found by watch ``w`` (an event surface) is an event. Events on one
-    surface with complementary guards (stick or reverse at v = 0, thesis eq. 5.4): the
-    crossing belongs to the one whose guard holds, which may be another watch. A crossing
-    whose normal velocity points against the event direction is round-off around a previous
-    event (the state is already leaving), unless that velocity is itself round-off (a state
-    on the surface and tangent to it is not leaving: the sign of the round-off must not
-    decide). Returns ``(w, fires, moving_away, hdot)`` with ``w`` the watch it belongs to."""
-    w1, w2, gx, hdx, jac, xt, ft = wk
-    j = wref[w]
-    ev(W_GUARD, j, t, y, p, buf)
-    guard_ok = buf[0] != 0.0
-    if not guard_ok:
-        for ww in range(nw):
-            if (ww != w and wact[ww] == ACT_EVENT and wtype[ww] == WF_SURFACE
-                    and widx[ww] == widx[w]
-                    and (wdir[ww] == 0 or wdir[ww] * new_sign > 0.0)):
-                ev(W_GUARD, wref[ww], t, y, p, buf)
-                if buf[0] != 0.0:
-                    w = ww
-                    j = wref[ww]
-                    guard_ok = True
-                    break
-    if dkind == REGULAR:
-        ev(W_HD, widx[w] * nm + mode, t, y, p, buf)
-        vn = buf[0]
-    else:
-        _field(ev, p, dkind, didx, mode, nm, t, y, n, fbuf, etab, stab, slide_c, w1, w2, gx,
-               hdx)
-        vn = _surface_rate(ev, p, dkind, widx[w], mode, nm, t, y, fbuf, n, buf, hdx)
-    moving_away = etab[j, 1] != 0 and vn * etab[j, 1] < 0.0
-    if moving_away and abs(vn) <= _rate_band(ev, p, widx[w], mode, nm, t, y, n, hdx):
-        moving_away = False
-    return w, guard_ok and not moving_away, moving_away, vn
-
 
 @_hot
 def _act_impact(ev, p, j, dkind, didx, mode, nm, t, y, xs, n, etab, t_end, fopt, chatter_on,
@@ -1876,7 +1813,12 @@ def _act_impact(ev, p, j, dkind, didx, mode, nm, t, y, xs, n, etab, t_end, fopt,
         chattered = 1
         chain_event = -1
     else:
-        mode = _apply_reset(ev, p, j, mode, t, y, xs, n, etab, ytmp)
+        # the impact law x+ = g_j(t, x-) (written out: a call per event is measurable)
+        ev(W_G, j, t, xs, p, ytmp)
+        for i in range(n):
+            y[i] = ytmp[i]
+        if etab[j, 3] >= 0:
+            mode = etab[j, 3]
         log_kind = K_IMPACT
     return dkind, didx, mode, log_kind, t_after, chatter_tail, chain_event, chain_vmax, chattered
 
@@ -1893,9 +1835,10 @@ def _chatter_jump(ev, p, k, mode, nm, t_out, xs, out, n, r, vin, acc, f, W, hdx,
 
 
 @_hot
-def _apply_reset(ev, p, j, mode, t, y, xs, n, etab, ytmp):
-    """The reset ``x+ = g_j(t, x-)`` of event ``j`` into ``y`` and its target mode (the mode
-    unchanged where the event has none). Returns the mode."""
+def _act_transition(ev, p, j, mode, t, y, xs, n, etab, ytmp):
+    """Transition on event ``j``: the reset ``x+ = g_j(t, x-)`` into ``y`` (the identity where
+    the event has none) and its target mode (unchanged where it has none). Returns the
+    mode."""
     ev(W_G, j, t, xs, p, ytmp)
     for i in range(n):
         y[i] = ytmp[i]
@@ -2089,76 +2032,6 @@ def _apply_saltation(y, S, Phi, n, seg_var):
             y[n + i * n + c] = acc
 
 
-@_hot
-def _guard_after_event(ev, p, act, wtype_w, widx_w, wref_w, new_sign, last_sign, dkind, mode, nm,
-                       t, y, n, etab, stab, buf, hdx):
-    """The re-trigger guard after an event: the function that fired and the side of it the
-    state is on now, so round-off around the event is not taken for a new crossing. Returns
-    ``(last_type, last_idx, last_sign)`` (``last_type`` -1: no guard)."""
-    last_type = wtype_w
-    last_idx = widx_w
-    if act == ACT_EVENT:
-        # after a reset the surface value is ~0; its new side is given by hdot after reset
-        if dkind == REGULAR:
-            ev(W_HD, widx_w * nm + mode, t, y, p, buf)
-            last_sign = 1.0 if buf[0] > 0.0 else -1.0
-            vout = buf[0]
-            if etab[wref_w, 2] == EV_IMPACT and vout != 0.0:
-                # hdot after an impact within round-off (a plastic impact that does not stick:
-                # the free motion leaves tangentially): its sign is noise, the state is on the
-                # allowed side
-                if abs(vout) <= _rate_band(ev, p, widx_w, mode, nm, t, y, n, hdx):
-                    vout = 0.0
-            if vout == 0.0:
-                # tangent after the event: an impact leaves the state on the admissible side,
-                # a transition has crossed into the event direction
-                if etab[wref_w, 2] == EV_IMPACT or etab[wref_w, 1] == 0:
-                    last_sign = 1.0 if etab[wref_w, 1] <= 0 else -1.0
-                else:
-                    last_sign = 1.0 if etab[wref_w, 1] > 0 else -1.0
-        else:
-            last_sign = 1.0
-    elif act == ACT_RELEASE:
-        last_sign = 1.0
-        last_type = WF_SURFACE
-        last_idx = etab[wref_w, 0]
-    elif act == ACT_SWITCH:
-        if dkind == SLIDE:
-            last_type = -1
-        else:
-            last_sign = 1.0 if mode == stab[wref_w, 1] else -1.0
-    elif act == ACT_INTERSECTION:
-        # crossed surface widx_w while sliding: we are on the new side of it
-        last_type = WF_SURFACE
-        last_sign = new_sign
-    else:
-        # sliding exit: we leave into the mode's side of the surface
-        last_type = WF_SURFACE
-        last_idx = stab[wref_w, 0]
-        last_sign = 1.0 if act == ACT_EXIT_ABOVE else -1.0
-    return last_type, last_idx, last_sign
-
-
-@_hot
-def _push_node(nodes_t, nodes_y, nodes_s, ikind, hstep, dense, n_nodes, t, y, dkind, didx, mode,
-               iv):
-    """Append the node ``(t, y)`` in discrete state ``(dkind, didx, mode)`` after an interval
-    of kind ``iv`` without a step (a jump at an event, a chattering gap): no dense output."""
-    nodes_t[n_nodes] = t
-    for i in range(y.shape[0]):
-        nodes_y[n_nodes, i] = y[i]
-    nodes_s[n_nodes, 0] = dkind
-    nodes_s[n_nodes, 1] = didx
-    nodes_s[n_nodes, 2] = mode
-    ikind[n_nodes - 1] = iv
-    hstep[n_nodes - 1] = 0.0
-    if dense.shape[0] > 0:
-        for i in range(dense.shape[1]):
-            for k in range(dense.shape[2]):
-                dense[n_nodes - 1, i, k] = 0.0
-    return n_nodes + 1
-
-
 # --------------------------------------------------------------------------------------
 # dense output on demand
 # --------------------------------------------------------------------------------------
@@ -2214,10 +2087,10 @@ def _dense_coefficients(ev, p, etab, stab, iopt, fopt, A, C, P, s_fsal, t0, x0, 
         if not exact:
             _rhs(ev, p, dkind, didx, mode, nm, t, y, n, nvar, K[0], etab, stab, slide_c,
                  w1, w2, gx, hdx, jac, xt, ft)
-            _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_fsal,
-                       ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
-        _step_dense(ev, p, exact, dkind, didx, mode, nm, t, y, h, K, A, C, s_fsal, P, Q, ytmp,
-                etab, stab, slide_c, wk, nz, aff)
+            _step_stages(ev, p, exact, dkind, didx, mode, nm, t, y, h, h, K, A, C, s_fsal, Q, ytmp,
+                         etab, stab, slide_c, wk)
+        _step_dense(ev, p, exact, dkind, didx, mode, nm, t, y, h, h, K, A, C, s_fsal, P, Q, ytmp,
+                    etab, stab, slide_c, wk, nz, aff)
         for c in range(nY):
             for k in range(deg):
                 out[r, c, k] = Q[c, k]
@@ -2754,8 +2627,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             # dense output coefficients are made only when needed (stored steps, interior samples)
             q_ready = q_made
             if store_q and not q_ready:
-                stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h, K, A, C,
-                        s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz, aff)
+                stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h, h, K, A,
+                        C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz, aff)
                 q_ready = True
             t_new = t + h
             if t_new > t_end or h >= t_end - t:
@@ -2819,7 +2692,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                         # shorter.
                         if not q_ready:
                             stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y,
-                                    h, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz,
+                                    h, h, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz,
                                     aff)
                             q_ready = True
                         _dense_eval(y, Q, 0.5, nY, deg, xs)
@@ -2861,7 +2734,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                             ns += 1
                     if ns > 1 and not q_ready:
                         stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h,
-                                K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz, aff)
+                                h, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz, aff)
                         q_ready = True
                     rates[0] = r0
                     for q in range(1, ns):
@@ -2908,7 +2781,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                             vals[w, 0] = 0.0
                     if not q_ready:
                         stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h,
-                                K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz, aff)
+                                h, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz, aff)
                         q_ready = True
                     _dense_eval(y, Q, 0.5, nY, deg, xs)
                     vals[w, 1] = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t + 0.5 * h,
@@ -2983,7 +2856,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     if _crosses(prev_v, vq, wdir[w]):
                         if not q_ready:
                             stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y,
-                                    h, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz,
+                                    h, h, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz,
                                     aff)
                             q_ready = True
                         # locate by Illinois on the dense output within [prev_th, th]
@@ -3088,7 +2961,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 if sdt > 0.0 and s0 + sk * sdt <= t_new:
                     if not q_ready:
                         stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h,
-                                K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz, aff)
+                                h, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz, aff)
                         q_ready = True
                     n_samp, sk = _take_samples(t, h, y, Q, nY, n, deg, s0, sdt, sk, t_end,
                                                      samp, n_samp, xs, max_samp)
@@ -3122,7 +2995,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             for i in range(nY):
                 Kland[0, i] = K[0, i]
             for polish in range(8):
-                stats[2] += _landing_step(ev, p, exact_now, dkind, didx, mode, nm, t, y, h, h_ev,
+                stats[2] += _step_stages(ev, p, exact_now, dkind, didx, mode, nm, t, y, h_ev, h,
                         Kland, A, C, s_fsal, Q, ytmp, etab, stab, slide_c, wk)
                 stats[5] += 1
                 for i in range(nY):
@@ -3156,8 +3029,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             # landing-step dense output (extra stages for DOP853; Taylor terms rescaled), where it
             # is stored or sampled
             if store_q or sdt > 0.0:
-                stats[2] += _landing_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h, h_ev,
-                        Kland, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk)
+                stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h_ev, h,
+                        Kland, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz, aff)
             t_ev = min(t + h_ev, t_end)
             # Events at one instant: another watched function (an event surface, a release or a
             # sliding exit) that changed sign between the step's start and the polished event
@@ -3215,11 +3088,39 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             chatter_tail = False
             contact_stick = False
             if act == ACT_EVENT:
-                w, fires, moving_away, vn = _event_fires(ev, p, w, nw, wact, wtype, widx, wdir,
-                                                         wref, new_sign, dkind, didx, mode, nm,
-                                                         t, y, n, etab, stab, slide_c, buf, fbuf,
-                                                         wk)
-                if not fires:
+                # Is the crossing an event? (Written out here, as the re-trigger guard below: a
+                # call passing the watch arrays measured a few % of an event-dominated run.)
+                # Events on one surface with complementary guards (stick or reverse at v = 0,
+                # thesis eq. 5.4): the crossing belongs to the one whose guard holds.
+                j = wref[w]
+                ev(W_GUARD, j, t, y, p, buf)
+                guard_ok = buf[0] != 0.0
+                if not guard_ok:
+                    for ww in range(nw):
+                        if (ww != w and wact[ww] == ACT_EVENT and wtype[ww] == WF_SURFACE
+                                and widx[ww] == widx[w]
+                                and (wdir[ww] == 0 or wdir[ww] * new_sign > 0.0)):
+                            ev(W_GUARD, wref[ww], t, y, p, buf)
+                            if buf[0] != 0.0:
+                                w = ww
+                                j = wref[ww]
+                                guard_ok = True
+                                break
+                # a crossing whose normal velocity points against the event direction is
+                # round-off around a previous event (the state is already leaving): not an
+                # event, unless that velocity is round-off itself (a state on the surface and
+                # tangent to it is not leaving; the sign of the round-off must not decide)
+                if dkind == REGULAR:
+                    ev(W_HD, widx[w] * nm + mode, t, y, p, buf)
+                    vn = buf[0]
+                else:
+                    _field(ev, p, dkind, didx, mode, nm, t, y, n, fbuf, etab, stab, slide_c, w1,
+                           w2, gx, hdx)
+                    vn = _surface_rate(ev, p, dkind, widx[w], mode, nm, t, y, fbuf, n, buf, hdx)
+                moving_away = etab[j, 1] != 0 and vn * etab[j, 1] < 0.0
+                if moving_away and abs(vn) <= _rate_band(ev, p, widx[w], mode, nm, t, y, n, hdx):
+                    moving_away = False
+                if not guard_ok or moving_away:
                     # no event: continue past this crossing
                     last_type = wtype[w]
                     last_idx = widx[w]
@@ -3245,7 +3146,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                                               buf, fbuf, ytmp, wk)
                     stats[4] += chattered
                 else:
-                    mode = _apply_reset(ev, p, j, mode, t, y, xs, n, etab, ytmp)
+                    mode = _act_transition(ev, p, j, mode, t, y, xs, n, etab, ytmp)
                     log_kind = K_TRANSITION
                     chain_event = -1
                 dkind, didx, mode, contact_stick = _after_reset(
@@ -3306,9 +3207,19 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                         for c in range(n):
                             y[n + i * n + c] = 1.0 if i == c else 0.0
                 # jump (or chatter gap) interval to the post-event node
-                n_nodes = _push_node(nodes_t, nodes_y, nodes_s, ikind, hstep, dense, n_nodes,
-                                     t_after, y, dkind, didx, mode,
-                                     IV_CHATTER if log_kind == K_CHATTER else IV_JUMP)
+                nodes_t[n_nodes] = t_after
+                for i in range(nY):
+                    nodes_y[n_nodes, i] = y[i]
+                nodes_s[n_nodes, 0] = dkind
+                nodes_s[n_nodes, 1] = didx
+                nodes_s[n_nodes, 2] = mode
+                ikind[n_nodes - 1] = IV_CHATTER if log_kind == K_CHATTER else IV_JUMP
+                hstep[n_nodes - 1] = 0.0
+                if store_q:
+                    for i in range(nY):
+                        for k in range(deg):
+                            dense[n_nodes - 1, i, k] = 0.0
+                n_nodes += 1
                 if contact_stick or log_kind == K_CHATTER:
                     # sticking starts here (after an impact that left the state in contact, or
                     # at the accumulation point of a chattering sequence): its own record, from
@@ -3391,9 +3302,48 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             last_depth = 0.0
             last_mode = wmode[w]
             last_t = t
-            last_type, last_idx, last_sign = _guard_after_event(
-                ev, p, act, wtype[w], widx[w], wref[w], new_sign, last_sign, dkind, mode, nm, t, y,
-                n, etab, stab, buf, hdx)
+            last_type = wtype[w]
+            last_idx = widx[w]
+            # re-trigger guard: the function that fired and the side of it the state is on now
+            if act == ACT_EVENT:
+                # after a reset the surface value is ~0; its new side is hdot after the reset
+                if dkind == REGULAR:
+                    ev(W_HD, widx[w] * nm + mode, t, y, p, buf)
+                    last_sign = 1.0 if buf[0] > 0.0 else -1.0
+                    vout = buf[0]
+                    if etab[wref[w], 2] == EV_IMPACT and vout != 0.0:
+                        # hdot after an impact within round-off (a plastic impact that does not
+                        # stick: the free motion leaves tangentially): its sign is noise, the
+                        # state is on the allowed side
+                        if abs(vout) <= _rate_band(ev, p, widx[w], mode, nm, t, y, n, hdx):
+                            vout = 0.0
+                    if vout == 0.0:
+                        # tangent after the event: an impact leaves the state on the admissible
+                        # side, a transition has crossed into the event direction
+                        if etab[wref[w], 2] == EV_IMPACT or etab[wref[w], 1] == 0:
+                            last_sign = 1.0 if etab[wref[w], 1] <= 0 else -1.0
+                        else:
+                            last_sign = 1.0 if etab[wref[w], 1] > 0 else -1.0
+                else:
+                    last_sign = 1.0
+            elif act == ACT_RELEASE:
+                last_sign = 1.0
+                last_type = WF_SURFACE
+                last_idx = etab[wref[w], 0]
+            elif act == ACT_SWITCH:
+                if dkind == SLIDE:
+                    last_type = -1
+                else:
+                    last_sign = 1.0 if mode == stab[wref[w], 1] else -1.0
+            elif act == ACT_INTERSECTION:
+                # crossed surface widx[w] while sliding: we are on the new side of it
+                last_type = WF_SURFACE
+                last_sign = new_sign
+            else:
+                # sliding exit: we leave into the mode's side of the surface
+                last_type = WF_SURFACE
+                last_idx = stab[wref[w], 0]
+                last_sign = 1.0 if act == ACT_EXIT_ABOVE else -1.0
             restart = True
 
     # final node (when only events are saved, the end state still is)
