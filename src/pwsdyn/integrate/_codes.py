@@ -79,9 +79,9 @@ VAR_NONE, VAR_GLOBAL, VAR_SEGMENTS = range(3)
 #: Integer options, by position in ``iopt``.
 INT_OPTIONS = ("mode0", "n_modes", "max_steps", "max_events", "method", "variational",
                "chatter", "save", "stop_mask", "stop_ref", "stop_count", "dkind0", "didx0",
-               "exact")
+               "exact", "order")
 (IO_MODE0, IO_NMODES, IO_MAXSTEPS, IO_MAXEVENTS, IO_METHOD, IO_VAR, IO_CHATTER, IO_SAVE,
- IO_STOP_MASK, IO_STOP_REF, IO_STOP_COUNT, IO_DKIND0, IO_DIDX0, IO_EXACT) = range(
+ IO_STOP_MASK, IO_STOP_REF, IO_STOP_COUNT, IO_DKIND0, IO_DIDX0, IO_EXACT, IO_ORDER) = range(
     len(INT_OPTIONS))
 IO_N = len(INT_OPTIONS)
 
@@ -96,7 +96,7 @@ FO_N = len(FLOAT_OPTIONS)
 def kernel_options(*, mode0: int, n_modes: int, max_steps: int, max_events: int, method: int,
                    variational: int = VAR_NONE, chatter: bool = True, save: int = SAVE_EVENTS,
                    stop: tuple[int, int, int] | None = None, dkind0: int = REGULAR,
-                   didx0: int = -1, exact: int = 0, rtol: float, atol: float,
+                   didx0: int = -1, exact: int = 0, order: int = 0, rtol: float, atol: float,
                    first_step: float = 0.0, max_step: float = np.inf,
                    chatter_ratio: float, chatter_velocity: float = -1.0,
                    sliding_gain: float = 0.0,
@@ -107,7 +107,9 @@ def kernel_options(*, mode0: int, n_modes: int, max_steps: int, max_events: int,
     ``K_*`` kind has its bit set in ``kind_mask`` and whose event or switch index is ``ref``
     (-1: any). ``first_step`` 0: estimated. ``chatter_ratio`` negative: the default ratio, applied
     only where the chattering map is accurate; ``chatter_velocity`` negative: the floor from
-    the tolerances. ``sample``: ``(t0, dt)`` of stroboscopic samples (``dt <= 0``: none)."""
+    the tolerances. ``sample``: ``(t0, dt)`` of stroboscopic samples (``dt <= 0``: none).
+    ``method``: the tableau's ``code`` (its error estimator), ``order`` its order (the
+    exponent of the step-size control; 0: 5 for code 0, 8 for code 1)."""
     iopt = np.zeros(IO_N, dtype=np.int64)
     iopt[IO_MODE0] = mode0
     iopt[IO_NMODES] = n_modes
@@ -122,6 +124,7 @@ def kernel_options(*, mode0: int, n_modes: int, max_steps: int, max_events: int,
     iopt[IO_DKIND0] = dkind0
     iopt[IO_DIDX0] = didx0
     iopt[IO_EXACT] = exact
+    iopt[IO_ORDER] = order
     fopt = np.zeros(FO_N, dtype=float)
     fopt[FO_RTOL] = rtol
     fopt[FO_ATOL] = atol

@@ -147,18 +147,16 @@ from ..model.codegen import (W_AFFINE, W_F, W_FU, W_FX, W_G, W_GUARD, W_GX, W_GT
 # defined once in ._codes, shared with the Python side; numba reads them as compile-time
 # constants. Numba's on-disk cache is keyed on this file, not on ._codes: after changing a
 # code there, clear the cache (or touch this file) so the kernel is recompiled.
-from ._codes import (ACT_EVENT, ACT_EXIT_ABOVE, ACT_EXIT_BELOW,  # noqa: F401 (re-exported)
-                     ACT_INTERSECTION, ACT_RELEASE, ACT_SWITCH, EV_IMPACT, EV_TRANSITION,
-                     FO_ATOL, FO_CHAT_ABS, FO_CHAT_REL, FO_H0, FO_HMAX, FO_N, FO_RTOL,
-                     FO_SAMPLE_DT, FO_SAMPLE_T0, FO_SLIDE_C, IO_CHATTER, IO_DIDX0, IO_DKIND0,
-                     IO_EXACT, IO_MAXEVENTS, IO_MAXSTEPS, IO_METHOD, IO_MODE0, IO_N, IO_NMODES,
-                     IO_SAVE, IO_STOP_COUNT, IO_STOP_MASK, IO_STOP_REF, IO_VAR, IV_CHATTER,
-                     IV_JUMP, IV_STEP, K_CHATTER, K_CROSSING, K_IMPACT, K_RELEASE, K_SLIDE_END,
-                     K_SLIDE_START, K_STICK, K_TRANSITION, REGULAR, SAVE_DENSE, SAVE_EVENTS,
-                     SAVE_NODES, SLIDE, SLIDE_CONVEX, SLIDE_UTKIN, ST_INTERSECTION,
-                     ST_MAX_EVENTS, ST_MAX_STEPS, ST_NONFINITE, ST_STEP_TOO_SMALL, ST_SUCCESS,
-                     ST_TERMINAL, ST_ZENO, STICK, SW_CONTINUOUS, SW_FILIPPOV, VAR_GLOBAL,
-                     VAR_NONE, VAR_SEGMENTS, WF_HDDOT, WF_HDOT, WF_SURFACE)
+from ._codes import (  # noqa: F401 (re-exported for the kernel's users)
+    ACT_EVENT, ACT_EXIT_ABOVE, ACT_EXIT_BELOW, ACT_INTERSECTION, ACT_RELEASE, ACT_SWITCH,
+    EV_IMPACT, EV_TRANSITION, FO_ATOL, FO_CHAT_ABS, FO_CHAT_REL, FO_H0, FO_HMAX, FO_N, FO_RTOL,
+    FO_SAMPLE_DT, FO_SAMPLE_T0, FO_SLIDE_C, IO_CHATTER, IO_DIDX0, IO_DKIND0, IO_EXACT,
+    IO_MAXEVENTS, IO_MAXSTEPS, IO_METHOD, IO_MODE0, IO_N, IO_NMODES, IO_ORDER, IO_SAVE,
+    IO_STOP_COUNT, IO_STOP_MASK, IO_STOP_REF, IO_VAR, IV_CHATTER, IV_JUMP, IV_STEP, K_CHATTER,
+    K_CROSSING, K_IMPACT, K_RELEASE, K_SLIDE_END, K_SLIDE_START, K_STICK, K_TRANSITION, REGULAR,
+    SAVE_DENSE, SAVE_EVENTS, SAVE_NODES, SLIDE, SLIDE_CONVEX, SLIDE_UTKIN, STICK, ST_INTERSECTION,
+    ST_MAX_EVENTS, ST_MAX_STEPS, ST_NONFINITE, ST_STEP_TOO_SMALL, ST_SUCCESS, ST_TERMINAL, ST_ZENO,
+    SW_CONTINUOUS, SW_FILIPPOV, VAR_GLOBAL, VAR_NONE, VAR_SEGMENTS, WF_HDDOT, WF_HDOT, WF_SURFACE)
 
 #: The decorator of the helpers that allocate nothing: compiled without numba's reference
 #: counting (``_nrt=False``). With it every call increfs and decrefs each array argument
@@ -1603,11 +1601,11 @@ def _exact_stepper(ev, p, mode, t, y, h, K, s_fsal, ynew, kst, Q, aff, aff_P, af
                    nz, T1, T2):
     """One exact step of affine mode ``mode`` (see "Exact propagation" in the module
     docstring), with the outputs of the Runge-Kutta step of run_kernel: the new state into
-    ``ynew``, the FSAL stage ``f(t + h, ynew)`` into ``K[s_fsal]``. The error is zero (the step is limited only
-    by the convergence of the Taylor sum, the largest step and the events). A full step
-    (``h == aff_full``) is one product with the propagator made once per mode and length; a
-    shorter one sums the Taylor series of the vector, whose terms are the dense output in
-    ``Q``. Returns ``(err, finite, dense_made, nfev)``."""
+    ``ynew``, the FSAL stage ``f(t + h, ynew)`` into ``K[s_fsal]``. The error is zero (the
+    step is limited only by the convergence of the Taylor sum, the largest step and the
+    events). A full step (``h == aff_full``) is one product with the propagator made once per
+    mode and length; a shorter one sums the Taylor series of the vector, whose terms are the
+    dense output in ``Q``. Returns ``(err, finite, dense_made, nfev)``."""
     aff_M, aff_s, aff_w, zv, zv1 = aff
     n = y.shape[0]   # (exact steps carry no variational equations)
     q_made = False
@@ -2210,7 +2208,11 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     T1 = np.zeros((max(nz, 1), max(nz, 1)))
     T2 = np.zeros((max(nz, 1), max(nz, 1)))
     n_sw = stab.shape[0]
+    # the order of the propagated solution: the exponent of the step-size control (Hairer,
+    # Norsett & Wanner I, II.4)
     order = 5.0 if method == 0 else 8.0
+    if iopt.shape[0] > IO_ORDER and iopt[IO_ORDER] > 0:
+        order = float(iopt[IO_ORDER])
 
     # work arrays
     K = np.zeros((s_ext, nY))

@@ -506,7 +506,7 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
             SAVE_DENSE if opts["variational"] or store_dense else SAVE_NODES)
     iopt, fopt = kernel_options(
         mode0=mode0, n_modes=len(model.modes), max_steps=opts["max_steps"],
-        max_events=opts["max_events"], method=tab.code,
+        max_events=opts["max_events"], method=tab.code, order=tab.order,
         variational=VAR_SEGMENTS if opts["variational"] else VAR_NONE, chatter=opts["chatter"],
         save=save, stop=stop, dkind0=0 if dkind0 is None else dkind0,
         didx0=-1 if didx0 is None else didx0, exact=_exact_code(model, opts["exact"]),
