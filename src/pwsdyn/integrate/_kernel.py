@@ -1706,13 +1706,12 @@ def _step_dense(ev, p, exact, dkind, didx, mode, nm, t, y, h, h_full, K, A, C, s
 # event actions: one function per action, called from the one dispatch in run_kernel
 # --------------------------------------------------------------------------------------
 # Each takes the state at the event (``t``, ``y``; ``xs`` the copy before it), updates ``y``
-# in place, writes the saltation matrix ``S`` when the variational equations are on, and
-# returns the new discrete state ``(dkind, didx, mode)`` and the kind of the log record
-# (``K_*``; -1: none). At most 30 arguments each (see the steppers above). The saltation
-# matrix of every action is made by :func:`_action_saltation`, called after the action where
-# the variational equations are on: the saltation helpers allocate, so they keep numba's
-# reference counting, which the actions (like every other per-step or per-event helper) are
-# compiled without (measured 5-10% of an event-dominated run).
+# in place and returns the new discrete state ``(dkind, didx, mode)`` and the kind of the log
+# record (``K_*``; -1: none). At most 30 arguments each (see the steppers above). The
+# saltation matrix of every action is made by :func:`_action_saltation`, called after the
+# action where the variational equations are on: the saltation helpers allocate, so they keep
+# numba's reference counting, which the actions (like every other per-step or per-event
+# helper) are compiled without (with it, measured 5-10% of an event-dominated run).
 
 @_hot
 def _act_impact(ev, p, j, dkind, didx, mode, nm, t, y, xs, n, etab, t_end, fopt, chatter_on,
