@@ -143,48 +143,20 @@ from numba import njit
 from ..model.codegen import (W_AFFINE, W_F, W_FU, W_FX, W_G, W_GUARD, W_GX, W_GT, W_H, W_HD,
                              W_HDT, W_HDU, W_HDUD, W_HDX, W_HHD, W_HT, W_HX)
 
-# discrete states
-REGULAR, STICK, SLIDE = 0, 1, 2
-# watch function types
-WF_SURFACE, WF_HDOT, WF_HDDOT = 0, 1, 2
-# actions of watch functions
-ACT_EVENT, ACT_SWITCH, ACT_RELEASE, ACT_EXIT_ABOVE, ACT_EXIT_BELOW, ACT_INTERSECTION = 0, 1, 2, 3, 4, 5
-# event log kinds (kept in sync with trajectory.EVENT_KINDS)
-K_IMPACT, K_TRANSITION, K_CHATTER, K_STICK, K_RELEASE, K_CROSSING, K_SLIDE_START, K_SLIDE_END = (
-    0, 1, 2, 3, 4, 5, 6, 7)
-# event kinds in the model tables
-EV_IMPACT, EV_TRANSITION = 0, 1
-# status codes (errors.Status)
-ST_SUCCESS, ST_TERMINAL, ST_MAX_STEPS, ST_MAX_EVENTS, ST_STEP_TOO_SMALL, ST_NONFINITE = 0, 1, 2, 3, 4, 5
-ST_INTERSECTION = 6
-ST_ZENO = 7
-# integer options
-IO_MODE0, IO_NMODES, IO_MAXSTEPS, IO_MAXEVENTS, IO_METHOD, IO_VAR, IO_CHATTER, IO_SAVE = range(8)
-# optional integer options, read only when ``iopt`` is long enough: stop after the
-# IO_STOP_COUNT-th logged event whose kind K_* has its bit set in IO_STOP_MASK and whose event
-# (or switch) index is IO_STOP_REF (-1: any); the initial discrete state kind and index
-IO_STOP_MASK, IO_STOP_REF, IO_STOP_COUNT, IO_DKIND0, IO_DIDX0 = range(8, 13)
-# exact propagation of the affine modes (1) instead of the Runge-Kutta pair (0)
-IO_EXACT = 13
-# values of iopt[IO_SAVE]: the nodes of events and the end only; every step with its dense
-# output (power-form coefficients, ``dense``); every step with its length only (``hstep``:
-# the dense output is rebuilt on demand from the node by :func:`dense_coefficients`)
-SAVE_EVENTS, SAVE_DENSE, SAVE_NODES = 0, 1, 2
-IO_N = 14
-# values of iopt[IO_VAR]: no variational equations; Phi = dx(t)/dx0 through every event; or per
-# segment: Phi restarts at the identity after each event and each event record carries the
-# segment's Phi (variational part of x_before) and the saltation matrix S (of x_after)
-VAR_NONE, VAR_GLOBAL, VAR_SEGMENTS = 0, 1, 2
-# float options
-FO_RTOL, FO_ATOL, FO_H0, FO_HMAX, FO_CHAT_REL, FO_CHAT_ABS, FO_SLIDE_C = range(7)
-# sampling at t = FO_SAMPLE_T0 + k FO_SAMPLE_DT (k >= 0) on the dense output; DT <= 0: off
-FO_SAMPLE_T0, FO_SAMPLE_DT = 7, 8
-FO_N = 9
-# switch table columns: surface, above mode, below mode, and optionally the kind (SW_FILIPPOV:
-# cross or slide; SW_CONTINUOUS: only a derivative jumps, always cross) and the sliding method
-# (SLIDE_CONVEX: Filippov's convex combination; SLIDE_UTKIN: Utkin's equivalent control)
-SW_FILIPPOV, SW_CONTINUOUS = 0, 1
-SLIDE_CONVEX, SLIDE_UTKIN = 0, 1
+# The integer codes (discrete states, watch types, actions, log kinds, statuses, options) are
+# defined once in ._codes, shared with the Python side; numba reads them as compile-time
+# constants. Numba's on-disk cache is keyed on this file, not on ._codes: after changing a
+# code there, clear the cache (or touch this file) so the kernel is recompiled.
+from ._codes import (  # noqa: F401 (re-exported for the kernel's users)
+    ACT_EVENT, ACT_EXIT_ABOVE, ACT_EXIT_BELOW, ACT_INTERSECTION, ACT_RELEASE, ACT_SWITCH,
+    EV_IMPACT, EV_TRANSITION, FO_ATOL, FO_CHAT_ABS, FO_CHAT_REL, FO_H0, FO_HMAX, FO_N, FO_RTOL,
+    FO_SAMPLE_DT, FO_SAMPLE_T0, FO_SLIDE_C, IO_CHATTER, IO_DIDX0, IO_DKIND0, IO_EXACT,
+    IO_MAXEVENTS, IO_MAXSTEPS, IO_METHOD, IO_MODE0, IO_N, IO_NMODES, IO_ORDER, IO_SAVE,
+    IO_STOP_COUNT, IO_STOP_MASK, IO_STOP_REF, IO_VAR, IV_CHATTER, IV_JUMP, IV_STEP, K_CHATTER,
+    K_CROSSING, K_IMPACT, K_RELEASE, K_SLIDE_END, K_SLIDE_START, K_STICK, K_TRANSITION, REGULAR,
+    SAVE_DENSE, SAVE_EVENTS, SAVE_NODES, SLIDE, SLIDE_CONVEX, SLIDE_UTKIN, STICK, ST_INTERSECTION,
+    ST_MAX_EVENTS, ST_MAX_STEPS, ST_NONFINITE, ST_STEP_TOO_SMALL, ST_SUCCESS, ST_TERMINAL, ST_ZENO,
+    SW_CONTINUOUS, SW_FILIPPOV, VAR_GLOBAL, VAR_NONE, VAR_SEGMENTS, WF_HDDOT, WF_HDOT, WF_SURFACE)
 
 #: The decorator of the helpers that allocate nothing: compiled without numba's reference
 #: counting (``_nrt=False``). With it every call increfs and decrefs each array argument
@@ -571,25 +543,6 @@ def _jacobian(ev, p, dkind, didx, mode, nm, t, y, n, f0, etab, stab, slide_c,
 # --------------------------------------------------------------------------------------
 
 @_hot
-def _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_last, ytmp,
-               etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft):
-    """Stages 1..s_last of an explicit RK step (stage 0 = K[0] is given)."""
-    for st in range(1, s_last + 1):
-        for i in range(nY):
-            acc = 0.0
-            for m in range(st):
-                a = A[st, m]
-                if a != 0.0:
-                    acc += a * K[m, i]
-            ytmp[i] = y[i] + h * acc
-        if dkind == REGULAR and nvar == 0:
-            ev(W_F, mode, t + C[st] * h, ytmp, p, K[st])
-        else:
-            _rhs(ev, p, dkind, didx, mode, nm, t + C[st] * h, ytmp, n, nvar, K[st], etab, stab,
-                 slide_c, w1, w2, gx, hdx, jac, xt, ft)
-
-
-@_hot
 def _error_norm(K, E, method, s, y, ynew, h, i0, i1, rtol, atol):
     """Scaled RMS error of the components ``y[i0:i1]``.
 
@@ -635,28 +588,6 @@ def _dense_coeffs(K, P, h, nY, s_ext, deg, out):
                 if pj != 0.0:
                     acc += K[j, i] * pj
             out[i, k] = h * acc
-
-
-@_hot
-def _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_fsal, P, Q, ytmp,
-                etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft):
-    """Dense output of the step just taken: extra stages (DOP853) and power-form
-    coefficients. Returns the number of extra function evaluations."""
-    s_ext = A.shape[0]
-    for st in range(s_fsal + 1, s_ext):
-        for i in range(nY):
-            acc = 0.0
-            for m in range(st):
-                acc += A[st, m] * K[m, i]
-            ytmp[i] = y[i] + h * acc
-        _rhs(ev, p, dkind, didx, mode, nm, t + C[st] * h, ytmp, n, nvar, K[st], etab, stab,
-             slide_c, w1, w2, gx, hdx, jac, xt, ft)
-    _dense_coeffs(K, P, h, nY, s_ext, P.shape[1], Q)
-    # columns beyond the method's degree are used by exact steps only
-    for k in range(P.shape[1], Q.shape[1]):
-        for i in range(nY):
-            Q[i, k] = 0.0
-    return s_ext - s_fsal - 1
 
 
 @njit(cache=True)
@@ -1653,6 +1584,452 @@ def state_field(ev, p, dkind, didx, mode, nm, t, x, etab, stab, slide_c, out):
 
 
 # --------------------------------------------------------------------------------------
+# steppers: one step from (t, y) of length h, Runge-Kutta or exact, behind one interface
+# --------------------------------------------------------------------------------------
+# The Runge-Kutta step itself is written out in the stepping loop of run_kernel (its cost is
+# that of a few multiply-adds and field calls, and any call costs a visible fraction of it);
+# the exact stepper, the dense output and the landing step are functions with the same
+# arguments. Each is a plain call of a ``_hot`` function with at most 30 arguments: longer
+# calls are made by Python as ``f(*args)``, for which numba builds a tuple of the arrays (a
+# reference-count update per array: measured 1.7x the cost of an RK45 step), and numba's
+# inlining assigns each array argument to a new variable (the same updates). The work vectors
+# of the vector fields travel as one tuple ``wk = (w1, w2, gx, hdx, jac, xt, ft)`` and the
+# affine tables as ``aff = (M, sc, wt, z, v)``, both built once per run.
+
+@_hot
+def _exact_stepper(ev, p, mode, t, y, h, K, s_fsal, ynew, kst, Q, aff, aff_P, aff_ph, aff_full,
+                   nz, T1, T2):
+    """One exact step of affine mode ``mode`` (see "Exact propagation" in the module
+    docstring), with the outputs of the Runge-Kutta step of run_kernel: the new state into
+    ``ynew``, the FSAL stage ``f(t + h, ynew)`` into ``K[s_fsal]``. The error is zero (the
+    step is limited only by the convergence of the Taylor sum, the largest step and the
+    events). A full step (``h == aff_full``) is one product with the propagator made once per
+    mode and length; a shorter one sums the Taylor series of the vector, whose terms are the
+    dense output in ``Q``. Returns ``(err, finite, dense_made, nfev)``."""
+    aff_M, aff_s, aff_w, zv, zv1 = aff
+    n = y.shape[0]   # (exact steps carry no variational equations)
+    q_made = False
+    if h == aff_full:
+        if h != aff_ph[mode]:
+            _exact_propagator(aff_M, aff_w, mode, nz, h, aff_P, T1, T2)
+            aff_ph[mode] = h
+        _exact_apply(aff_M, aff_s, aff_P, mode, nz, n, t, y, zv, ynew)
+    else:
+        _exact_step(aff_M, aff_s, aff_w, mode, nz, n, t, y, h, zv, zv1, Q, ynew)
+        q_made = True
+    ev(W_F, mode, t + h, ynew, p, kst)
+    finite = True
+    for i in range(n):
+        K[s_fsal, i] = kst[i]
+        if not (np.isfinite(kst[i]) and np.isfinite(ynew[i])):
+            finite = False
+    return (0.0 if finite else np.inf), finite, q_made, 1
+
+
+@_hot
+def _step_stages(ev, p, exact, dkind, didx, mode, nm, t, y, h, h_full, K, A, C, s_fsal, Q, ytmp,
+                 etab, stab, slide_c, wk):
+    """Stages 1..s_fsal of the step of length ``h`` from ``(t, y)`` (``K[0] = f(t, y)`` is
+    given), its end state into ``ytmp``: the step retaken to an event at ``t + h`` inside the
+    accepted step of length ``h_full`` (the landing step: the event state comes from the
+    integrator, not from an interpolant), or a step rebuilt from its node. On an exact step the
+    dense output ``Q`` of the full step is the exact flow: the landing is its evaluation and
+    the FSAL stage ``K[s_fsal]`` its field. Returns the number of function evaluations."""
+    w1, w2, gx, hdx, jac, xt, ft = wk
+    nY = y.shape[0]
+    n = w1.shape[0]
+    if exact:
+        _dense_eval(y, Q, h / h_full, nY, Q.shape[1], ytmp)
+        ev(W_F, mode, t + h, ytmp, p, K[s_fsal])
+        return 1
+    nvar = 1 if nY > n else 0
+    for st in range(1, s_fsal + 1):
+        for i in range(nY):
+            acc = 0.0
+            for m in range(st):
+                a = A[st, m]
+                if a != 0.0:
+                    acc += a * K[m, i]
+            ytmp[i] = y[i] + h * acc
+        if dkind == REGULAR and nvar == 0:
+            ev(W_F, mode, t + C[st] * h, ytmp, p, K[st])
+        else:
+            _rhs(ev, p, dkind, didx, mode, nm, t + C[st] * h, ytmp, n, nvar, K[st], etab, stab,
+                 slide_c, w1, w2, gx, hdx, jac, xt, ft)
+    return s_fsal
+
+
+@_hot
+def _step_dense(ev, p, exact, dkind, didx, mode, nm, t, y, h, h_full, K, A, C, s_fsal, P, Q, ytmp,
+                etab, stab, slide_c, wk, nz, aff):
+    """The dense output ``Q`` (power form) of the step of length ``h`` just taken from
+    ``(t, y)`` with stages ``K``: for the Runge-Kutta pair the extra stages of the tableau
+    (DOP853: 3) and the interpolant's coefficients; for an exact step the Taylor terms of the
+    exact flow, made once for the full step (``h == h_full``) and rescaled to a landing step
+    inside it (term k by ``(h / h_full)^k``). Made only where it is needed (stored steps,
+    samples, event search). Returns the number of function evaluations."""
+    w1, w2, gx, hdx, jac, xt, ft = wk
+    nY = y.shape[0]
+    n = w1.shape[0]
+    if exact:
+        if h == h_full:
+            aff_M, aff_s, aff_w, zv, zv1 = aff
+            # (the end state of the series goes to the scratch ytmp: the step's is in ynew)
+            _exact_step(aff_M, aff_s, aff_w, mode, nz, n, t, y, h, zv, zv1, Q, ytmp)
+        else:
+            ratio = h / h_full
+            scale = 1.0
+            for k in range(Q.shape[1]):
+                scale *= ratio
+                for i in range(n):
+                    Q[i, k] *= scale
+        return 0
+    nvar = 1 if nY > n else 0
+    s_ext = A.shape[0]
+    for st in range(s_fsal + 1, s_ext):
+        for i in range(nY):
+            acc = 0.0
+            for m in range(st):
+                acc += A[st, m] * K[m, i]
+            ytmp[i] = y[i] + h * acc
+        _rhs(ev, p, dkind, didx, mode, nm, t + C[st] * h, ytmp, n, nvar, K[st], etab, stab,
+             slide_c, w1, w2, gx, hdx, jac, xt, ft)
+    _dense_coeffs(K, P, h, nY, s_ext, P.shape[1], Q)
+    # columns beyond the method's degree are used by exact steps only
+    for k in range(P.shape[1], Q.shape[1]):
+        for i in range(nY):
+            Q[i, k] = 0.0
+    return s_ext - s_fsal - 1
+
+
+# --------------------------------------------------------------------------------------
+# event actions: one function per action, called from the one dispatch in run_kernel
+# --------------------------------------------------------------------------------------
+# Each takes the state at the event (``t``, ``y``; ``xs`` the copy before it), updates ``y``
+# in place and returns the new discrete state ``(dkind, didx, mode)`` and the kind of the log
+# record (``K_*``; -1: none). At most 30 arguments each (see the steppers above). The
+# saltation matrix of every action is made by :func:`_action_saltation`, called after the
+# action where the variational equations are on: the saltation helpers allocate, so they keep
+# numba's reference counting, which the actions (like every other per-step or per-event
+# helper) are compiled without (with it, measured 5-10% of an event-dominated run).
+
+@_hot
+def _act_impact(ev, p, j, dkind, didx, mode, nm, t, y, xs, n, etab, t_end, fopt, chatter_on,
+                chain_event, chain_vmax, buf, fbuf, ytmp, wk):
+    """Impact on event ``j``: the reset ``g``, or the complete-chattering map where the
+    sequence of impacts accumulates (:func:`_act_chatter`), or, where the accumulation point
+    lies past ``t_end`` and the bounces are below the velocity floor, the end of the run on
+    the chord of the chattering gap. ``chain_event``/``chain_vmax``: the impacts of the
+    current sequence and its largest normal speed (the relative chattering threshold).
+    Returns ``(dkind, didx, mode, log_kind, t_after, chatter_tail, chain_event, chain_vmax,
+    chattered)``."""
+    w1, w2, gx, hdx, jac, xt, ft = wk
+    rtol = fopt[FO_RTOL]
+    atol = fopt[FO_ATOL]
+    chat_rel = fopt[FO_CHAT_REL]
+    # a negative ratio is the default one, applied only where the chattering map is accurate
+    chat_gated = chat_rel < 0.0
+    chat_rel = abs(chat_rel)
+    chat_abs = fopt[FO_CHAT_ABS]
+    k = etab[j, 0]
+    # normal velocity and acceleration at impact, impact direction W, restitution r
+    ev(W_HD, k * nm + mode, t, y, p, buf)
+    vin = buf[0]
+    ev(W_F, mode, t, y, p, fbuf)
+    ev(W_HDX, k * nm + mode, t, y, p, hdx)
+    ev(W_HDT, k * nm + mode, t, y, p, buf)
+    acc = buf[0] + _dot(hdx, fbuf, n)
+    hw = _impact_direction(ev, p, j, k, mode, nm, t, y, n, w1, gx, hdx)
+    r = -(1.0 + hw)
+    if chain_event != j:
+        chain_event = j
+        chain_vmax = 0.0
+    chain_vmax = max(chain_vmax, abs(vin))
+    # velocity floor: a bounce of speed v rises v^2 / (2|a|); below the position tolerance it
+    # cannot be told from sticking (default when chat_abs < 0)
+    vfloor = chat_abs
+    if vfloor < 0.0:
+        xmax = 0.0
+        for i in range(n):
+            xmax = max(xmax, abs(y[i]))
+        vfloor = np.sqrt(2.0 * abs(acc) * (atol + rtol * xmax))
+    do_chatter = (chatter_on == 1 and acc < 0.0 and r >= 0.0 and r < 1.0
+                  and (abs(vin) <= vfloor or r == 0.0))
+    if (chatter_on == 1 and not do_chatter and acc < 0.0 and 0.0 <= r < 1.0
+            and abs(vin) <= chat_rel * chain_vmax and not chat_gated):
+        do_chatter = True
+    elif (chatter_on == 1 and not do_chatter and acc < 0.0 and 0.0 <= r < 1.0
+            and abs(vin) <= chat_rel * chain_vmax):
+        # the map takes the normal acceleration as constant over the sequence: jump only
+        # where its change over the sequence's duration moves the state by less than the
+        # position tolerance, dt^2 |a(t + dt) - a(t)| (a table whose acceleration varies put
+        # the accumulation point 3e-6 off when entered at 1e-4 of the first impact's speed;
+        # below the floor the bounces are unresolvable anyway)
+        dtq = 2.0 * r * vin / ((1.0 - r) * acc)
+        for i in range(n):
+            xt[i] = y[i] + dtq * fbuf[i]
+        acc2 = _free_normal_acc(ev, p, k, mode, nm, t + dtq, xt, n, buf, ft, w2)
+        xmax = 0.0
+        for i in range(n):
+            xmax = max(xmax, abs(y[i]))
+        do_chatter = dtq * dtq * abs(acc2 - acc) <= atol + rtol * xmax
+    # complete-chattering map (Nordmark & Piiroinen 2009; slides):
+    # x_out = x_in + (2 r f_in / a + W) hdot_in / (1 - r),
+    # t_out = t_in + 2 r hdot_in / ((1 - r) a)
+    dtc = 2.0 * r * vin / ((1.0 - r) * acc) if do_chatter else 0.0
+    chatter_tail = False
+    if do_chatter and not (t + dtc <= t_end):
+        # the accumulation point lies beyond t_end: up to t_end the motion is a finite number
+        # of ordinary impacts, so take this one (and the next ones) as an impact and
+        # integrate on; jumping would end the run past t_end with the state of a time not
+        # asked for
+        do_chatter = False
+        # ... unless the bounces are below the velocity floor: they rise less than the
+        # position tolerance, so the event search cannot resolve them (their crossings drown
+        # in the round-off band of the re-trigger guard and the state would fall through the
+        # surface). Up to t_end the motion then is the start of the chattering sequence,
+        # within the resolution of the run: end at t_end on the chord from x_in to the
+        # accumulation state (Q(x_in) projected onto the sticking manifold, as below) that a
+        # chattering gap is drawn with (error O(floor) in hdot, O(tolerance) in h)
+        chatter_tail = abs(vin) <= vfloor and dtc > 0.0
+    log_kind = -1
+    t_after = t
+    chattered = 0
+    if chatter_tail:
+        _chatter_jump(ev, p, k, mode, nm, t + dtc, xs, ytmp, n, r, vin, acc, fbuf, w1, hdx, w2,
+                      buf)
+        th = (t_end - t) / dtc
+        for i in range(n):
+            y[i] = (1.0 - th) * xs[i] + th * ytmp[i]
+    elif do_chatter:
+        t_after = t + dtc
+        _chatter_jump(ev, p, k, mode, nm, t_after, xs, y, n, r, vin, acc, fbuf, w1, hdx, w2, buf)
+        log_kind = K_CHATTER
+        dkind = STICK
+        didx = j
+        chattered = 1
+        chain_event = -1
+    else:
+        # the impact law x+ = g_j(t, x-) (written out: a call per event is measurable)
+        ev(W_G, j, t, xs, p, ytmp)
+        for i in range(n):
+            y[i] = ytmp[i]
+        if etab[j, 3] >= 0:
+            mode = etab[j, 3]
+        log_kind = K_IMPACT
+    return dkind, didx, mode, log_kind, t_after, chatter_tail, chain_event, chain_vmax, chattered
+
+
+@_hot
+def _chatter_jump(ev, p, k, mode, nm, t_out, xs, out, n, r, vin, acc, f, W, hdx, w2, buf):
+    """The complete-chattering map ``Q(x_in) = x_in + (2 r f_in / a + W) hdot_in / (1 - r)``
+    (Nordmark & Piiroinen 2009) into ``out``. Q is first order in hdot; the accumulation point
+    lies on the sticking manifold {h = 0, hdot = 0} by definition, so it is projected onto
+    it at ``t_out``."""
+    for i in range(n):
+        out[i] = xs[i] + (2.0 * r * f[i] / acc + W[i]) * vin / (1.0 - r)
+    _project_stick(ev, p, k, mode, nm, t_out, out, n, hdx, w2, buf)
+
+
+@_hot
+def _act_transition(ev, p, j, mode, t, y, xs, n, etab, ytmp):
+    """Transition on event ``j``: the reset ``x+ = g_j(t, x-)`` into ``y`` (the identity where
+    the event has none) and its target mode (unchanged where it has none). Returns the
+    mode."""
+    ev(W_G, j, t, xs, p, ytmp)
+    for i in range(n):
+        y[i] = ytmp[i]
+    if etab[j, 3] >= 0:
+        return etab[j, 3]
+    return mode
+
+
+@_hot
+def _after_reset(ev, p, j, log_kind, chatter_tail, dkind, didx, mode, nm, t, y, n, etab, stab,
+                 buf, fbuf, wk):
+    """After an impact or a transition: the switching variant the new state lies in (a reset
+    or a new mode may put the state on the other side of a switching surface, or on one: take
+    the variant on the right side, or slide; an event without reset or target while sliding,
+    a section or a terminal event, leaves the sliding motion alone); sticking where an impact
+    left the normal velocity at round-off while the free motion presses into the surface (a
+    plastic impact on an oblique or curved surface, an impact at rest: constrained motion
+    along the surface, released where the constraint force vanishes; the impact's saltation
+    matrix then maps into the sticking field). Returns ``(dkind, didx, mode,
+    contact_stick)``."""
+    w1, w2, gx, hdx, jac, xt, ft = wk
+    k = etab[j, 0]
+    contact_stick = False
+    if (log_kind != K_CHATTER and not chatter_tail and stab.shape[0] > 0
+            and (dkind == REGULAR or etab[j, 5] == 1 or etab[j, 3] >= 0)):
+        dkind, didx, mode = _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx)
+    if (log_kind == K_IMPACT and dkind == REGULAR
+            and _stays_in_contact(ev, p, k, mode, nm, t, y, n, buf, fbuf, hdx)):
+        contact_stick = True
+        dkind = STICK
+        didx = j
+        _project_stick(ev, p, k, mode, nm, t, y, n, hdx, w2, buf)
+    return dkind, didx, mode, contact_stick
+
+
+@_hot
+def _act_release(ev, p, k, mode, nm, t, y, n, stab, buf, wk):
+    """Release from sticking on surface ``k``: the flight starts on the sticking manifold
+    {h = 0, hdot = 0} (the sticking steps drift off it by their local error, and a drift to
+    the far side, deeper than the re-trigger guard's round-off band, would hide a short
+    flight's landing), in the switching variant on the side the released motion takes (a
+    kink surface held at zero while sticking, e.g. the relative velocity of bilinear damping).
+    Returns ``(dkind, didx, mode, log_kind)``."""
+    w1, w2, gx, hdx, jac, xt, ft = wk
+    _project_stick(ev, p, k, mode, nm, t, y, n, hdx, w2, buf)
+    dkind = REGULAR
+    didx = -1
+    if stab.shape[0] > 0:
+        dkind, didx, mode = _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx)
+    return dkind, didx, mode, K_RELEASE
+
+
+@_hot
+def _act_switch(ev, p, s, old_kind, old_idx, old_mode, nm, t, y, n, stab, buf, hdx):
+    """Arrival at switching surface ``s``: sliding starts where both fields point into the
+    surface (h_t + h_x f_above < 0 < h_t + h_x f_below), otherwise the flow crosses (thesis
+    eq. 2.6-2.8); kink surfaces (SW_CONTINUOUS) always cross. Arriving with the own field
+    tangent (hdot = 0) while the other one points back is a graze: no event. Returns
+    ``(dkind, didx, mode, log_kind, graze)``."""
+    k = stab[s, 0]
+    a_m = stab[s, 1]
+    b_m = stab[s, 2]
+    ev(W_HD, k * nm + a_m, t, y, p, buf)
+    sa = buf[0]
+    ev(W_HD, k * nm + b_m, t, y, p, buf)
+    sb = buf[0]
+    filippov = stab.shape[1] <= 3 or stab[s, 3] == SW_FILIPPOV
+    graze = filippov and ((old_mode == a_m and sa >= 0.0 and sb > 0.0)
+                          or (old_mode == b_m and sb <= 0.0 and sa < 0.0))
+    if graze:
+        return old_kind, old_idx, old_mode, -1, True
+    dkind = old_kind
+    didx = old_idx
+    if filippov and sa < 0.0 and sb > 0.0:
+        dkind = SLIDE
+        didx = s
+        mode = a_m
+        log_kind = K_SLIDE_START
+        _project_surface(ev, p, k, t, y, n, hdx, buf)
+    else:
+        log_kind = K_CROSSING
+        mode = b_m if old_mode == a_m else a_m
+    return dkind, didx, mode, log_kind, False
+
+
+@_hot
+def _act_slide_exit(s, above, stab):
+    """End of sliding on switch ``s`` into the mode above (``alpha -> 0``) or below
+    (``alpha -> 1``). Returns ``(dkind, didx, mode, log_kind)``."""
+    return REGULAR, -1, (stab[s, 1] if above else stab[s, 2]), K_SLIDE_END
+
+
+@_hot
+def _act_intersection(ev, p, k2, new_sign, log_ref, old_kind, old_idx, old_mode, nm, t, y, n,
+                      etab, stab, slide_c, buf, fbuf, wk):
+    """Sliding on switch ``old_idx`` reached surface ``k2`` of another switch. Across ``k2``
+    the sliding pair (a, b) becomes (a2, b2): if the flow slides on the first surface there
+    too and its sliding field carries the state away from k2, it crosses k2 while sliding; if
+    both pairs leave the first surface to one side, the sliding ends; if the sliding field on
+    the far side points back into k2 the motion would slide on the intersection of the two
+    surfaces, which is not supported (``ST_INTERSECTION``). Returns ``(status, dkind, didx,
+    mode, log_kind, log_ref)``."""
+    w1, w2, gx, hdx, jac, xt, ft = wk
+    dkind = old_kind
+    didx = old_idx
+    mode = old_mode
+    log_kind = -1
+    k1 = stab[old_idx, 0]
+    a2 = _partner(stab, k2, stab[old_idx, 1])
+    b2 = _partner(stab, k2, stab[old_idx, 2])
+    s_new = _find_switch(stab, k1, a2, b2) if a2 >= 0 and b2 >= 0 else -1
+    if s_new >= 0:
+        ev(W_HD, k1 * nm + a2, t, y, p, buf)
+        sa = buf[0]
+        ev(W_HD, k1 * nm + b2, t, y, p, buf)
+        sb = buf[0]
+        if sa < 0.0 and sb > 0.0:
+            _field(ev, p, SLIDE, s_new, a2, nm, t, y, n, fbuf, etab, stab, slide_c, w1, w2, gx,
+                   hdx)
+            rate = _surface_rate(ev, p, SLIDE, k2, a2, nm, t, y, fbuf, n, buf, hdx)
+            if rate * new_sign > 0.0:
+                dkind = SLIDE
+                didx = s_new
+                mode = a2
+                log_kind = K_CROSSING
+        elif sa >= 0.0 and sb > 0.0:
+            dkind = REGULAR
+            didx = -1
+            mode = a2
+            log_kind = K_SLIDE_END
+            log_ref = old_idx
+        elif sa < 0.0 and sb <= 0.0:
+            dkind = REGULAR
+            didx = -1
+            mode = b2
+            log_kind = K_SLIDE_END
+            log_ref = old_idx
+    if log_kind < 0:
+        return ST_INTERSECTION, dkind, didx, mode, log_kind, log_ref
+    return ST_SUCCESS, dkind, didx, mode, log_kind, log_ref
+
+
+@njit(cache=True)
+def _action_saltation(ev, p, act, log_kind, chatter_tail, ref, k, old_kind, old_idx, old_mode,
+                      dkind, didx, mode, nm, t, xs, y, n, S, etab, stab, slide_c, buf, fbuf,
+                      ytmp, wk):
+    """The saltation matrix ``S`` of the action just taken (slides, "Saltation matrices";
+    Adolfsson et al. 2001): of the reset or transition (:func:`_event_saltation`), of the
+    complete-chattering map (:func:`_chatter_saltation`), of a Filippov crossing or sliding
+    entry on surface ``k`` (:func:`_switch_saltation`); release and sliding exit leave the
+    field continuous (``S = I``). ``ref``: the event or switch index of the action; ``xs``
+    the state before it, ``y`` after it."""
+    w1, w2, gx, hdx, jac, xt, ft = wk
+    if act == ACT_EVENT:
+        if log_kind == K_CHATTER:
+            _chatter_saltation(ev, p, ref, k, old_mode, nm, t, xs, n, S, etab, stab, slide_c)
+        elif not chatter_tail:
+            _event_saltation(ev, p, ref, k, old_mode, mode, nm, t, xs, y, n, S, gx, hdx, buf, fbuf,
+                             w1, w2, etab, stab, slide_c, old_kind, old_idx, ytmp, dkind, didx)
+    elif act == ACT_SWITCH or act == ACT_INTERSECTION:
+        _switch_saltation(ev, p, dkind, didx, old_mode, mode, nm, k, t, y, n, S, hdx, buf, fbuf,
+                          w1, w2, gx, etab, stab, slide_c, old_kind, old_idx)
+    else:
+        _identity(S, n)
+
+
+@_hot
+def _identity(S, n):
+    for i in range(n):
+        for c in range(n):
+            S[i, c] = 1.0 if i == c else 0.0
+
+
+@_hot
+def _apply_saltation(y, S, Phi, n, seg_var):
+    """The variational part of ``y`` after an event: ``Phi+ = S Phi-`` (slides, "Saltation
+    matrices"); per segment the record keeps ``S`` (the segment's ``Phi`` is in x_before)."""
+    if seg_var:
+        for i in range(n):
+            for c in range(n):
+                y[n + i * n + c] = S[i, c]
+        return
+    for i in range(n):
+        for c in range(n):
+            Phi[i, c] = y[n + i * n + c]
+    for i in range(n):
+        for c in range(n):
+            acc = 0.0
+            for m in range(n):
+                acc += S[i, m] * Phi[m, c]
+            y[n + i * n + c] = acc
+
+
+# --------------------------------------------------------------------------------------
 # dense output on demand
 # --------------------------------------------------------------------------------------
 
@@ -1689,8 +2066,9 @@ def _dense_coefficients(ev, p, etab, stab, iopt, fopt, A, C, P, s_fsal, t0, x0, 
     ft = np.zeros(n)
     zv = np.zeros(max(nz, 1))
     zv1 = np.zeros(max(nz, 1))
-    xe = np.zeros(n)
     out = np.zeros((which.shape[0], nY, deg))
+    wk = (w1, w2, gx, hdx, jac, xt, ft)
+    aff = (aff_M, aff_s, aff_w, zv, zv1)
     for r in range(which.shape[0]):
         i = which[r]
         h = hstep[i]
@@ -1702,15 +2080,14 @@ def _dense_coefficients(ev, p, etab, stab, iopt, fopt, A, C, P, s_fsal, t0, x0, 
         t = nodes_t[i]
         for c in range(nY):
             y[c] = nodes_y[i, c]
-        if nz > 0 and dkind == REGULAR and nvar == 0 and aff_ok[mode] == 1:
-            _exact_step(aff_M, aff_s, aff_w, mode, nz, n, t, y, h, zv, zv1, Q, xe)
-        else:
+        exact = nz > 0 and dkind == REGULAR and nvar == 0 and aff_ok[mode] == 1
+        if not exact:
             _rhs(ev, p, dkind, didx, mode, nm, t, y, n, nvar, K[0], etab, stab, slide_c,
                  w1, w2, gx, hdx, jac, xt, ft)
-            _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_fsal,
-                       ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
-            _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K, A, C, s_fsal, P,
-                        Q, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
+            _step_stages(ev, p, exact, dkind, didx, mode, nm, t, y, h, h, K, A, C, s_fsal, Q, ytmp,
+                         etab, stab, slide_c, wk)
+        _step_dense(ev, p, exact, dkind, didx, mode, nm, t, y, h, h, K, A, C, s_fsal, P, Q, ytmp,
+                    etab, stab, slide_c, wk, nz, aff)
         for c in range(nY):
             for k in range(deg):
                 out[r, c, k] = Q[c, k]
@@ -1812,11 +2189,6 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     rtol = fopt[FO_RTOL]
     atol = fopt[FO_ATOL]
     hmax = fopt[FO_HMAX]
-    chat_rel = fopt[FO_CHAT_REL]
-    # a negative ratio is the default one, applied only where the chattering map is accurate
-    chat_gated = chat_rel < 0.0
-    chat_rel = abs(chat_rel)
-    chat_abs = fopt[FO_CHAT_ABS]
     slide_c = fopt[FO_SLIDE_C]
     s_ext = A.shape[0]
     deg = P.shape[1]
@@ -1829,14 +2201,17 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
         deg = max(deg, _EXACT_TERMS)
     zv = np.zeros(max(nz, 1))
     zv1 = np.zeros(max(nz, 1))
-    xe = np.zeros(n)
     # propagator exp(h M) per mode for the step length aff_ph (most steps have the same one)
     aff_P = np.zeros((nm, max(nz, 1), max(nz, 1)))
     aff_ph = np.full(nm, -1.0)
     T1 = np.zeros((max(nz, 1), max(nz, 1)))
     T2 = np.zeros((max(nz, 1), max(nz, 1)))
     n_sw = stab.shape[0]
+    # the order of the propagated solution: the exponent of the step-size control (Hairer,
+    # Norsett & Wanner I, II.4)
     order = 5.0 if method == 0 else 8.0
+    if iopt.shape[0] > IO_ORDER and iopt[IO_ORDER] > 0:
+        order = float(iopt[IO_ORDER])
 
     # work arrays
     K = np.zeros((s_ext, nY))
@@ -1858,6 +2233,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     Kland = np.zeros((s_ext, nY))
     S = np.zeros((n, n))
     Phi = np.zeros((n, n))
+    # the vector fields' work vectors and the affine tables, passed as one argument each
+    wk = (w1, w2, gx, hdx, jac, xt, ft)
+    aff = (aff_M, aff_s, aff_w, zv, zv1)
 
     # outputs
     cap = 256
@@ -2197,33 +2575,16 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 status = ST_STEP_TOO_SMALL
                 break
 
-            q_made = False
+            # ---- one step: the exact flow of an affine mode or the Runge-Kutta pair
             if exact_now:
-                # ---- one exact step of an affine mode (no error: the step is limited only by
-                # the convergence of the Taylor sum, the largest step and the events)
-                if h == min(aff_h[mode], hmax):
-                    # a full step: one product with the propagator, made once per mode and run
-                    if h != aff_ph[mode]:
-                        _exact_propagator(aff_M, aff_w, mode, nz, h, aff_P, T1, T2)
-                        aff_ph[mode] = h
-                    _exact_apply(aff_M, aff_s, aff_P, mode, nz, n, t, y, zv, ynew)
-                else:
-                    # a shorter one (before an event, t_end, or a moving surface): the Taylor sum
-                    # of the vector, whose terms are the dense output
-                    _exact_step(aff_M, aff_s, aff_w, mode,
-                                nz, n, t, y, h, zv, zv1, Q, ynew)
-                    q_made = True
-                ev(W_F, mode, t + h, ynew, p, kst)
-                for i in range(n):
-                    K[s_fsal, i] = kst[i]
-                stats[2] += 1
-                err = 0.0
-                for i in range(n):
-                    if not (np.isfinite(K[s_fsal, i]) and np.isfinite(ynew[i])):
-                        err = np.inf
-                finite = err == 0.0
+                err, finite, q_made, nf = _exact_stepper(ev, p, mode, t, y, h, K, s_fsal, ynew,
+                        kst, Q, aff, aff_P, aff_ph, min(aff_h[mode], hmax), nz, T1, T2)
             else:
-                # ---- one RK step (stages written out here: this is the hot loop)
+                # the Runge-Kutta step, written out here (the stepper with the interface of
+                # _exact_stepper): as a call it passes ~20 arrays per step, measured 10-15% of
+                # an RK45 step on a two-state model
+                q_made = False
+                nf = s_fsal
                 fast = dkind == REGULAR and nvar == 0
                 for st in range(1, s_fsal + 1):
                     cst = t + C[st] * h
@@ -2241,7 +2602,6 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                              slide_c, w1, w2, gx, hdx, jac, xt, ft)
                     for i in range(nY):
                         K[st, i] = kst[i]
-                stats[2] += s_fsal
                 # the FSAL stage was evaluated at y + h sum B K = the new solution
                 finite = True
                 for i in range(nY):
@@ -2253,6 +2613,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 if nvar and finite:
                     err = max(err, _error_norm(K, E, method, s_fsal, y, ynew, h, n, nY, rtol,
                               atol))
+            stats[2] += nf
             if not (err <= 1.0):
                 stats[1] += 1
                 if not finite or err != err:
@@ -2267,12 +2628,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             # dense output coefficients are made only when needed (stored steps, interior samples)
             q_ready = q_made
             if store_q and not q_ready:
-                if exact_now:
-                    _exact_step(aff_M, aff_s, aff_w, mode, nz, n, t, y, h, zv, zv1, Q, xe)
-                else:
-                    stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n, nvar, K,
-                                            A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1, w2,
-                                            gx, hdx, jac, xt, ft)
+                stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h, h, K, A,
+                        C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz, aff)
                 q_ready = True
             t_new = t + h
             if t_new > t_end or h >= t_end - t:
@@ -2335,14 +2692,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                         # Hermite fit must reproduce h at the midpoint, or the step is retaken
                         # shorter.
                         if not q_ready:
-                            if exact_now:
-                                _exact_step(aff_M, aff_s, aff_w, mode,
-                                            nz, n, t, y, h, zv, zv1, Q, xe)
-                            else:
-                                stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY,
-                                                        n, nvar, K, A, C, s_fsal, P, Q, ytmp, etab,
-                                                        stab, slide_c, w1, w2, gx, hdx, jac, xt,
-                                                        ft)
+                            stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y,
+                                    h, h, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz,
+                                    aff)
                             q_ready = True
                         _dense_eval(y, Q, 0.5, nY, deg, xs)
                         hm = _watch_value(ev, p, WF_SURFACE, widx[w], wmode[w], nm, t + 0.5 * h,
@@ -2382,13 +2734,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                             thetas[ns] = rb
                             ns += 1
                     if ns > 1 and not q_ready:
-                        if exact_now:
-                            _exact_step(aff_M, aff_s, aff_w, mode,
-                                        nz, n, t, y, h, zv, zv1, Q, xe)
-                        else:
-                            stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n,
-                                                    nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab,
-                                                    slide_c, w1, w2, gx, hdx, jac, xt, ft)
+                        stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h,
+                                h, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz, aff)
                         q_ready = True
                     rates[0] = r0
                     for q in range(1, ns):
@@ -2434,13 +2781,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                             # changed sign at the instant of the event just handled (see below)
                             vals[w, 0] = 0.0
                     if not q_ready:
-                        if exact_now:
-                            _exact_step(aff_M, aff_s, aff_w, mode,
-                                        nz, n, t, y, h, zv, zv1, Q, xe)
-                        else:
-                            stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n,
-                                                    nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab,
-                                                    slide_c, w1, w2, gx, hdx, jac, xt, ft)
+                        stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h,
+                                h, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz, aff)
                         q_ready = True
                     _dense_eval(y, Q, 0.5, nY, deg, xs)
                     vals[w, 1] = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t + 0.5 * h,
@@ -2514,14 +2856,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                         continue
                     if _crosses(prev_v, vq, wdir[w]):
                         if not q_ready:
-                            if exact_now:
-                                _exact_step(aff_M, aff_s, aff_w, mode,
-                                            nz, n, t, y, h, zv, zv1, Q, xe)
-                            else:
-                                stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY,
-                                                        n, nvar, K, A, C, s_fsal, P, Q, ytmp, etab,
-                                                        stab, slide_c, w1, w2, gx, hdx, jac, xt,
-                                                        ft)
+                            stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y,
+                                    h, h, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz,
+                                    aff)
                             q_ready = True
                         # locate by Illinois on the dense output within [prev_th, th]
                         a_th = prev_th
@@ -2615,7 +2952,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                                 dense[n_nodes - 1, i, k] = Q[i, k]
                     for i in range(nY):
                         nodes_y[n_nodes, i] = ynew[i]
-                    ikind[n_nodes - 1] = 0
+                    ikind[n_nodes - 1] = IV_STEP
                     hstep[n_nodes - 1] = h
                     nodes_t[n_nodes] = t_new
                     nodes_s[n_nodes, 0] = dkind
@@ -2624,13 +2961,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     n_nodes += 1
                 if sdt > 0.0 and s0 + sk * sdt <= t_new:
                     if not q_ready:
-                        if exact_now:
-                            _exact_step(aff_M, aff_s, aff_w, mode,
-                                        nz, n, t, y, h, zv, zv1, Q, xe)
-                        else:
-                            stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h, nY, n,
-                                                    nvar, K, A, C, s_fsal, P, Q, ytmp, etab, stab,
-                                                    slide_c, w1, w2, gx, hdx, jac, xt, ft)
+                        stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h,
+                                h, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz, aff)
                         q_ready = True
                     n_samp, sk = _take_samples(t, h, y, Q, nY, n, deg, s0, sdt, sk, t_end,
                                                      samp, n_samp, xs, max_samp)
@@ -2664,14 +2996,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             for i in range(nY):
                 Kland[0, i] = K[0, i]
             for polish in range(8):
-                if exact_now:
-                    _dense_eval(y, Q, h_ev / h, nY, deg, ytmp)
-                    ev(W_F, mode, t + h_ev, ytmp, p, Kland[s_fsal])
-                    stats[2] += 1
-                else:
-                    _rk_stages(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, nvar, Kland, A, C,
-                               s_fsal, ytmp, etab, stab, slide_c, w1, w2, gx, hdx, jac, xt, ft)
-                    stats[2] += s_fsal
+                stats[2] += _step_stages(ev, p, exact_now, dkind, didx, mode, nm, t, y, h_ev, h,
+                        Kland, A, C, s_fsal, Q, ytmp, etab, stab, slide_c, wk)
                 stats[5] += 1
                 for i in range(nY):
                     ynew[i] = ytmp[i]
@@ -2703,17 +3029,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 h_ev += dt
             # landing-step dense output (extra stages for DOP853; Taylor terms rescaled), where it
             # is stored or sampled
-            if exact_now and (store_q or sdt > 0.0):
-                ratio = h_ev / h
-                scale = 1.0
-                for k in range(deg):
-                    scale *= ratio
-                    for i in range(n):
-                        Q[i, k] *= scale
-            elif store_q or sdt > 0.0:
-                stats[2] += _make_dense(ev, p, dkind, didx, mode, nm, t, y, h_ev, nY, n, nvar,
-                                        Kland, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, w1,
-                                        w2, gx, hdx, jac, xt, ft)
+            if store_q or sdt > 0.0:
+                stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h_ev, h,
+                        Kland, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz, aff)
             t_ev = min(t + h_ev, t_end)
             # Events at one instant: another watched function (an event surface, a release or a
             # sliding exit) that changed sign between the step's start and the polished event
@@ -2745,7 +3063,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 for i in range(nY):
                     for k in range(deg):
                         dense[n_nodes - 1, i, k] = Q[i, k]
-            ikind[n_nodes - 1] = 0 if save_all else 1
+            ikind[n_nodes - 1] = IV_STEP if save_all else IV_JUMP
             hstep[n_nodes - 1] = h_ev
             nodes_t[n_nodes] = t_ev
             for i in range(nY):
@@ -2755,30 +3073,30 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             nodes_s[n_nodes, 2] = mode
             n_nodes += 1
 
-            # ---- handle the event
+            # ---- handle the event: one action per kind of watch function
             n_ev0 = n_ev
             for i in range(nY):
                 y[i] = ynew[i]
+                xs[i] = ynew[i]
             t = t_ev
             old_kind = dkind
             old_idx = didx
             old_mode = mode
             log_kind = -1
-            log_ref = wref[w]
             t_after = t
             act = wact[w]
             new_sign = best_sign
             chatter_tail = False
             contact_stick = False
-            for i in range(nY):
-                xs[i] = y[i]
             if act == ACT_EVENT:
+                # Is the crossing an event? (Written out here, as the re-trigger guard below: a
+                # call passing the watch arrays measured a few % of an event-dominated run.)
+                # Events on one surface with complementary guards (stick or reverse at v = 0,
+                # thesis eq. 5.4): the crossing belongs to the one whose guard holds.
                 j = wref[w]
                 ev(W_GUARD, j, t, y, p, buf)
                 guard_ok = buf[0] != 0.0
                 if not guard_ok:
-                    # events on one surface with complementary guards (stick or reverse at v = 0,
-                    # thesis eq. 5.4): the crossing belongs to the one whose guard holds
                     for ww in range(nw):
                         if (ww != w and wact[ww] == ACT_EVENT and wtype[ww] == WF_SURFACE
                                 and widx[ww] == widx[w]
@@ -2787,11 +3105,12 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                             if buf[0] != 0.0:
                                 w = ww
                                 j = wref[ww]
-                                log_ref = j
                                 guard_ok = True
                                 break
                 # a crossing whose normal velocity points against the event direction is
-                # round-off around a previous event (the state is already leaving): not an event
+                # round-off around a previous event (the state is already leaving): not an
+                # event, unless that velocity is round-off itself (a state on the surface and
+                # tangent to it is not leaving; the sign of the round-off must not decide)
                 if dkind == REGULAR:
                     ev(W_HD, widx[w] * nm + mode, t, y, p, buf)
                     vn = buf[0]
@@ -2800,277 +3119,74 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                            w2, gx, hdx)
                     vn = _surface_rate(ev, p, dkind, widx[w], mode, nm, t, y, fbuf, n, buf, hdx)
                 moving_away = etab[j, 1] != 0 and vn * etab[j, 1] < 0.0
-                if moving_away:
-                    # ... unless that velocity is round-off: a state on the surface and tangent to
-                    # it (hdot +-1e-16 on an oblique or curved surface) is not leaving; the sign of
-                    # the round-off must not decide (it would let the state sink into the surface
-                    # until the re-trigger guard's noise band is passed)
-                    if abs(vn) <= _rate_band(ev, p, widx[w], mode, nm, t, y, n, hdx):
-                        moving_away = False
+                if moving_away and abs(vn) <= _rate_band(ev, p, widx[w], mode, nm, t, y, n, hdx):
+                    moving_away = False
                 if not guard_ok or moving_away:
                     # no event: continue past this crossing
-                    last_type = wtype[w]; last_idx = widx[w]; last_mode = wmode[w]
+                    last_type = wtype[w]
+                    last_idx = widx[w]
+                    last_mode = wmode[w]
                     last_sign = new_sign
                     if moving_away:
                         last_sign = 1.0 if vn > 0.0 else -1.0
-                        # the state sits a little on the far side (round-off of an earlier event)
-                        # and is moving back: values within that depth are not a new crossing
+                        # the state sits a little on the far side (round-off of an earlier
+                        # event) and is moving back: values within that depth are not a new
+                        # crossing
                         ev(W_H, widx[w], t, y, p, buf)
                         last_depth = 4.0 * abs(buf[0])
                     last_t = t
-                    # the interval [t_ev, ...] continues smoothly: mark the stored interval as step
-                    ikind[n_nodes - 2] = 0 if save_all else 1
+                    # the interval [t_ev, ...] continues smoothly: the stored one is a step
+                    ikind[n_nodes - 2] = IV_STEP if save_all else IV_JUMP
                     restart = True
                     continue
-                k = etab[j, 0]
+                j = wref[w]
                 if etab[j, 2] == EV_IMPACT:
-                    # normal velocity and acceleration at impact, impact direction W, restitution r
-                    ev(W_HD, k * nm + mode, t, y, p, buf)
-                    vin = buf[0]
-                    ev(W_F, mode, t, y, p, fbuf)
-                    ev(W_HDX, k * nm + mode, t, y, p, hdx)
-                    ev(W_HDT, k * nm + mode, t, y, p, buf)
-                    acc = buf[0] + _dot(hdx, fbuf, n)
-                    hw = _impact_direction(ev, p, j, k, mode, nm, t, y, n, w1, gx, hdx)
-                    r = -(1.0 + hw)
-                    if chain_event != j:
-                        chain_event = j
-                        chain_vmax = 0.0
-                    chain_vmax = max(chain_vmax, abs(vin))
-                    # velocity floor: a bounce of speed v rises v^2 / (2|a|); below the position
-                    # tolerance it cannot be told from sticking (default when chat_abs < 0)
-                    vfloor = chat_abs
-                    if vfloor < 0.0:
-                        xmax = 0.0
-                        for i in range(n):
-                            xmax = max(xmax, abs(y[i]))
-                        vfloor = np.sqrt(2.0 * abs(acc) * (atol + rtol * xmax))
-                    do_chatter = (chatter_on == 1 and acc < 0.0 and r >= 0.0 and r < 1.0
-                                  and (abs(vin) <= vfloor or r == 0.0))
-                    if (chatter_on == 1 and not do_chatter and acc < 0.0 and 0.0 <= r < 1.0
-                            and abs(vin) <= chat_rel * chain_vmax and not chat_gated):
-                        do_chatter = True
-                    elif (chatter_on == 1 and not do_chatter and acc < 0.0 and 0.0 <= r < 1.0
-                            and abs(vin) <= chat_rel * chain_vmax):
-                        # the map takes the normal acceleration as constant over the sequence:
-                        # jump only where its change over the sequence's duration moves the state
-                        # by less than the position tolerance, dt^2 |a(t + dt) - a(t)| (a table
-                        # whose acceleration varies put the accumulation point 3e-6 off when
-                        # entered at 1e-4 of the first impact's speed; below the floor the bounces
-                        # are unresolvable anyway)
-                        dtq = 2.0 * r * vin / ((1.0 - r) * acc)
-                        for i in range(n):
-                            xt[i] = y[i] + dtq * fbuf[i]
-                        acc2 = _free_normal_acc(ev, p, k, mode, nm, t + dtq, xt, n, buf, ft, w2)
-                        xmax = 0.0
-                        for i in range(n):
-                            xmax = max(xmax, abs(y[i]))
-                        do_chatter = dtq * dtq * abs(acc2 - acc) <= atol + rtol * xmax
-                    # complete-chattering map (Nordmark & Piiroinen 2009; slides):
-                    # x_out = x_in + (2 r f_in / a + W) hdot_in / (1 - r),
-                    # t_out = t_in + 2 r hdot_in / ((1 - r) a)
-                    dtc = 2.0 * r * vin / ((1.0 - r) * acc) if do_chatter else 0.0
-                    if do_chatter and not (t + dtc <= t_end):
-                        # the accumulation point lies beyond t_end: up to t_end the motion is a
-                        # finite number of ordinary impacts, so take this one (and the next ones)
-                        # as an impact and integrate on; jumping would end the run past t_end
-                        # with the state of a time not asked for
-                        do_chatter = False
-                        # ... unless the bounces are below the velocity floor: they rise less than
-                        # the position tolerance, so the event search cannot resolve them (their
-                        # crossings drown in the round-off band of the re-trigger guard and the
-                        # state would fall through the surface). Up to t_end the motion then is
-                        # the start of the chattering sequence, within the resolution of the run:
-                        # end at t_end on the chord from x_in to the accumulation state (Q(x_in)
-                        # projected onto the sticking manifold, as below) that a chattering gap
-                        # is drawn with (error O(floor) in hdot, O(tolerance) in h)
-                        chatter_tail = abs(vin) <= vfloor and dtc > 0.0
-                    if chatter_tail:
-                        for i in range(n):
-                            ytmp[i] = xs[i] + (2.0 * r * fbuf[i] / acc + w1[i]) * vin / (1.0 - r)
-                        _project_stick(ev, p, k, mode, nm, t + dtc, ytmp, n, hdx, w2, buf)
-                        th = (t_end - t) / dtc
-                        for i in range(n):
-                            y[i] = (1.0 - th) * xs[i] + th * ytmp[i]
-                        log_kind = -1
-                    elif do_chatter:
-                        for i in range(n):
-                            y[i] = xs[i] + (2.0 * r * fbuf[i] / acc + w1[i]) * vin / (1.0 - r)
-                        if nvar:
-                            _chatter_saltation(ev, p, j, k, mode, nm, t, xs, n, S, etab, stab,
-                                               slide_c)
-                        t_after = t + dtc
-                        # Q is first order in hdot; the accumulation point lies on the sticking
-                        # manifold {h = 0, hdot = 0} by definition, so we project onto it
-                        _project_stick(ev, p, k, mode, nm, t_after, y, n, hdx, w2, buf)
-                        log_kind = K_CHATTER
-                        dkind = STICK
-                        didx = j
-                        stats[4] += 1
-                        chain_event = -1
-                    else:
-                        ev(W_G, j, t, xs, p, ytmp)
-                        for i in range(n):
-                            y[i] = ytmp[i]
-                        log_kind = K_IMPACT
-                        if etab[j, 3] >= 0:
-                            mode = etab[j, 3]
+                    (dkind, didx, mode, log_kind, t_after, chatter_tail, chain_event, chain_vmax,
+                     chattered) = _act_impact(ev, p, j, dkind, didx, mode, nm, t, y, xs, n, etab,
+                                              t_end, fopt, chatter_on, chain_event, chain_vmax,
+                                              buf, fbuf, ytmp, wk)
+                    stats[4] += chattered
                 else:
-                    ev(W_G, j, t, xs, p, ytmp)
-                    for i in range(n):
-                        y[i] = ytmp[i]
+                    mode = _act_transition(ev, p, j, mode, t, y, xs, n, etab, ytmp)
                     log_kind = K_TRANSITION
-                    if etab[j, 3] >= 0:
-                        mode = etab[j, 3]
                     chain_event = -1
-                if (log_kind != K_CHATTER and not chatter_tail and n_sw > 0
-                        and (dkind == REGULAR or etab[j, 5] == 1 or etab[j, 3] >= 0)):
-                    # a reset or a new mode may put the state on the other side of a switching
-                    # surface, or on one (an impact that stops the relative motion): take the
-                    # variant on the right side, or slide. An event without reset or target
-                    # while sliding (a section, a terminal event) leaves the sliding motion alone.
-                    dkind, didx, mode = _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx)
-                if (log_kind == K_IMPACT and dkind == REGULAR
-                        and _stays_in_contact(ev, p, k, mode, nm, t, y, n, buf, fbuf, hdx)):
-                    # the reset left hdot at round-off (a plastic impact on an oblique or curved
-                    # surface, an impact at rest) and the free motion presses into the surface:
-                    # the state sticks (constrained motion along the surface, released where the
-                    # constraint force vanishes), logged as a `stick` record after the impact, as
-                    # after a chattering sequence. The impact's saltation matrix maps into the
-                    # sticking field.
-                    contact_stick = True
-                    dkind = STICK
-                    didx = j
-                    _project_stick(ev, p, k, mode, nm, t, y, n, hdx, w2, buf)
-                if nvar and log_kind != K_CHATTER and not chatter_tail:
-                    _event_saltation(ev, p, j, k, old_mode, mode, nm, t, xs, y, n, S, gx, hdx, buf,
-                                     fbuf, w1, w2, etab, stab, slide_c, old_kind, old_idx, ytmp,
-                                     dkind, didx)
+                dkind, didx, mode, contact_stick = _after_reset(
+                    ev, p, j, log_kind, chatter_tail, dkind, didx, mode, nm, t, y, n, etab, stab,
+                    buf, fbuf, wk)
             elif act == ACT_RELEASE:
-                # the flight starts on the sticking manifold {h = 0, hdot = 0}: the sticking steps
-                # drift off it by their local error, and a drift to the far side (deeper than the
-                # re-trigger guard's round-off band) would hide a short flight's landing
-                _project_stick(ev, p, etab[old_idx, 0], mode, nm, t, y, n, hdx, w2, buf)
-                dkind = REGULAR
-                didx = -1
-                log_kind = K_RELEASE
-                if n_sw > 0:
-                    # the variant on the side the released motion takes (a kink surface held at
-                    # zero while sticking, e.g. the relative velocity of bilinear damping)
-                    dkind, didx, mode = _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx)
-                if nvar:
-                    for i in range(n):
-                        for c in range(n):
-                            S[i, c] = 1.0 if i == c else 0.0
+                dkind, didx, mode, log_kind = _act_release(ev, p, etab[old_idx, 0], mode, nm, t,
+                                                           y, n, stab, buf, wk)
             elif act == ACT_SWITCH:
-                s = wref[w]
-                k = stab[s, 0]
-                a_m = stab[s, 1]
-                b_m = stab[s, 2]
-                ev(W_HD, k * nm + a_m, t, y, p, buf)
-                sa = buf[0]
-                ev(W_HD, k * nm + b_m, t, y, p, buf)
-                sb = buf[0]
-                filippov = stab.shape[1] <= 3 or stab[s, 3] == SW_FILIPPOV
-                # thesis eq. 2.6-2.8: both fields pointing into the surface (h_t + h_x f_above < 0
-                # < h_t + h_x f_below) is sliding; otherwise the flow crosses. Arriving with the
-                # own field tangent (hdot = 0) while the other one points back is a graze.
-                graze = filippov and ((old_mode == a_m and sa >= 0.0 and sb > 0.0)
-                                      or (old_mode == b_m and sb <= 0.0 and sa < 0.0))
+                dkind, didx, mode, log_kind, graze = _act_switch(ev, p, wref[w], old_kind,
+                                                                 old_idx, old_mode, nm, t, y, n,
+                                                                 stab, buf, hdx)
                 if graze:
-                    last_type = wtype[w]; last_idx = widx[w]; last_mode = wmode[w]
+                    last_type = wtype[w]
+                    last_idx = widx[w]
+                    last_mode = wmode[w]
                     last_sign = new_sign
                     last_t = t
-                    ikind[n_nodes - 2] = 0 if save_all else 1
+                    ikind[n_nodes - 2] = IV_STEP if save_all else IV_JUMP
                     restart = True
                     continue
-                if filippov and sa < 0.0 and sb > 0.0:
-                    dkind = SLIDE
-                    didx = s
-                    mode = a_m
-                    log_kind = K_SLIDE_START
-                    _project_surface(ev, p, k, t, y, n, hdx, buf)
-                else:
-                    log_kind = K_CROSSING
-                    mode = b_m if old_mode == a_m else a_m
-                if nvar:
-                    _switch_saltation(ev, p, dkind, didx, old_mode, mode, nm, k, t, y, n, S, hdx,
-                                      buf, fbuf, w1, w2, gx, etab, stab, slide_c, old_kind,
-                                      old_idx)
             elif act == ACT_EXIT_ABOVE or act == ACT_EXIT_BELOW:
-                s = wref[w]
-                mode = stab[s, 1] if act == ACT_EXIT_ABOVE else stab[s, 2]
-                dkind = REGULAR
-                didx = -1
-                log_kind = K_SLIDE_END
-                if nvar:
-                    for i in range(n):
-                        for c in range(n):
-                            S[i, c] = 1.0 if i == c else 0.0
+                dkind, didx, mode, log_kind = _act_slide_exit(wref[w], act == ACT_EXIT_ABOVE,
+                                                              stab)
             else:
-                # sliding on switch old_idx reached surface k2 = widx[w] of another switch. Across
-                # k2 the sliding pair (a, b) becomes (a2, b2): if the flow slides on the first
-                # surface there too and its sliding field carries the state away from k2, it
-                # crosses k2 while sliding; if both pairs leave the first surface to one side, the
-                # sliding ends; if the sliding field on the far side points back into k2 the motion
-                # would slide on the intersection of the two surfaces, which is not supported
-                status = ST_INTERSECTION
-                log_kind = -1
-                k1 = stab[old_idx, 0]
-                k2 = widx[w]
-                a2 = _partner(stab, k2, stab[old_idx, 1])
-                b2 = _partner(stab, k2, stab[old_idx, 2])
-                s_new = _find_switch(stab, k1, a2, b2) if a2 >= 0 and b2 >= 0 else -1
-                if s_new >= 0:
-                    ev(W_HD, k1 * nm + a2, t, y, p, buf)
-                    sa = buf[0]
-                    ev(W_HD, k1 * nm + b2, t, y, p, buf)
-                    sb = buf[0]
-                    if sa < 0.0 and sb > 0.0:
-                        _field(ev, p, SLIDE, s_new, a2, nm, t, y, n, fbuf, etab, stab, slide_c, w1,
-                               w2, gx, hdx)
-                        rate = _surface_rate(ev, p, SLIDE, k2, a2, nm, t, y, fbuf, n, buf, hdx)
-                        if rate * new_sign > 0.0:
-                            dkind = SLIDE
-                            didx = s_new
-                            mode = a2
-                            log_kind = K_CROSSING
-                    elif sa >= 0.0 and sb > 0.0:
-                        dkind = REGULAR
-                        didx = -1
-                        mode = a2
-                        log_kind = K_SLIDE_END
-                        log_ref = old_idx
-                    elif sa < 0.0 and sb <= 0.0:
-                        dkind = REGULAR
-                        didx = -1
-                        mode = b2
-                        log_kind = K_SLIDE_END
-                        log_ref = old_idx
-                if log_kind >= 0:
-                    status = ST_SUCCESS
-                    if nvar:
-                        _switch_saltation(ev, p, dkind, didx, old_mode, mode, nm, k2, t, y, n,
-                                          S, hdx, buf, fbuf, w1, w2, gx, etab, stab, slide_c,
-                                          old_kind, old_idx)
+                status, dkind, didx, mode, log_kind, log_ref = _act_intersection(
+                    ev, p, widx[w], new_sign, wref[w], old_kind, old_idx, old_mode, nm, t, y, n,
+                    etab, stab, slide_c, buf, fbuf, wk)
+            if act != ACT_INTERSECTION:
+                log_ref = wref[w]
 
             if log_kind >= 0:
-                if nvar and seg_var:
-                    # per segment: the record keeps S (the segment's Phi is in x_before)
-                    for i in range(n):
-                        for c in range(n):
-                            y[n + i * n + c] = S[i, c]
-                elif nvar:
-                    # Phi+ = S Phi-
-                    for i in range(n):
-                        for c in range(n):
-                            Phi[i, c] = y[n + i * n + c]
-                    for i in range(n):
-                        for c in range(n):
-                            acc = 0.0
-                            for m in range(n):
-                                acc += S[i, m] * Phi[m, c]
-                            y[n + i * n + c] = acc
+                if nvar:
+                    # the saltation matrix of the action, then Phi+ = S Phi-
+                    _action_saltation(ev, p, act, log_kind, chatter_tail, log_ref,
+                                      widx[w] if act != ACT_SWITCH else stab[wref[w], 0],
+                                      old_kind, old_idx, old_mode, dkind, didx, mode, nm, t, xs,
+                                      y, n, S, etab, stab, slide_c, buf, fbuf, ytmp, wk)
+                    _apply_saltation(y, S, Phi, n, seg_var)
                 rec[0] = log_kind
                 rec[1] = log_ref
                 rec[2] = old_kind
@@ -3083,8 +3199,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 rec[6] = old_idx if log_kind == K_CHATTER else (-1 if contact_stick else didx)
                 rec[7] = old_mode if log_kind == K_CHATTER else mode
                 rec[8] = n_nodes
-                _log_event(ev_t, ev_t2, ev_info, ev_xb, ev_xa,
-                                                                n_ev, t, t_after, rec, xs, y)
+                _log_event(ev_t, ev_t2, ev_info, ev_xb, ev_xa, n_ev, t, t_after, rec, xs, y)
                 n_ev += 1
                 stats[3] += 1
                 if nvar and seg_var:
@@ -3099,38 +3214,31 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 nodes_s[n_nodes, 0] = dkind
                 nodes_s[n_nodes, 1] = didx
                 nodes_s[n_nodes, 2] = mode
-                ikind[n_nodes - 1] = 2 if log_kind == K_CHATTER else 1
+                ikind[n_nodes - 1] = IV_CHATTER if log_kind == K_CHATTER else IV_JUMP
                 hstep[n_nodes - 1] = 0.0
                 if store_q:
                     for i in range(nY):
                         for k in range(deg):
                             dense[n_nodes - 1, i, k] = 0.0
                 n_nodes += 1
-                if contact_stick:
-                    # the impact left the state in contact: sticking starts here (its own record,
-                    # from the mode the reset gave, as after a chattering sequence)
+                if contact_stick or log_kind == K_CHATTER:
+                    # sticking starts here (after an impact that left the state in contact, or
+                    # at the accumulation point of a chattering sequence): its own record, from
+                    # the mode the reset gave
                     rec[0] = K_STICK
-                    rec[2] = REGULAR
-                    rec[3] = -1
-                    rec[4] = mode
+                    if contact_stick:
+                        rec[2] = REGULAR
+                        rec[3] = -1
+                        rec[4] = mode
                     rec[5] = dkind
                     rec[6] = didx
                     rec[7] = mode
                     rec[8] = n_nodes - 1
-                    _log_event(ev_t, ev_t2, ev_info, ev_xb,
-                                                                    ev_xa, n_ev, t, t, rec, y, y)
+                    _log_event(ev_t, ev_t2, ev_info, ev_xb, ev_xa, n_ev, t_after, t_after, rec, y,
+                               y)
                     n_ev += 1
                 if log_kind == K_CHATTER:
-                    # the accumulation is followed by sticking: log it as its own event
-                    rec[0] = K_STICK
-                    rec[5] = dkind
-                    rec[6] = didx
-                    rec[7] = mode
-                    rec[8] = n_nodes - 1
-                    _log_event(ev_t, ev_t2, ev_info, ev_xb,
-                                                                    ev_xa, n_ev, t_after, t_after,
-                                                                    rec, y, y)
-                    n_ev += 1
+                    # samples across the chattering gap on its chord
                     while (sdt > 0.0 and s0 + sk * sdt < t_after and s0 + sk * sdt <= t_end
                            and n_samp < max_samp):
                         ts = s0 + sk * sdt
@@ -3193,12 +3301,13 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             else:
                 n_co = 0
             last_depth = 0.0
-            last_type = wtype[w]
-            last_idx = widx[w]
             last_mode = wmode[w]
             last_t = t
+            last_type = wtype[w]
+            last_idx = widx[w]
+            # re-trigger guard: the function that fired and the side of it the state is on now
             if act == ACT_EVENT:
-                # after a reset the surface value is ~0; its new side is given by hdot after reset
+                # after a reset the surface value is ~0; its new side is hdot after the reset
                 if dkind == REGULAR:
                     ev(W_HD, widx[w] * nm + mode, t, y, p, buf)
                     last_sign = 1.0 if buf[0] > 0.0 else -1.0
@@ -3230,7 +3339,6 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             elif act == ACT_INTERSECTION:
                 # crossed surface widx[w] while sliding: we are on the new side of it
                 last_type = WF_SURFACE
-                last_idx = widx[w]
                 last_sign = new_sign
             else:
                 # sliding exit: we leave into the mode's side of the surface
@@ -3246,7 +3354,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
         nodes_s = _grow2(nodes_s, n_nodes + 1)
         ikind = _grow1(ikind, n_nodes + 1)
         hstep = _grow1(hstep, n_nodes + 1)
-        ikind[n_nodes - 1] = 1
+        ikind[n_nodes - 1] = IV_JUMP
         hstep[n_nodes - 1] = 0.0
         if store_q:
             dense = _grow3(dense, n_nodes + 1)

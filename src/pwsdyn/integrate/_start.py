@@ -58,6 +58,7 @@ import numpy as np
 
 from ..errors import ArgumentError
 from ..model.codegen import W_F, W_GUARD, W_GX, W_H, W_HD, W_HDT, W_HDX, W_HX
+from ._codes import REGULAR, SLIDE, STICK  # noqa: F401 (SLIDE re-exported: stability)
 
 #: Ulps of the round-off band: the kernel's ``_surface_offset`` (64 eps xmax gmax).
 BAND_ULPS = 64.0
@@ -68,7 +69,6 @@ BAND_ULPS = 64.0
 #: so a long sticking run ends behind the wall by more than any tolerance; about sqrt(eps).
 ADMIT_BEHIND = 1e-8
 _EPS = float(np.finfo(float).eps)
-REGULAR, STICK, SLIDE = 0, 1, 2
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,8 @@ from ..model.codegen import CompiledModel
 from ..model.affine import affine_structure
 from ..model.spec import as_model, run_defaults
 from ._load import kernel
+from ._codes import (SAVE_DENSE, SAVE_EVENTS, SAVE_NODES, STATS, VAR_NONE, VAR_SEGMENTS,
+                     KernelResult, kernel_options)
 from ._start import ADMIT_BEHIND, STICK, start_state
 from ._variational import assemble_segments
 from .tableaus import METHODS
@@ -494,33 +496,28 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
     K = kernel()  # compiled on the first run in this process (see integrate._load)
     # dense output: rebuilt on demand from the nodes and step lengths (SAVE_NODES), except
     # with the variational equations, whose nodes are transformed after the run
-    save = (K.SAVE_EVENTS if not opts["dense"] else
-            K.SAVE_DENSE if opts["variational"] or store_dense else K.SAVE_NODES)
-    iopt = np.zeros(K.IO_N, dtype=np.int64)
-    iopt[:8] = [mode0, len(model.modes), opts["max_steps"], opts["max_events"], tab.code,
-                K.VAR_SEGMENTS if opts["variational"] else K.VAR_NONE, 1 if opts["chatter"] else 0,
-                save]
-    if stop is not None:
-        iopt[K.IO_STOP_MASK], iopt[K.IO_STOP_REF], iopt[K.IO_STOP_COUNT] = stop
-    iopt[K.IO_DKIND0] = 0 if dkind0 is None else dkind0
-    iopt[K.IO_DIDX0] = -1 if didx0 is None else didx0
-    iopt[K.IO_EXACT] = _exact_code(model, opts["exact"])
-    fopt = np.array([opts["rtol"], opts["atol"], opts["first_step"] or 0.0,
-                     _max_step(model, p, opts["max_step"]),
-                     # negative: the default ratio, applied where the map is accurate
-                     (-DEFAULT_CHATTER_RATIO if opts["chatter_ratio"] is None
-                      else opts["chatter_ratio"]),
-                     -1.0 if opts["chatter_velocity"] is None else opts["chatter_velocity"],
-                     opts["sliding_gain"],
-                     sample[0] if sample is not None else 0.0,
-                     sample[1] if sample is not None else 0.0], dtype=float)
+    save = (SAVE_EVENTS if not opts["dense"] else
+            SAVE_DENSE if opts["variational"] or store_dense else SAVE_NODES)
+    iopt, fopt = kernel_options(
+        mode0=mode0, n_modes=len(model.modes), max_steps=opts["max_steps"],
+        max_events=opts["max_events"], method=tab.code, order=tab.order,
+        variational=VAR_SEGMENTS if opts["variational"] else VAR_NONE, chatter=opts["chatter"],
+        save=save, stop=stop, dkind0=0 if dkind0 is None else dkind0,
+        didx0=-1 if didx0 is None else didx0, exact=_exact_code(model, opts["exact"]),
+        rtol=opts["rtol"], atol=opts["atol"], first_step=opts["first_step"] or 0.0,
+        max_step=_max_step(model, p, opts["max_step"]),
+        # negative: the default ratio, applied where the map is accurate
+        chatter_ratio=(-DEFAULT_CHATTER_RATIO if opts["chatter_ratio"] is None
+                       else opts["chatter_ratio"]),
+        chatter_velocity=-1.0 if opts["chatter_velocity"] is None else opts["chatter_velocity"],
+        sliding_gain=opts["sliding_gain"], sample=sample)
     pv = np.ascontiguousarray(p if p.size else np.zeros(1), dtype=float)
     x = np.array(x, dtype=float)
-    res = K.run_kernel(cm.evaluate, float(t0), float(t_end), x, pv, etab, eact, stab, iopt, fopt,
-                     tab.A, tab.C, tab.E, tab.P, tab.n_stages)
+    res = KernelResult(*K.run_kernel(cm.evaluate, float(t0), float(t_end), x, pv, etab, eact,
+                                     stab, iopt, fopt, tab.A, tab.C, tab.E, tab.P, tab.n_stages))
     (status, t_fin, y_fin, dstate, nodes_t, nodes_y, nodes_s, dense, ikind, ev_t, ev_t2, ev_info,
      ev_xb, ev_xa, stats, samples, hstep) = res
-    if save == K.SAVE_NODES:
+    if save == SAVE_NODES:
         dense = _lazy_dense(cm, pv, etab, stab, iopt, fopt, tab, float(t0), x, nodes_t, nodes_y,
                             nodes_s, hstep, dense.shape[2])
     n = model.n_states
@@ -544,8 +541,7 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
     # the event log as arrays; its records are made when it is read (sweeps read columns)
     events = EventLog(model, ev_t, ev_t2, ev_info, ev_xb[:, :n].copy(), ev_xa[:, :n].copy(),
                       _state_name)
-    stat = dict(zip(("steps", "rejected_steps", "nfev", "events", "chatter", "landing_steps"),
-                    (int(s) for s in stats)))
+    stat = dict(zip(STATS, (int(s) for s in stats)))
     params = dict(zip(model.parameters, (float(v) for v in p)))
     traj = Trajectory(
         t=nodes_t, x=nodes_y[:, :n].copy(), state=states, events=events, status=status,
