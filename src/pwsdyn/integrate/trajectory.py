@@ -18,11 +18,12 @@ if TYPE_CHECKING:
 
     from .._typing import PathLike
 
+from .._codes import EVENT_LOG_KINDS, STATE_KINDS as _STATE_KINDS
+
 #: Event kinds of the log, indexed by the kernel's codes.
-EVENT_KINDS = ("impact", "transition", "chatter", "stick", "release", "crossing", "slide_start",
-               "slide_end")
+EVENT_KINDS = EVENT_LOG_KINDS
 #: Discrete states of the kernel: a regular mode, sticking on an impact surface, sliding.
-STATE_KINDS = ("mode", "stick", "slide")
+STATE_KINDS = _STATE_KINDS
 
 
 class DiscreteState(str):

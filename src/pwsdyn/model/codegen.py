@@ -32,6 +32,7 @@ import sympy as sp
 from numba import types
 from sympy.printing.codeprinter import PrintMethodNotImplementedError
 
+from .._codes import MODEL_EVENT_KINDS
 from ..errors import ModelError
 from .affine import affine_structure
 from .cache import cache_dir as cache_dir, load_module
@@ -283,7 +284,7 @@ class CompiledModel:
 
 _COMPILED: dict[str, CompiledModel] = {}
 
-EVENT_KIND_CODES = {"impact": 0, "transition": 1}
+EVENT_KIND_CODES = {k: i for i, k in enumerate(MODEL_EVENT_KINDS)}
 
 
 def compile_model(model: Model) -> CompiledModel:

@@ -27,13 +27,15 @@ from typing import Any, Mapping
 
 import sympy as sp
 
+from .._codes import MODEL_EVENT_KINDS
 from ..errors import ArgumentError, ModelError, PwsdynError
 from .elements import Event as Event, Mode as Mode, Surface as Surface, Switch as Switch
 from .expressions import check_expression, parse_expression
 
 #: Name of the independent variable in expressions.
 TIME = "t"
-EVENT_KINDS = ("impact", "transition")
+#: Kinds of model events (the one list, shared with the integrator's codes).
+EVENT_KINDS = MODEL_EVENT_KINDS
 #: Longest name of a state, parameter, definition, mode, event or switch.
 MAX_NAME_LENGTH = 64
 #: Longest model name (free text, shown in files and figures; never part of generated code).
