@@ -531,3 +531,19 @@ def test_directory_that_is_not_a_store_is_refused(tmp_path):
     with pytest.raises(StoreMismatchError, match="not a pwsdyn store"):
         _sweep(d)
     assert sorted(p.name for p in d.iterdir()) == ["chunk-00000.nc"]    # no lock file made
+
+
+@pytest.mark.parametrize("pos", [-1, 64, 65])   # the newline and the two separating spaces
+@pytest.mark.parametrize("bit", [0, 3, 7])
+def test_a_flipped_bit_in_the_checksum_separator_or_newline_is_refused(finished, pos, bit):
+    """A whitespace split of the checksum file forgave a newline turned into a vertical tab
+    (found by the flipped-bit property): the file must be exactly '<sha256>  <name>\\n'."""
+    with tempfile.TemporaryDirectory() as tmp:
+        store = Path(tmp) / "store"
+        shutil.copytree(finished, store)
+        f = store / "chunk-00000.sha256"
+        data = bytearray(f.read_bytes())
+        data[pos] ^= 1 << bit
+        f.write_bytes(bytes(data))
+        with pytest.raises(StoreError, match="chunk-00000"):
+            _sweep(store)

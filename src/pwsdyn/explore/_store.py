@@ -395,12 +395,15 @@ class ChunkStore:
             raise StoreError(f"cannot read chunk file {_q(path)}: {exc.strerror or exc}. "
                              f"{fix}") from exc
         try:
-            words = side.read_text(encoding="ascii").split()
+            text = side.read_text(encoding="ascii")
         except FileNotFoundError:
             raise StoreError(f"chunk file {_q(path)} has no checksum file {_q(side)} (deleted, "
                              "or the chunk was not written by this store). " + fix) from None
         except (OSError, UnicodeDecodeError) as exc:
             raise StoreError(f"cannot read the checksum file {_q(side)}: {exc}. {fix}") from None
+        # exactly what write() put there: a flipped bit anywhere in it (the separator and the
+        # newline included, which a whitespace split would forgive) is a corrupted file
+        words = text[:-1].split("  ") if text.endswith("\n") else []
         if (len(words) != 2 or words[1] != path.name or len(words[0]) != 64
                 or any(c not in "0123456789abcdef" for c in words[0])):
             raise StoreError(f"the checksum file {_q(side)} is corrupted (expected "
