@@ -1054,8 +1054,10 @@ def _graze_samples(ev, p, wtype, widx, wmode, wdir, dkind, didx, mode, nm, t, h,
 @_hot
 def _hermite_extrema(v0, v1, d0, d1):
     """Interior extrema ``ra <= rb`` in ``(0, 1)`` of the cubic Hermite fit with values ``v0``,
-    ``v1`` and theta-derivatives ``d0``, ``d1`` at the ends (2.0: none), by the
-    cancellation-free quadratic formula as in the surface sampling of :func:`run_kernel`."""
+    ``v1`` and theta-derivatives ``d0``, ``d1`` at the ends (2.0: none). With
+    ``H(th) = ca th^3 + cb th^2 + d0 th + v0``, the roots of ``H'`` by the cancellation-free
+    form of the quadratic formula (Numerical Recipes 5.6): the cubic term vanishes for a
+    parabolic ``h``, where the textbook formula loses all digits."""
     qa = 3.0 * (2.0 * v0 - 2.0 * v1 + d0 + d1)
     qb = 2.0 * (-3.0 * v0 + 3.0 * v1 - 2.0 * d0 - d1)
     disc = qb * qb - 4.0 * qa * d0
@@ -2706,33 +2708,17 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                         if ratio > 1.0:
                             unresolved = True
                             break
-                    # H(th) = ca th^3 + cb th^2 + d0 th + v0;  H'(th) = 3 ca th^2 + 2 cb th + d0
-                    ca = 2.0 * v0 - 2.0 * v1 + d0 + d1
-                    cb = -3.0 * v0 + 3.0 * v1 - 2.0 * d0 - d1
-                    qa = 3.0 * ca
-                    qb = 2.0 * cb
                     ns = 1
                     thetas[0] = 0.0
                     vals[w, 0] = v0
-                    # roots of H' by the cancellation-free form (Numerical Recipes 5.6): the cubic
-                    # term vanishes for parabolic h, where the textbook formula loses all digits
-                    disc = qb * qb - 4.0 * qa * d0
-                    ra = 2.0
-                    rb = 2.0
-                    if disc >= 0.0:
-                        qq = -0.5 * (qb + (np.sqrt(disc) if qb >= 0.0 else -np.sqrt(disc)))
-                        if qa != 0.0:
-                            ra = qq / qa
-                        if qq != 0.0:
-                            rb = d0 / qq
-                        if ra > rb:
-                            ra, rb = rb, ra
-                        if 0.0 < ra < 1.0:
-                            thetas[ns] = ra
-                            ns += 1
-                        if 0.0 < rb < 1.0 and rb > ra:
-                            thetas[ns] = rb
-                            ns += 1
+                    # the interior extrema of the cubic Hermite fit (2.0: none)
+                    ra, rb = _hermite_extrema(v0, v1, d0, d1)
+                    if ra < 1.0:
+                        thetas[ns] = ra
+                        ns += 1
+                    if rb < 1.0:
+                        thetas[ns] = rb
+                        ns += 1
                     if ns > 1 and not q_ready:
                         stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h,
                                 h, K, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz, aff)
