@@ -31,35 +31,42 @@ from scipy.optimize import brentq
 from ..newton import TrialRejected
 
 
-def _solve_old(op, u, lam):
-    res = op.solve(u, np.array([lam]))
-    return res.x if res.converged else None
+def _segment_mode(op, seg):
+    """The mode of segment ``seg``, or ``None`` where re-segmenting it is not supported (a
+    sticking or sliding segment, or boundaries made of several events)."""
+    if len(op.bounds) != len(op.signature) or op.fields[seg].kind != "mode":
+        return None
+    return op.fields[seg].index
+
+
+def _old_segment(op, u, lam, seg):
+    """``(p, segment, dense trajectory, context)`` of segment ``seg`` of the old signature's
+    solution ``u`` at ``lam``."""
+    from ..orbits.problem import _context
+
+    p = np.array([lam])
+    s = op.evaluate(u, p, jacobian=False).segs[seg]
+    return p, s, op._dense_segment(seg, s, p), _context(op.model, op.param_dict(p), op.sliding)
 
 
 def insert_impact(op, u, lam, seg: int, surface_name: str):
     """The problem with an impact on ``surface_name`` added inside segment ``seg`` and its
     ``u`` at ``lam`` from the old signature's solution there (which crosses the surface):
     ``(problem, u)`` or a reason string."""
-    from ..orbits.problem import _context
     from ..orbits.signature import Signature, SignatureEvent
 
     m = op.model
     n = op.n
-    if len(op.bounds) != len(op.signature) or op.fields[seg].kind != "mode":
+    mode = _segment_mode(op, seg)
+    if mode is None:
         return "only segments in a mode ending in single events are re-segmented"
-    mode = op.fields[seg].index
     events = [(j, e) for j, e in enumerate(m.events)
               if e.kind == "impact" and mode in e.modes
               and m.surfaces[e.surface].name == surface_name]
     if not events:
         return f"no impact event on surface {surface_name!r} in the segment's mode"
     j, e = events[0]
-    p = np.array([lam])
-    ev = op.evaluate(u, p, jacobian=False)
-    s = ev.segs[seg]
-    opts = op._seg_opts(p, dense=True, variational=False)
-    _, _, tr = op._flow(seg, s.t, s.z, s.T, opts)
-    ctx = _context(m, op.param_dict(p), op.sliding)
+    p, s, tr, ctx = _old_segment(op, u, lam, seg)
 
     def h(t):
         return ctx.h(e.surface, t, tr(t)[:n])
@@ -126,26 +133,20 @@ def insert_sliding(op, u, lam, seg: int, surface_name: str):
     signature's solution there, which crosses the surface and comes back: sliding from where
     it enters to where it returns (Newton moves the exit to where the sliding field leaves):
     ``(problem, u)`` or a reason string."""
-    from ..orbits.problem import _context
     from ..orbits.signature import SignatureEvent
 
     m = op.model
     n = op.n
-    if len(op.bounds) != len(op.signature) or op.fields[seg].kind != "mode":
+    mode = _segment_mode(op, seg)
+    if mode is None:
         return "only segments in a mode ending in single events are re-segmented"
-    mode = op.fields[seg].index
     sws = [sw for sw in m.switches if sw.kind == "filippov" and mode in (sw.above, sw.below)
            and m.surfaces[sw.surface].name == surface_name]
     if not sws:
         return f"no Filippov switch on surface {surface_name!r} bounds the segment's mode"
     sw = sws[0]
     sign = 1.0 if mode == sw.above else -1.0
-    p = np.array([lam])
-    ev = op.evaluate(u, p, jacobian=False)
-    s = ev.segs[seg]
-    opts = op._seg_opts(p, dense=True, variational=False)
-    _, _, tr = op._flow(seg, s.t, s.z, s.T, opts)
-    ctx = _context(m, op.param_dict(p), op.sliding)
+    p, s, tr, ctx = _old_segment(op, u, lam, seg)
 
     def g(t):
         return sign * ctx.h(sw.surface, t, tr(t)[:n])
