@@ -294,3 +294,14 @@ def test_event_log_columns_match_its_records(name, x0, params, t_end):
     assert {e.kind for e in recs} >= ({"impact", "chatter", "stick", "release"}
                                       if name == "bouncing-ball"
                                       else {"slide_start", "slide_end"})
+
+
+def test_event_records_and_logs_compare_by_value():
+    """Records hold arrays: they compare field by field (the generated dataclass equality
+    raised on the truth value of an array)."""
+    import copy
+
+    a = pwsdyn.simulate("bouncing-ball", {"y": 1.0, "v": 0.0}, (0, 2))
+    b = pwsdyn.simulate("bouncing-ball", {"y": 1.0, "v": 0.0}, (0, 2))
+    assert a.events[0] == copy.deepcopy(a.events[0]) and a.events[0] != a.events[1]
+    assert list(a.events) == list(b.events) and a.events == b.events

@@ -100,7 +100,7 @@ class DiscreteState(str):
         return f"DiscreteState({self.kind!r}, {self.name!r})"
 
 
-@dataclass(slots=True)
+@dataclass(slots=True, eq=False)
 class EventRecord:
     """One event of a trajectory.
 
@@ -139,6 +139,20 @@ class EventRecord:
     def __repr__(self):
         return (f"EventRecord(t={self.t:.12g}, name={self.name!r}, kind={self.kind!r}, "
                 f"{self.mode_before} -> {self.mode_after})")
+
+    def __eq__(self, other):
+        # field by field, the states as arrays (the generated __eq__ compares a tuple of
+        # arrays, whose truth value numpy refuses)
+        if not isinstance(other, EventRecord):
+            return NotImplemented
+        return (self.t == other.t and self.t_after == other.t_after
+                and self.name == other.name and self.kind == other.kind
+                and self.mode_before == other.mode_before
+                and self.mode_after == other.mode_after
+                and np.array_equal(self.x_before, other.x_before)
+                and np.array_equal(self.x_after, other.x_after))
+
+    __hash__ = None
 
 
 #: Event kinds logged on a switching surface (their ``name`` is the switch's).
