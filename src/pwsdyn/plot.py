@@ -1221,12 +1221,15 @@ def plot_branch(branch, y=None, path: str | Path | None = None, *, ax: Axes | No
     stab = branch.stable
     adm = branch.admissible
     style = np.where(~adm, "not admissible", np.where(stab, "stable", "unstable"))
+    sig = np.array([getattr(p, "signature_index", 0) for p in branch.points])
     seen = set()
     start = 0
     for i in range(1, len(lam) + 1):
-        if i == len(lam) or style[i] != style[start]:
-            # each run of one style, joined to the next point so that the curve is unbroken
-            j = min(i + 1, len(lam))
+        if i == len(lam) or style[i] != style[start] or sig[i] != sig[start]:
+            # each run of one style, joined to the next point so that the curve is unbroken;
+            # not across a change of signature (past a graze the section state is another
+            # point of the orbit: the curve restarts there)
+            j = min(i + 1, len(lam)) if i < len(lam) and sig[i] == sig[start] else i
             st = str(style[start])
             ax.plot(lam[start:j], yv[start:j], ls=BRANCH_STYLES[st], color=color, lw=1.4,
                     label=st if st not in seen else None)
