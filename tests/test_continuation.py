@@ -536,3 +536,21 @@ def test_boundary_equilibrium_bifurcations():
         alpha = np.array([p.data["alpha"] for p in ps.points])
         assert np.allclose(alpha, (ps.values + 1) / 2, atol=1e-12)
         assert (ps.admissible == (np.abs(ps.values) <= 1 + 1e-9)).all()
+
+
+def test_plot_over_the_whole_orbit_is_continuous_across_a_graze():
+    """y = "min:x" (the orbit's smallest x over a period) is the same on both sides of a
+    graze, where the section state jumps."""
+    import matplotlib
+    matplotlib.use("Agg")
+    from pwsdyn.plot import _branch_y
+
+    params = {"eps": 0.1, "omega": 2.8, "sigma": 0.45}
+    orbit = pwsdyn.find_periodic_orbit(IO_MODEL, [-0.006, -0.41], t0=0.0, params=params)
+    br = pwsdyn.continue_orbit(IO_MODEL, orbit, "sigma", span=(0.0, 0.45), ds=-0.05)
+    y, label = _branch_y(br, "min:x")
+    k = next(i for i, p in enumerate(br.points) if p.signature_index == 1)
+    assert "over the orbit" in label and abs(y[k] - y[k - 1]) < 1e-3
+    assert abs(y[0] + 1.0 / math.hypot(1 - 2.8**2, 0.28)) < 1e-6     # -R: the free motion
+    fig = br.plot(y="min:x")
+    assert fig.axes[0].get_ylabel().startswith("min")

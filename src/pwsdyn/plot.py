@@ -1153,6 +1153,19 @@ SPECIAL_MARKERS = {"LP": "s", "BP": "D", "PD": "o", "NS": "^", "HB": "*", "EP": 
 def _branch_y(branch, y):
     """The quantity plotted against the parameter and its axis label."""
     names = list(branch.problem.state_names)
+    if isinstance(y, str) and y.split(":")[0] in ("max", "min") and branch.kind == "orbit":
+        # a measure of the whole orbit (its largest or smallest value of a state over one
+        # period): the same on both sides of a graze, where the section state jumps
+        how, _, state = y.partition(":")
+        if state not in names:
+            raise ArgumentError(f"`y` = {y!r}: {state!r} is not a state {names}")
+        k = names.index(state)
+        out = []
+        for p in branch.points:
+            traj = branch.problem_of(p).orbit(p.u, p.lam).trajectory
+            _, X = traj.sample(400)
+            out.append(X[:, k].max() if how == "max" else X[:, k].min())
+        return np.array(out), f"{how} {_tex(state)} over the orbit"
     if y is None:
         # the state that changes most along the branch (at an impact section the position
         # is the wall's, the same at every point)
@@ -1187,7 +1200,9 @@ def plot_branch(branch, y=None, path: str | Path | None = None, *, ax: Axes | No
     branch : Branch
     y : str or int, optional
         A state (at the section: the start of the orbit's first segment), ``"norm"`` or, for
-        orbits, ``"period"``. Default: the state that varies most along the branch.
+        orbits, ``"period"`` or ``"max:<state>"`` / ``"min:<state>"`` (over the whole orbit:
+        continuous across a graze, where the section state jumps). Default: the state that
+        varies most along the branch.
     path : str or Path, optional
         Also save the figure there.
     ax : matplotlib.axes.Axes, optional
