@@ -247,8 +247,6 @@ def _with_options(prob, options):
 
 def _from_special(sp: SpecialPoint, model, param, settings, progress, params, options,
                   on_dib="switch"):
-    from ..orbits.problem import OrbitProblem
-
     br = sp.branch
     if br.kind != "orbit":
         raise ArgumentError(f"continue_orbit needs a special point of an orbit branch, got one "
@@ -294,8 +292,6 @@ def _switch_period_doubling(sp, model, settings, progress, options, on_dib="swit
     multiplier -1 of one period is +1 of two); the new branch leaves along its null vector,
     the flip ``+w`` on the first period, ``-w`` on the second, at fixed parameter (a
     pitchfork of the doubled problem; Kuznetsov, section 10.3.2)."""
-    from ..orbits.problem import OrbitProblem
-
     base = sp.problem
     op = base.orbit_problem
     pt = sp.point
@@ -526,8 +522,6 @@ def continue_bifurcation(model, special_point: SpecialPoint, params, *, span=Non
     Branch
         ``kind`` ``"orbit"``, ``curve`` the bifurcation's kind.
     """
-    from ..orbits.problem import OrbitProblem
-
     model = as_model(model, kind="flow", caller="continue_bifurcation()")
     if not isinstance(special_point, SpecialPoint):
         raise ArgumentError(f"`special_point` must be a SpecialPoint of an orbit branch, got "
