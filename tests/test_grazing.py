@@ -291,3 +291,41 @@ def test_switching_sliding_curve_in_two_parameters():
         u, P = p.u[:-1], np.array([p.lam, p.u[-1]])
         mon = op.dib_monitors(u, P)[ss.key]
         assert abs(mon.value) < 1e-9 and np.max(np.abs(op.residual(u, P))) < 1e-9
+
+
+# ---- corner collision ----------------------------------------------------------------------
+
+CORNER = {"name": "io-corner", "states": ["x", "v"], "forcing_period": "2*pi/omega",
+          "parameters": {"eps": 0.1, "omega": 2.8, "sigma": -0.5, "r": 0.8, "k": 0.0,
+                         "c": 1.0},
+          "modes": {"free": {"x": "v", "v": "sin(omega*t) - eps*v - x + k*abs(v - c)"}},
+          "events": [{"name": "impact", "kind": "impact", "surface": "sigma - x",
+                      "direction": -1, "reset": {"v": "-r*v"}}]}
+
+
+@pytest.mark.parametrize("ds", [0.01, 0.1])
+def test_corner_collision_of_an_impact_with_a_switching_surface(ds):
+    """The impact oscillator with a switching surface v = c that does not change its motion
+    (a kink term k |v - c| with k = 0): the one-impact orbit crosses v = c before each impact
+    while c is below the impact velocity v_imp (closed form), and impacts above it. At
+    c = v_imp the impact point lies on both surfaces -- a corner collision, located once to
+    1e-10 -- and beyond it the orbit crosses back below c before it impacts (its velocity
+    peaks before the impact), as direct simulation shows on either side."""
+    from _orbit_cases import io_one_impact, io_orbit
+
+    m = pwsdyn.load_model(CORNER)
+    v_imp = io_one_impact(2.8, 1)[0]
+    o = io_orbit("stable")
+    orb = pwsdyn.find_periodic_orbit(m, o.x0, t0=o.t0, params={"c": 1.0})
+    assert [e.kind for e in orb.events] == ["crossing", "impact"]
+    br = pwsdyn.continue_orbit(m, orb, "c", span=(0.5, 2.0), ds=ds, ds_max=10 * ds)
+    cc = br.special("CC")
+    assert len(cc) == 1 and abs(cc[0].value - v_imp) < 1e-10
+    assert "CC located" in br.stop_reason
+    T = 2 * math.pi / 2.8
+    for dc, kinds in ((-0.01, ["crossing", "impact"]),
+                      (0.01, ["crossing", "crossing", "impact"])):
+        tr = pwsdyn.simulate(m, o.x0, (o.t0, o.t0 + 40 * T), params={"c": v_imp + dc},
+                             rtol=1e-12, atol=1e-12)
+        last = [e.kind for e in tr.events if e.t > o.t0 + 39 * T]
+        assert last == kinds, (dc, last)

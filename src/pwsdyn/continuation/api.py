@@ -51,7 +51,7 @@ def _split_options(options: dict, span, ds, max_points):
 
 
 #: Kinds of discontinuity-induced bifurcations at which an orbit branch changes signature.
-DIB_KINDS = ("GR", "GS", "SS", "AS")
+DIB_KINDS = ("GR", "GS", "SS", "AS", "CC")
 ON_DIB = ("switch", "stop", "continue")
 
 

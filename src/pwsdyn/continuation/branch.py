@@ -24,6 +24,8 @@ KINDS = {
     "SS": "switching-sliding: the point where the orbit reaches a Filippov surface crosses the "
           "other boundary of the sliding region",
     "AS": "adding-sliding: the orbit leaves a sliding segment with a cubic tangency",
+    "CC": "corner collision: an event point of the orbit reaches another surface (the orbit "
+          "passes through the intersection of two surfaces)",
     "BEB": "boundary equilibrium bifurcation: an equilibrium reaches the boundary of its "
            "mode's region, or a pseudo-equilibrium that of the sliding region",
     "EP": "end point of the branch",

@@ -98,7 +98,7 @@ class ContinuationSettings:
     max_iter: int = 10
     target_iter: int = 3
     max_angle: float = 0.35
-    locate: tuple = ("LP", "BP", "PD", "NS", "HB", "GR", "GS", "SS", "AS", "BEB")
+    locate: tuple = ("LP", "BP", "PD", "NS", "HB", "GR", "GS", "SS", "AS", "CC", "BEB")
     locate_tol: float = 1e-11
     predictor: str = "tangent"
     stop_at: tuple = ()
@@ -545,7 +545,15 @@ class Continuation:
                 p.data["located"] = key
                 found.append(p)
         found.sort(key=lambda q: q.arclength)
-        return found
+        # one bifurcation seen by two monitors (a corner collision by the surface at each of
+        # the two events that meet there) is one special point
+        kept = []
+        for q in found:
+            if kept and q.special == kept[-1].special and abs(q.arclength - kept[-1].arclength) \
+                    <= 100.0 * self.settings.locate_tol * (1.0 + abs(q.arclength)):
+                continue
+            kept.append(q)
+        return kept
 
     def problem_confirms(self, kind, p) -> bool:
         confirm = getattr(self.problem, "confirm", None)

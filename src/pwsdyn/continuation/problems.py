@@ -243,10 +243,10 @@ class EquilibriumProblem(_PointProblem):
 
 
 #: Test functions of the bifurcations of periodic orbits followed in two parameters.
-CURVE_KINDS = ("LP", "PD", "NS", "GR", "GS", "SS", "AS")
+CURVE_KINDS = ("LP", "PD", "NS", "GR", "GS", "SS", "AS", "CC")
 #: Curves whose defining condition is a monitor of the orbit problem (a graze), not a test
 #: function of the multipliers.
-MONITOR_KINDS = ("GR", "GS", "SS", "AS")
+MONITOR_KINDS = ("GR", "GS", "SS", "AS", "CC")
 
 
 def orbit_test_function(kind: str, mu) -> float:

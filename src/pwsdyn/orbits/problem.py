@@ -1150,6 +1150,24 @@ class OrbitProblem:
     # ==================================================================================
     # monitors of discontinuity-induced bifurcations
     # ==================================================================================
+    def _bounding_surfaces(self, mode: int) -> list:
+        """``(name, surface index, sign, other mode)`` of the surfaces a segment in ``mode``
+        must not cross: its impact surfaces (sign +1: ``h >= 0``) and the switching surfaces
+        bounding its region (sign +1 above, -1 below; ``other`` the mode beyond a Filippov
+        switch, -1 otherwise)."""
+        m = self.model
+        out = []
+        for e in m.events:
+            if e.kind == "impact" and mode in e.modes:
+                out.append((m.surfaces[e.surface].name, e.surface, 1.0, -1))
+        for sw in m.switches:
+            if mode in (sw.above, sw.below):
+                above = mode == sw.above
+                other = sw.below if above else sw.above
+                out.append((m.surfaces[sw.surface].name, sw.surface, 1.0 if above else -1.0,
+                            other if sw.kind == "filippov" else -1))
+        return list(dict.fromkeys(out))
+
     def dib_monitors(self, u, p=None, evaluation: ProblemEvaluation | None = None) -> dict:
         """Monitors of discontinuity-induced bifurcations on a solution: ``{key: Monitor}``,
         each a signed distance from the bifurcation, positive on the side where the orbit
@@ -1170,7 +1188,11 @@ class OrbitProblem:
           vanishes);
         * ``"AS/<switch>@<i>"`` at a sliding exit: the normal acceleration of the field the
           orbit leaves with, positive while it curves away (adding-sliding where it
-          vanishes).
+          vanishes);
+        * ``"CC/<surface>@<i>"`` at an impact, transition or crossing ending a segment in a
+          mode: the value of another surface of the mode there, signed positive on the
+          segment's side (a corner collision where it vanishes: the event point reaches the
+          intersection of the two surfaces).
 
         A segment with no interior local minimum of a surface gives no monitor for it.
         """
@@ -1189,18 +1211,7 @@ class OrbitProblem:
                 if len(ts) < 3:
                     continue
                 Y = np.asarray(tr(ts))[:, :n]
-                watched = []      # (surface name, surface index, side sign, other mode)
-                for e in m.events:
-                    if e.kind == "impact" and fk.index in e.modes:
-                        watched.append((m.surfaces[e.surface].name, e.surface, 1.0, -1))
-                for sw in m.switches:
-                    if fk.index in (sw.above, sw.below):
-                        above = fk.index == sw.above
-                        other = sw.below if above else sw.above
-                        watched.append((m.surfaces[sw.surface].name, sw.surface,
-                                        1.0 if above else -1.0,
-                                        other if sw.kind == "filippov" else -1))
-                for name, k, sign, other in dict.fromkeys(watched):
+                for name, k, sign, other in self._bounding_surfaces(fk.index):
                     fn = _h(ctx, k)
                     vals = sign * fn.rows(ts, Y)
                     found = _interior_minimum(lambda tt: sign * fn(tt, tr(tt)[:n]), ts, vals)
@@ -1220,6 +1231,13 @@ class OrbitProblem:
             if b is None:
                 continue
             te, y = s.te, np.asarray(s.y[:n], dtype=float)
+            if fk.kind == "mode" and b.kind in ("impact", "transition", "crossing"):
+                # corner collision: the event point reaches another surface of the segment's
+                # mode (the orbit passes through the intersection of two surfaces)
+                for name, k, sign, _ in self._bounding_surfaces(fk.index):
+                    if k != b.surface:
+                        out[f"CC/{name}@{i}"] = Monitor(float(sign * ctx.h(k, te, y)), i, name,
+                                                        float(te), y)
             if b.kind == "impact":
                 e = m.events[b.ref]
                 f_in = _state_field(ctx, fk, te, y)
