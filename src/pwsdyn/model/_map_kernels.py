@@ -19,6 +19,19 @@ _f2 = types.float64[:, ::1]
 _i1 = types.int64[::1]
 
 
+@njit(cache=True, nogil=True)
+def _step_status(y, bound):
+    """The status after an iterate ``y``: non-finite, beyond ``bound``, or fine (the last
+    offending component decides, as the loops always did)."""
+    status = MAP_OK
+    for i in range(y.shape[0]):
+        if not np.isfinite(y[i]):
+            status = MAP_NONFINITE
+        elif abs(y[i]) > bound:
+            status = MAP_DIVERGED
+    return status
+
+
 @njit(types.Tuple((types.int64, _f2, _i1, _f1, types.int64))(
     MAP_STEP_TYPE, _f1, _f1, types.int64, types.int64, types.float64), cache=True, nogil=True)
 def orbit_kernel(step, x0, p, n_transient, n_samples, bound):
@@ -47,11 +60,7 @@ def orbit_kernel(step, x0, p, n_transient, n_samples, bound):
         if pc < 0:
             status = MAP_NO_PIECE
             break
-        for i in range(n):
-            if not np.isfinite(y[i]):
-                status = MAP_NONFINITE
-            elif abs(y[i]) > bound:
-                status = MAP_DIVERGED
+        status = _step_status(y, bound)
         if status != MAP_OK:
             break
         for i in range(n):
@@ -82,11 +91,7 @@ def lyapunov_kernel(step, x0, p, n_transient, n_iter, bound):
         if pc < 0:
             status = MAP_NO_PIECE
             break
-        for i in range(n):
-            if not np.isfinite(y[i]):
-                status = MAP_NONFINITE
-            elif abs(y[i]) > bound:
-                status = MAP_DIVERGED
+        status = _step_status(y, bound)
         if status != MAP_OK:
             break
         if k >= n_transient:
