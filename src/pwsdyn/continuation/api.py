@@ -230,19 +230,10 @@ def _parameter(model, param):
 
 def _with_options(prob, options):
     """The problem with integrator options changed (those given to continue_orbit)."""
-    from ..orbits.problem import OrbitProblem
-
-    opts = {k: v for k, v in prob.opts.items() if k not in
-            ("variational", "dense", "throw", "mode", "sliding")}
-    opts.update(options)
     from ..integrate.simulate import DEFAULTS
 
-    opts = {k: v for k, v in opts.items() if k in DEFAULTS}
-    kw = {} if prob.signature else {"state": str(prob.state_names[0])}
-    return OrbitProblem(prob.model, prob.signature, params=prob.params,
-                        parameters=list(prob.parameters), periods=prob.periods,
-                        t_ref=prob.t_ref, sliding=prob.sliding, phase_ref=prob.phase_ref,
-                        phase_normal=prob.phase_normal, **kw, **opts)
+    return prob.replace(**{k: v for k, v in options.items() if k in DEFAULTS and k not in
+                           ("variational", "dense", "throw", "mode", "sliding")})
 
 
 def _from_special(sp: SpecialPoint, model, param, settings, progress, params, options,

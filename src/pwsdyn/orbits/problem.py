@@ -289,16 +289,17 @@ class OrbitProblem:
                           for k in self.parameters]
 
     def replace(self, *, signature=None, params=None, parameters=None, periods=None,
-                t_ref=None, state=None) -> "OrbitProblem":
+                t_ref=None, state=None, **options) -> "OrbitProblem":
         """The same problem (model, integrator options, sliding method, phase condition) with
         some of its definition changed: another signature (an event added or removed, the
         period doubled), other parameter values or continued parameters, another period or
-        start time. An orbit without events keeps its discrete state unless ``state`` is
-        given."""
+        start time, integrator ``options`` over its own. An orbit without events keeps its
+        discrete state unless ``state`` is given."""
         from ..integrate.simulate import DEFAULTS
 
         opts = {k: v for k, v in self.opts.items() if k in DEFAULTS
                 and k not in ("variational", "dense", "throw", "mode", "sliding")}
+        opts.update(options)
         sig = self.signature if signature is None else Signature(signature)
         kw = {}
         if not sig:
