@@ -482,3 +482,52 @@ def test_property_restart_from_any_logged_state(c, data):
 @given(table_cases, st.data())
 def test_property_restart_from_any_logged_state_many(c, data):
     _check_restart_from_event(c, lambda n: data.draw(st.integers(0, n - 1), label="event"))
+
+
+# ---- 5. a sliding exit in a short window inside a step ------------------------------------
+#
+# x' = g(t) above the surface x = 0 and x' = 1 below it, g(t) = eps - (t - t0)^2: the field
+# above points into the surface except on |t - t0| < sqrt(eps). A motion sliding on x = 0
+# leaves it at ta = t0 - sqrt(eps) (g turns positive), rises with x' = g and comes back to the
+# surface where the integral of g from ta vanishes: (s - 2 sqrt(eps)) (s + sqrt(eps))^2 = 0
+# for s = tb - t0, so tb = t0 + 2 sqrt(eps), and slides again. In the sliding state the
+# field is zero and the steps are long: the window is a small part of one step -- the case of
+# a sliding flow touching the boundary of the sliding region near an adding-sliding.
+WINDOW = {"name": "sliding-window", "states": ["x"],
+          "parameters": {"eps": 1e-4, "t0": 3.0},
+          "modes": {"m": {"x": "(1 + eps - (t - t0)**2)/2 - (1 - eps + (t - t0)**2)/2*sign(x)"}}}
+
+window_cases = st.tuples(st.floats(1e-7, 1e-2), st.floats(2.0, 20.0),
+                         st.sampled_from(["RK45", "DOP853"]))
+
+
+def _check_window(case):
+    eps, t0, method = case
+    r = math.sqrt(eps)
+    tr = pwsdyn.simulate(WINDOW, [0.0], (0.0, t0 + 4.0), params={"eps": eps, "t0": t0},
+                         **PATHS[method], **TOL)
+    kinds = [(e.kind, e.t) for e in tr.events]
+    # sliding from the start (a start on the surface is a state, not an event), the exit at
+    # ta, the return at tb, sliding to the end
+    assert str(tr.state[0]) == "slide:x"
+    assert [k for k, _ in kinds] == ["slide_end", "slide_start"], kinds
+    assert abs(kinds[0][1] - (t0 - r)) < T_EVENT * (1 + t0)
+    # the return: x(t) = eps (t - ta) - ((t - t0)^3 + r^3) / 3 has a simple root at tb with
+    # slope g(tb) = -3 eps, so its time is known to the position error over that slope
+    assert abs(kinds[1][1] - (t0 + 2 * r)) < T_EVENT * (1 + t0) + 1e-10 / eps
+    assert str(tr.state[-1]) == "slide:x"
+    slides = tr.sliding_intervals()
+    assert len(slides) == 2 and slides[0][0] == 0.0 and slides[1][1] == tr.t_final
+
+
+@PROPERTY
+@given(window_cases)
+def test_a_short_sliding_exit_window_is_never_missed(case):
+    _check_window(case)
+
+
+@pytest.mark.slow
+@PROPERTY_SLOW
+@given(window_cases)
+def test_a_short_sliding_exit_window_is_never_missed_campaign(case):
+    _check_window(case)

@@ -2779,12 +2779,14 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                         bad_watch = True
                         break
                     wv[w] = vals[w, 2]
-                    if wtype[w] == WF_HDDOT:
-                        # release from sticking: the free normal acceleration may turn positive
-                        # only in a short window around its maximum inside the step. Its slopes
-                        # at the ends (central differences on the dense output; the end one is
-                        # kept for the next step), the extrema of the Hermite fit and the bounded
-                        # search of surfaces add samples there
+                    if wtype[w] == WF_HDDOT or wtype[w] == WF_HDOT:
+                        # release from sticking, exit from sliding: the free normal
+                        # acceleration, or the normal velocity of the field beyond, may change
+                        # sign only in a short window around its extremum inside the step (the
+                        # sliding flow touching the boundary of the sliding region, near an
+                        # adding-sliding). Its slopes at the ends (central differences on the
+                        # dense output; the end one is kept for the next step), the extrema of
+                        # the Hermite fit and the bounded search of surfaces add samples there
                         if wvalid[w] == 1:
                             sd0 = wd[w]
                         else:
