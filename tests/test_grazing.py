@@ -232,13 +232,14 @@ def test_square_root_law_of_near_grazing_impact_velocities():
     assert abs(vs[1] / math.sqrt(vs[0]) / C - 1) < 2e-3   # v1 ~ C sqrt(v0)
 
 
-def _friction_branch(ds, span=(0.0, 0.6), **kw):
-    m_, k, c, w, V, mu = 1.0, 1.0, 0.1, 1.5, 0.5, 0.3
+def _friction_branch(ds, span=(0.0, 0.6), omega=1.5, **kw):
+    m_, k, c, w, V, mu = 1.0, 1.0, 0.1, omega, 0.5, 0.3
     model = pwsdyn.load_model(FRICTION)
     F0 = 0.5 * V * math.hypot(k - m_ * w * w, c * w) / w
     X, Y = np.linalg.solve(np.array([[k - m_ * w * w, c * w], [-c * w, k - m_ * w * w]]),
                            [F0, 0.0])
-    orb = pwsdyn.find_periodic_orbit(model, [mu / k + X, w * Y], t0=0.0, params={"F": F0})
+    orb = pwsdyn.find_periodic_orbit(model, [mu / k + X, w * Y], t0=0.0,
+                                     params={"F": F0, "omega": w})
     return model, pwsdyn.continue_orbit(model, orb, "F", span=span, ds=ds, **kw)
 
 
@@ -329,3 +330,95 @@ def test_corner_collision_of_an_impact_with_a_switching_surface(ds):
                              rtol=1e-12, atol=1e-12)
         last = [e.kind for e in tr.events if e.t > o.t0 + 39 * T]
         assert last == kinds, (dc, last)
+
+
+# ---- crossing-sliding and adding-sliding ---------------------------------------------------
+
+def _simulated_events(model, orbit, params, periods=80):
+    """Kinds of the events of the last forcing period of a long run from ``orbit``'s start."""
+    P = 2 * math.pi / params.get("omega", 1.5)
+    tr = pwsdyn.simulate(model, orbit.x0, (orbit.t0, orbit.t0 + periods * P), params=params,
+                         rtol=1e-12, atol=1e-12)
+    return [e.kind for e in tr.events if e.t > orbit.t0 + (periods - 1) * P + 1e-9]
+
+
+@pytest.mark.parametrize("ds", [0.01, 0.1])
+def test_crossing_sliding_followed_both_ways(ds):
+    """Further up in F than the switching-sliding the sliding entry of the block (coming down
+    from above the belt's speed) meets its exit on the boundary of the sliding region, where
+    the field below is tangent: crossing-sliding. Past it the block crosses the belt's speed
+    twice per period without sticking. Followed up from the non-sliding orbit and back down
+    from the crossing one, every DIB is found once, at the same parameter both ways, and
+    the grazing-sliding where the branch ends at its closed form F_GS = V D / omega: seen
+    from the sliding side, the sliding segment shrinks to nothing there (its duration is zero
+    at the graze, the locked signature folds back; no fold is reported beside the graze)."""
+    model, up = _friction_branch(ds, span=(0.0, 1.0), ds_max=10 * ds, max_points=400)
+    assert [s.kind for s in up.special_points if s.kind != "EP"] == ["GS", "SS", "CS"]
+    sliding = ("(block[vrel<0]) crossing:vrel (block[vrel>0]) slide_start:vrel (slide:vrel) "
+               "slide_end:vrel (block[vrel<0])")
+    crossing = ("(block[vrel<0]) crossing:vrel (block[vrel>0]) crossing:vrel "
+                "(block[vrel<0])")
+    assert [str(s) for s in up.signatures][2:] == [sliding, crossing]
+    cs = up.special("CS")[0]
+    assert abs(cs.monitor.value) < 1e-9 and up.admissible.all()
+    for dF, kinds in ((-0.01, ["crossing", "slide_start", "slide_end"]),
+                      (0.01, ["crossing", "crossing"])):
+        assert _simulated_events(model, cs.orbit, {"F": cs.value + dF}) == kinds
+    end = up.points[-1]
+    orb = up.problem_of(end).orbit(end.u, end.lam)
+    down = pwsdyn.continue_orbit(model, orb, "F", span=(0.0, 1.0), ds=-ds, ds_max=10 * ds,
+                                 max_points=400, params={"F": end.lam})
+    assert [s.kind for s in down.special_points if s.kind != "EP"] == ["CS", "SS", "GS"]
+    assert [str(s) for s in down.signatures] == [crossing, sliding, str(up.signatures[1]), "()"]
+    assert down.admissible.all() and down.values.min() == pytest.approx(0.0, abs=1e-12)
+    # the crossing-sliding from either side: the same point (its monitor is linear in F on
+    # both sides); the switching-sliding seen from the crossing side ends a short arc of
+    # vanishing duration whose end condition has a double root there, so Newton's tolerance
+    # on the residual (1e-10) leaves ~1e-9 in the parameter
+    assert abs(down.special("CS")[0].value - cs.value) < 1e-10
+    assert abs(down.special("SS")[0].value - up.special("SS")[0].value) < 5e-9
+    m_, k, c, w, V = 1.0, 1.0, 0.1, 1.5, 0.5
+    assert abs(down.special("GS")[0].value - V * math.hypot(k - m_ * w * w, c * w) / w) < 1e-10
+
+
+@pytest.mark.parametrize("ds", [0.01, 0.1])
+def test_adding_sliding_splits_a_sliding_segment_and_joins_it_back(ds):
+    """At omega = 0.5, past the switching-sliding, the sliding flow on the belt comes ever
+    closer to the boundary of the sliding region, where the field above (the block faster
+    than the belt) is tangent, and touches it (h_x f = 0 and (h_x f)_x f = 0 at a point
+    inside the sliding segment: the slides' adding-sliding). Past it the block leaves the belt
+    there, overtakes it for an arc and sticks again: the sliding segment is split in two. The
+    events on either side are those a direct simulation settles on (which needs the kernel
+    to find a sliding exit in a short window inside a step). Followed back down from the
+    split side, the adding-sliding is found at the same F and the two sliding segments join."""
+    w = 0.5
+    model, up = _friction_branch(ds, span=(0.0, 1.3), ds_max=10 * ds, max_points=400,
+                                 params={"omega": w}, omega=w)
+    assert [s.kind for s in up.special_points if s.kind != "EP"] == ["GS", "SS", "AS"]
+    split = ("(block[vrel<0]) crossing:vrel (block[vrel>0]) slide_start:vrel (slide:vrel) "
+             "slide_end:vrel (block[vrel>0]) slide_start:vrel (slide:vrel) slide_end:vrel "
+             "(block[vrel<0])")
+    assert str(up.signatures[-1]) == split and up.admissible.all()
+    a = up.special("AS")[0]
+    assert a.key == "AS/vrel:above/2" and abs(a.monitor.value) < 1e-9
+    params = {"omega": w}
+    for dF, n_events in ((-0.01, 3), (0.02, 5)):      # SS lies 0.014 below
+        assert len(_simulated_events(model, a.orbit, {**params, "F": a.value + dF})) == n_events
+    end = up.points[-1]
+    orb = up.problem_of(end).orbit(end.u, end.lam)
+    down = pwsdyn.continue_orbit(model, orb, "F", span=(1.0, 1.3), ds=-ds, ds_max=10 * ds,
+                                 max_points=400, params={**params, "F": end.lam})
+    kinds = [s.kind for s in down.special_points if s.kind != "EP"]
+    assert kinds == ["AS", "SS"]
+    # from the split side the branch of the locked signature folds at the adding-sliding
+    # itself, where the arc between the two sliding segments vanishes: there its solution is
+    # not isolated (the Jacobian is singular at the fold), and the located point, exact in F,
+    # has the arc's duration within ~1e-5 of zero, of either sign. It is the one point that
+    # may fail the admissibility check
+    as2 = down.special("AS")[0]
+    assert abs(as2.value - a.value) < 1e-9
+    assert all(ok for i, ok in enumerate(down.admissible) if i != as2.index)
+    _, _, Ts = down.problem_of(down.points[as2.index]).orbit_problem.unpack(
+        down.points[as2.index].u)
+    assert np.min(Ts) > -1e-4
+    assert str(down.signatures[1]) == str(up.signatures[2])

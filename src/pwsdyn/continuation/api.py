@@ -14,7 +14,7 @@ from ..errors import ArgumentError
 from ..model.spec import as_model
 from .branch import Branch, SpecialPoint
 from .engine import Continuation, ContinuationError, ContinuationSettings, null_space
-from .problems import (CURVE_KINDS, MONITOR_KINDS, BifurcationCurveProblem,
+from .problems import (CURVE_KINDS, DIB_KINDS, BifurcationCurveProblem,
                        OrbitBranchProblem, equilibrium_problem)
 
 _SETTING_NAMES = {f.name for f in dataclasses.fields(ContinuationSettings)}
@@ -51,7 +51,6 @@ def _split_options(options: dict, span, ds, max_points):
 
 
 #: Kinds of discontinuity-induced bifurcations at which an orbit branch changes signature.
-DIB_KINDS = ("GR", "GS", "SS", "AS", "CC")
 ON_DIB = ("switch", "stop", "continue")
 
 
@@ -71,7 +70,7 @@ def _run(problem, u0, lam0, settings, *, tangent=None, correct_start=True, progr
     reason = cont.stop_reason
     while (orbit and on_dib == "switch" and cont.stop_point is not None
            and len(points) < settings.max_points):
-        nxt = _after_graze(problems[-1], cont.stop_point, st, options or {})
+        nxt = _after_graze(problems[-1], cont.stop_point, st, options or {}, points)
         if isinstance(nxt, str):
             reason = f"{reason}; {nxt}"
             break
@@ -93,7 +92,7 @@ def _run(problem, u0, lam0, settings, *, tangent=None, correct_start=True, progr
                   problems=problems)
 
 
-def _after_graze(bp, pt, settings, options):
+def _after_graze(bp, pt, settings, options, points=()):
     """The orbit just past the graze ``pt`` (a point of ``bp``) with the signature it has
     there (:func:`pwsdyn.continuation.dib.past_graze`): ``(problem, u, lam, ds)``, or why
     there is none. The restart is a short step ``delta`` past the graze in the direction of
@@ -103,17 +102,25 @@ def _after_graze(bp, pt, settings, options):
 
     op = bp.orbit_problem
     key = pt.data.get("located", "")
-    direction = float(np.sign(pt.tangent[-1])) or float(np.sign(settings.ds)) or 1.0
+    # past the graze is away from where the branch came from (not along the tangent: where a
+    # sliding segment shrinks to nothing the old branch folds back at the graze itself)
+    tiny = 1e-9 * (1.0 + abs(pt.lam))
+    came = next((q.lam for q in reversed(points) if abs(q.lam - pt.lam) > tiny), None)
+    direction = (float(np.sign(pt.lam - came)) if came is not None else
+                 float(np.sign(pt.tangent[-1])) or float(np.sign(settings.ds)) or 1.0)
     lo, hi = settings.span
     delta = 1e-4 * (1.0 + abs(pt.lam))
     lam1 = pt.lam + direction * delta
     if not lo <= lam1 <= hi:
         return "the span ends at the graze"
-    # the old signature past the graze (regular: it crosses the surface there)
+    # the old signature past the graze (regular: it crosses the surface there); where it has
+    # no solution there (a sliding segment that shrank to nothing: the old branch folds back
+    # at the graze), the new signature is built from the graze itself
     res = op.solve(pt.u, np.array([lam1]))
-    if not res.converged:
-        return f"the old signature past the graze: Newton {res.reason}"
-    made = past_graze(op, key, res.x, lam1)
+    if res.converged:
+        made = past_graze(op, key, res.x, lam1)
+    else:
+        made = past_graze(op, key, pt.u, pt.lam, solve_at=lam1)
     if isinstance(made, str):
         return made
     prob1, u1 = made
@@ -541,7 +548,7 @@ def continue_bifurcation(model, special_point: SpecialPoint, params, *, span=Non
     if options:
         prob = _with_options(prob, options)
     curve = BifurcationCurveProblem(prob, sp.kind,
-                                    key=sp.key if sp.kind in MONITOR_KINDS else "")
+                                    key=sp.key if sp.kind in DIB_KINDS else "")
     U0 = np.append(sp.point.u, all_params[p2])
     cont = Continuation(curve, U0, all_params[p1], settings, progress=progress)
     lo2, hi2 = (-math.inf, math.inf) if span2 is None else span2

@@ -23,7 +23,11 @@ KINDS = {
           "points back, and a sliding segment is born",
     "SS": "switching-sliding: the point where the orbit reaches a Filippov surface crosses the "
           "other boundary of the sliding region",
-    "AS": "adding-sliding: the orbit leaves a sliding segment with a cubic tangency",
+    "CS": "crossing-sliding: the point where the orbit crosses a Filippov surface reaches the "
+          "boundary of the sliding region, and a sliding segment is born there (or, from the "
+          "other side, a sliding segment shrinks to nothing)",
+    "AS": "adding-sliding: the sliding flow touches the boundary of the sliding region (a "
+          "cubic tangency of the field beyond), and a sliding segment splits in two",
     "CC": "corner collision: an event point of the orbit reaches another surface (the orbit "
           "passes through the intersection of two surfaces)",
     "BEB": "boundary equilibrium bifurcation: an equilibrium reaches the boundary of its "

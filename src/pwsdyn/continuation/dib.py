@@ -12,7 +12,22 @@ At a graze located on an orbit branch (monitor ``GR`` of
   sliding segment (``slide_start``, ``slide_end``) is added inside segment ``i``;
 * a sliding entry reaching the other boundary of the sliding region (``SS/<switch>@<i>``,
   switching-sliding): past it the orbit crosses, runs a short arc in the other mode and
-  comes back to slide -- the entry becomes a crossing and an entry from the other side.
+  comes back to slide -- the entry becomes a crossing and an entry from the other side;
+  seen from the crossing side (``SS`` at a crossing followed by that arc) the arc goes;
+* a crossing point reaching the boundary of the sliding region where the sliding flow leaves
+  it (``CS/<switch>@<i>``, crossing-sliding): past it the orbit slides a short way there --
+  the crossing becomes an entry, a sliding segment and an exit; seen from the sliding side
+  (an entry whose sliding segment leaves into the mode beyond) the sliding segment goes;
+* the sliding flow touching the boundary of the sliding region inside a sliding segment
+  (``AS/<switch>:<side>/<i>``, adding-sliding): past it the orbit leaves there, runs an arc
+  and slides again -- the segment is split; seen from the split side (``AS/<switch>@<i>``,
+  an exit whose field no longer curves away) the two sliding segments join;
+* an orbit arriving ever more tangentially at a sliding entry that leaves back into the same
+  mode (``GS/<switch>@<i>``, grazing-sliding from its sliding side): the sliding segment goes.
+
+Where the old signature has no solution past the bifurcation (a segment that shrank to
+nothing: the locked branch folds back there), the new signature is built at the bifurcation
+itself and solved past it.
 
 The new problem is singular at the graze itself (its event condition's derivative
 ``h_x f`` vanishes there) and the new orbit lies a square root of the parameter distance
@@ -232,19 +247,249 @@ def insert_crossing(op, u, lam, seg: int):
     return prob, prob.pack(t0, xs2, Ts2)
 
 
-def past_graze(op, key: str, u, lam):
+def _segments(op, u):
+    """The solution ``u`` as a list of ``[start time, start state, duration]``, one per
+    segment (the signature's events end them in turn)."""
+    t0, xs, Ts = op.unpack(u)
+    out, t = [], float(t0)
+    for x, T in zip(xs, Ts):
+        out.append([t, np.asarray(x, dtype=float), float(T)])
+        t += float(T)
+    return out
+
+
+def _pack(prob, segs):
+    """``u`` of ``prob`` from segments ``[start time, start state, duration]``."""
+    return prob.pack(segs[0][0], [x for _, x, _ in segs], [T for _, _, T in segs])
+
+
+def slide_at_crossing(op, u, lam, seg: int):
+    """Past a crossing-sliding at the crossing ending segment ``seg`` (the field beyond now
+    points back at the crossing point): the orbit slides from there to the sliding region's
+    boundary, where the field beyond becomes tangent, and leaves into the mode it crossed
+    into. The crossing becomes a sliding entry, a sliding segment and its exit; the slide's
+    guessed duration is the time for the field beyond's normal velocity ``hdot`` to reach zero
+    at its rate along the sliding field, ``|hdot / (d hdot / dt)|``: ``(problem, u)`` or a
+    reason string."""
+    from ..orbits._segments import FieldKey
+    from ..orbits.problem import _boundary_rate, _context, _hd, _state_field
+    from ..orbits.signature import SignatureEvent
+
+    m = op.model
+    b = op.bounds[seg]
+    fk = op.fields[seg]
+    if b.kind != "crossing" or fk.kind != "mode" or len(op.bounds) != len(op.signature):
+        return "only a crossing out of a mode is re-segmented"
+    sw = m.switches[b.ref]
+    beyond = sw.above if fk.index == sw.below else sw.below
+    p = np.array([lam])
+    s = op.evaluate(u, p, jacobian=False).segs[seg]
+    te, y = float(s.te), np.asarray(s.y[:op.n], dtype=float)
+    ctx = _context(m, op.param_dict(p), op.sliding)
+    fs = _state_field(ctx, FieldKey("slide", b.ref), te, y)
+    hd = _hd(ctx, b.surface, beyond)(te, y)
+    rate = _boundary_rate(ctx, b.ref, beyond, te, y)
+    if hd * rate >= 0.0:
+        return "the sliding flow does not carry the crossing point to the region's boundary"
+    tau = abs(hd / rate)
+    sname = f"slide:{sw.name}"
+    old = op.signature[seg]
+    new = [SignatureEvent("slide_start", sw.name, old.mode_before, sname),
+           SignatureEvent("slide_end", sw.name, sname, old.mode_after)]
+    prob = op.replace(signature=list(op.signature[:seg]) + new + list(op.signature[seg + 1:]))
+    segs = _segments(op, u)
+    nxt = (seg + 1) % len(segs)
+    t_b, x_b, T_b = segs[nxt]
+    segs[nxt] = [t_b + tau, y + tau * fs, T_b - tau]
+    slide = [te, y, tau]
+    if nxt == 0:
+        segs.append(slide)
+        # the exit now starts the first segment a little later
+    else:
+        segs.insert(seg + 1, slide)
+    return prob, _pack(prob, segs)
+
+
+def _merge_next(op, u, lam, seg: int, event):
+    """The event ending segment ``seg`` replaced by ``event`` and the next segment dropped,
+    its duration given to the one after it, which now starts where the dropped one did:
+    ``(problem, u)``."""
+    mm = len(op.signature)
+    j, k = (seg + 1) % mm, (seg + 2) % mm
+    sig = list(op.signature)
+    sig[seg] = event
+    segs = _segments(op, u)
+    t_j, x_j, T_j = segs[j]
+    T_k = segs[k][2]
+    # where the merged segment is the first one, it starts a period before the dropped one
+    P = op.period_value(np.array([lam])) if k == 0 else 0.0
+    segs[k] = [t_j - P, x_j, T_j + T_k]
+    del segs[j]
+    del sig[j]
+    prob = op.replace(signature=sig)
+    return prob, _pack(prob, segs)
+
+
+def split_sliding(op, u, lam, seg: int, side: str):
+    """Past an adding-sliding on sliding segment ``seg``: the sliding flow of the old solution
+    now leaves the sliding region on an interval ``(ta, tb)`` (the field on ``side`` points
+    away there). The orbit leaves at ``ta`` into that side's mode, runs a short arc and slides
+    again: the segment is split by an exit, an arc (guessed as lasting ``tb - ta``) and an
+    entry: ``(problem, u)`` or a reason string."""
+    from ..orbits.problem import _hd
+    from ..orbits.signature import SignatureEvent
+
+    m = op.model
+    fk = op.fields[seg]
+    if fk.kind != "slide" or len(op.bounds) != len(op.signature):
+        return "only a sliding segment between single events is split"
+    sw = m.switches[fk.index]
+    mode, sign = (sw.above, -1.0) if side == "above" else (sw.below, 1.0)
+    p, s, tr, ctx = _old_segment(op, u, lam, seg)
+    n = op.n
+    hd = _hd(ctx, sw.surface, mode)
+
+    def g(t):                      # positive inside the sliding region
+        return sign * hd(t, tr(t)[:n])
+    ts = np.linspace(s.t, s.t + s.T, 2001)[1:-1]
+    gv = np.array([g(t) for t in ts])
+    out = np.flatnonzero((gv[:-1] > 0) & (gv[1:] <= 0))
+    if not out.size:
+        return "the sliding flow past the adding-sliding stays in the sliding region"
+    back = np.flatnonzero((gv[:-1] <= 0) & (gv[1:] > 0))
+    back = back[back > out[0]]
+    if not back.size:
+        return "the sliding flow past the adding-sliding does not come back into the region"
+    ta = brentq(g, ts[out[0]], ts[out[0] + 1], xtol=1e-14)
+    tb = brentq(g, ts[back[0]], ts[back[0] + 1], xtol=1e-14)
+    sname, mname = op.state_names[seg], m.mode_names[mode]
+    new = [SignatureEvent("slide_end", sw.name, sname, mname),
+           SignatureEvent("slide_start", sw.name, mname, sname)]
+    prob = op.replace(signature=list(op.signature[:seg]) + new + list(op.signature[seg:]))
+    segs = _segments(op, u)
+    t_s, x_s, T_s = segs[seg]
+    segs[seg:seg + 1] = [[t_s, x_s, ta - t_s],
+                         [ta, np.asarray(tr(ta)[:n], dtype=float), tb - ta],
+                         [tb, np.asarray(tr(tb)[:n], dtype=float), t_s + T_s - tb]]
+    return prob, _pack(prob, segs)
+
+
+def join_sliding(op, u, lam, seg: int):
+    """Past an adding-sliding seen from its split side (the sliding segment ``seg`` ends in an
+    exit whose field no longer curves away, followed by a short arc and an entry back): the
+    sliding flow no longer leaves the region there. Exit, arc and entry go, and the two
+    sliding segments become one: ``(problem, u)`` or a reason string."""
+    mm = len(op.signature)
+    if (op.fields[seg].kind != "slide" or op.bounds[seg].kind != "slide_end"
+            or len(op.bounds) != mm or mm < 3):
+        return "only a sliding exit followed by an arc and an entry back is re-segmented"
+    j = (seg + 1) % mm
+    if op.bounds[j].kind != "slide_start" or op.bounds[j].ref != op.bounds[seg].ref:
+        return "the arc after the exit does not slide again on the same surface"
+    return _merge_run(op, u, lam, seg, 2)
+
+
+def _merge_run(op, u, lam, first: int, drop: int):
+    """The ``drop`` events from the one ending segment ``first`` on (cyclically) removed and
+    the segments they separated joined into segment ``first`` (its field goes on through
+    them): ``(problem, u)``. With no event left the orbit is one segment of a whole period."""
+    mm = len(op.signature)
+    segs = _segments(op, u)
+    pairs = [[segs[r], op.signature[r]] for r in range(mm)]
+    gone = [(first + r) % mm for r in range(1, drop + 1)]
+    t, x, _ = segs[first]
+    pairs[first] = [[t, x, sum(segs[(first + r) % mm][2] for r in range(drop + 1))],
+                    op.signature[(first + drop) % mm]]
+    if drop >= mm:
+        prob = op.replace(signature=[], t_ref=float(t), state=str(op.state_names[first]))
+        return prob, prob.pack(float(t), [x], [op.period_value(np.array([lam]))])
+    keep = [r for r in range(mm) if r not in gone]
+    # the list starts at the first kept segment: times go on cyclically from there
+    kept = [pairs[r] for r in keep]
+    prob = op.replace(signature=[e for _, e in kept])
+    return prob, _pack(prob, [sg for sg, _ in kept])
+
+
+def remove_sliding(op, u, lam, seg: int):
+    """Past a grazing-sliding seen from its sliding side (the sliding entry ending segment
+    ``seg`` is followed by an exit back into the same mode): the orbit no longer reaches the
+    surface; entry, sliding segment and exit go, and the mode runs on through them:
+    ``(problem, u)`` or a reason string."""
+    mm = len(op.signature)
+    if op.bounds[seg].kind != "slide_start" or len(op.bounds) != mm:
+        return "only a sliding entry followed by its exit is re-segmented"
+    j = (seg + 1) % mm
+    if op.bounds[j].kind != "slide_end" or op.bounds[j].mode != op.bounds[seg].mode:
+        return "the sliding segment does not leave into the mode it came from"
+    return _merge_run(op, u, lam, seg, 2)
+
+
+def slide_instead_of_arc(op, u, lam, seg: int):
+    """Past a switching-sliding seen from its crossing side (the crossing ending segment
+    ``seg`` is followed by a short arc beyond the surface and a sliding entry back): the
+    crossing point is now in the sliding region and the orbit slides from there. The crossing
+    becomes the sliding entry and the arc goes: ``(problem, u)`` or a reason string."""
+    from ..orbits.signature import SignatureEvent
+
+    mm = len(op.signature)
+    b = op.bounds[seg]
+    if b.kind != "crossing" or len(op.bounds) != mm or mm < 3:
+        return "only a crossing followed by an arc and a sliding entry is re-segmented"
+    j = (seg + 1) % mm
+    if op.bounds[j].kind != "slide_start" or op.bounds[j].ref != b.ref:
+        return "the arc after the crossing does not end sliding on the same surface"
+    old_in, old_entry = op.signature[seg], op.signature[j]
+    return _merge_next(op, u, lam, seg, SignatureEvent("slide_start", old_entry.name,
+                                                       old_in.mode_before,
+                                                       old_entry.mode_after))
+
+
+def cross_instead_of_sliding(op, u, lam, seg: int):
+    """Past a crossing-sliding at the sliding entry ending segment ``seg``, whose sliding
+    segment leaves into the mode beyond: the entry and the exit have met on the boundary of
+    the sliding region, and past it the orbit crosses there. The entry becomes a crossing and
+    the sliding segment goes, its duration given to the mode after it (which now starts at
+    the entry point): ``(problem, u)`` or a reason string."""
+    from ..orbits.signature import SignatureEvent
+
+    mm = len(op.signature)
+    b = op.bounds[seg]
+    if b.kind != "slide_start" or len(op.bounds) != mm or mm < 3:
+        return "only a sliding entry followed by its exit is re-segmented"
+    j = (seg + 1) % mm
+    if op.bounds[j].kind != "slide_end":
+        return "the sliding segment does not end in an exit"
+    old_in, old_out = op.signature[seg], op.signature[j]
+    return _merge_next(op, u, lam, seg, SignatureEvent("crossing", old_in.name,
+                                                       old_in.mode_before, old_out.mode_after))
+
+
+def past_graze(op, key: str, u, lam, solve_at=None):
     """The new signature's problem and solution just past the graze ``key`` at ``lam``:
-    ``(problem, u)``, or a reason string. ``u`` solves the old signature at ``lam``."""
+    ``(problem, u)``, or a reason string. ``u`` solves the old signature at ``lam``; with
+    ``solve_at`` the new problem is built there and solved at ``solve_at``."""
     kind, body = key.split("/", 1)
-    if kind not in ("GR", "GS", "SS"):
+    if kind not in ("GR", "GS", "SS", "CS", "AS"):
         return (f"the orbit's new event sequence past a {kind} is not built yet (the branch "
                 f"stops here; on_dib='continue' follows the old one, not admissible beyond)")
     try:
-        if kind == "SS":
-            made = insert_crossing(op, u, lam, int(body.rsplit("@", 1)[1]))
+        if kind == "AS":
+            where, seg = body.rsplit("/", 1) if "/" in body else (body, "")
+            if ":" in where:
+                made = split_sliding(op, u, lam, int(seg), where.rsplit(":", 1)[1])
+            else:
+                made = join_sliding(op, u, lam, int(body.rsplit("@", 1)[1]))
+        elif kind in ("SS", "CS"):
+            seg = int(body.rsplit("@", 1)[1])
+            at_crossing = op.bounds[seg].kind == "crossing"
+            if kind == "SS":
+                made = (slide_instead_of_arc if at_crossing else insert_crossing)(op, u, lam, seg)
+            else:
+                made = (slide_at_crossing if at_crossing else cross_instead_of_sliding)(
+                    op, u, lam, seg)
         elif "@" in body:
             seg = int(body.rsplit("@", 1)[1])
-            made = remove_impact(op, u, lam, seg)
+            made = (remove_sliding if kind == "GS" else remove_impact)(op, u, lam, seg)
         elif kind == "GS":
             surface, seg = body.rsplit("/", 1)
             made = insert_sliding(op, u, lam, int(seg), surface)
@@ -256,6 +501,7 @@ def past_graze(op, key: str, u, lam):
     if isinstance(made, str):
         return f"no orbit past the {kind}: {made}"
     prob, u2 = made
+    lam = lam if solve_at is None else solve_at
     res = prob.solve(u2, np.array([lam]))
     if not res.converged:
         return f"Newton on the new signature {prob.signature}: {res.reason} ({res.message})"

@@ -98,7 +98,7 @@ class ContinuationSettings:
     max_iter: int = 10
     target_iter: int = 3
     max_angle: float = 0.35
-    locate: tuple = ("LP", "BP", "PD", "NS", "HB", "GR", "GS", "SS", "AS", "CC", "BEB")
+    locate: tuple = ("LP", "BP", "PD", "NS", "HB", "GR", "GS", "SS", "CS", "AS", "CC", "BEB")
     locate_tol: float = 1e-11
     predictor: str = "tangent"
     stop_at: tuple = ()
@@ -398,6 +398,7 @@ class Continuation:
         try:
             while not self.stop_reason:
                 for p in self._step():
+                    self._fold_at_special(p)
                     self.points.append(p)
                     self._tick()
                     yield p
@@ -405,6 +406,25 @@ class Continuation:
             if self._bar is not None:
                 self._bar.close()
                 self._bar = None
+
+    def _fold_at_special(self, p: Point) -> None:
+        """A fold located at the very point of another special point (before or after it) is
+        that point's consequence, not a second bifurcation: the branch of an orbit's locked
+        signature turns back where a segment shrinks to nothing at a graze (its duration
+        grows like the square root of the parameter's distance). The fold keeps its point
+        but loses its label."""
+        if not p.special:
+            return
+        # at the same parameter (the fold's arclength may differ: the unknowns that vanish
+        # at the graze move like a square root there)
+        near = 1e-8 * (1.0 + abs(p.lam))
+        for q in reversed(self.points[-3:]):
+            if abs(q.lam - p.lam) > near:
+                continue
+            pair = {p.special, q.special}
+            if "LP" in pair and not pair <= {"LP", "BP", ""}:
+                (p if p.special == "LP" else q).special = ""
+                return
 
     def _tick(self):
         if self._bar is not None:
@@ -601,13 +621,18 @@ class Continuation:
             sig = sb - fb * (sb - sa) / (fb - fa) if fb != fa else 0.5 * (sa + sb)
             if not sa < sig < sb or side == 2:
                 sig = 0.5 * (sa + sb)
-            Xg = predict(sig)
-            try:
-                X, res = self._correct_on(Xg, e, float(e @ Xg))
-            except TrialRejected:
-                X = None
-            if X is not None and np.linalg.norm(X - Xg) > 0.05 * L:
-                X = None
+            X = None
+            # the cubic prediction first; where its correction fails or lands far off (near
+            # a fold whose tangents turn fast, or where another branch crosses) the chord's
+            for Xg in (predict(sig), Xa + sig * chord):
+                try:
+                    X, res = self._correct_on(Xg, e, float(e @ Xg))
+                except TrialRejected:
+                    X = None
+                if X is not None and np.linalg.norm(X - Xg) > 0.05 * L:
+                    X = None
+                if X is not None:
+                    break
             if X is None:
                 if side == 2:
                     break

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..errors import ArgumentError
 from ..newton import TrialRejected
+from ..orbits.problem import DIB_KINDS
 
 #: A located zero is the bifurcation its test function stands for when the critical
 #: multipliers (eigenvalues) are this close to the critical set.
@@ -243,10 +244,9 @@ class EquilibriumProblem(_PointProblem):
 
 
 #: Test functions of the bifurcations of periodic orbits followed in two parameters.
-CURVE_KINDS = ("LP", "PD", "NS", "GR", "GS", "SS", "AS", "CC")
-#: Curves whose defining condition is a monitor of the orbit problem (a graze), not a test
-#: function of the multipliers.
-MONITOR_KINDS = ("GR", "GS", "SS", "AS", "CC")
+#: (The DIB kinds' defining condition is a monitor of the orbit problem, not a test function
+#: of the multipliers.)
+CURVE_KINDS = ("LP", "PD", "NS") + DIB_KINDS
 
 
 def orbit_test_function(kind: str, mu) -> float:
@@ -279,7 +279,7 @@ class BifurcationCurveProblem:
     kind = "orbit"
 
     def __init__(self, problem, curve: str, *, fd_step: float = 1e-6, key: str = ""):
-        if curve in MONITOR_KINDS and not key.startswith(curve + "/"):
+        if curve in DIB_KINDS and not key.startswith(curve + "/"):
             raise ArgumentError(f"a {curve} curve needs the key of its monitor ({curve}/...)")
         self.key = key
         if curve not in CURVE_KINDS:
@@ -303,7 +303,7 @@ class BifurcationCurveProblem:
             raise TrialRejected(str(exc), "simulation") from None
 
     def _psi(self, u, p, ev) -> float:
-        if self.curve in MONITOR_KINDS:
+        if self.curve in DIB_KINDS:
             # the grazing monitor itself: the segment's interior minimum of h (or an impact's
             # normal velocity) is zero on the grazing curve
             mon = self.orbit_problem.dib_monitors(u, p, evaluation=ev).get(self.key)

@@ -77,6 +77,12 @@ _SAMPLES = 8
 _SYSTEMS: dict = {}
 
 
+#: Kinds of the monitors of :meth:`OrbitProblem.dib_monitors` (discontinuity-induced
+#: bifurcations of an orbit): grazing, grazing-, switching-, crossing- and adding-sliding,
+#: corner collision.
+DIB_KINDS = ("GR", "GS", "SS", "CS", "AS", "CC")
+
+
 @dataclass(frozen=True)
 class Monitor:
     """A monitor of a discontinuity-induced bifurcation on an orbit: ``value`` (zero at the
@@ -1004,16 +1010,20 @@ class OrbitProblem:
         holds, a crossing has both fields on the same side and a sliding entry both fields
         pointing into the surface, and a chattering sequence starts with an arriving flow and a
         pressing acceleration. "Zero" is within ``ADMISSIBILITY_RTOL (1 + |x|)`` (times the
-        gradient's size): an orbit exactly at a grazing is admissible. Segments are checked on
+        gradient's size; durations within ``ADMISSIBILITY_RTOL`` times the period): an orbit
+        exactly at a grazing is admissible. Segments are checked on
         their dense output (8 points per step and the refined minima between them).
         """
         p = self._p(p)
         ev = evaluation if evaluation is not None else self.evaluate(u, p, jacobian=False)
         ctx = _context(self.model, self.param_dict(p), self.sliding)
         out = []
+        # a segment that vanishes at a graze (a sliding segment shrinking to nothing) has a
+        # duration of round-off size, of either sign, at the located point
+        t_band = ADMISSIBILITY_RTOL * max(1.0, sum(abs(float(s.T)) for s in ev.segs))
         for i, s in enumerate(ev.segs):
             name = self.state_names[i]
-            if s.T < 0:
+            if s.T < -t_band:
                 out.append(f"segment {i} ({name}) has a negative duration {s.T:.3e}: the "
                            f"event that should end it comes before its start")
                 continue
@@ -1228,6 +1238,8 @@ class OrbitProblem:
                         rate = _hd(ctx, k, other)(tg, xg)
                         kind = "GS" if sign * rate > 0 else "GR"
                     out[f"{kind}/{name}/{i}"] = Monitor(float(hg), i, name, float(tg), xg)
+            elif fk.kind == "slide" and s.T > 0:
+                out.update(self._sliding_monitors(i, s, p, ctx))
             b = self.bounds[i] if i < len(self.bounds) else None
             if b is None:
                 continue
@@ -1239,6 +1251,21 @@ class OrbitProblem:
                     if k != b.surface:
                         out[f"CC/{name}@{i}"] = Monitor(float(sign * ctx.h(k, te, y)), i, name,
                                                         float(te), y)
+            if b.kind == "crossing" and fk.kind == "mode":
+                sw = m.switches[b.ref]
+                if sw.kind == "filippov":
+                    # the field beyond stops carrying the orbit away from the surface at the
+                    # crossing point: the point reaches the sliding region's boundary. Where
+                    # the sliding flow leaves the region there, the orbit past it slides a
+                    # short way and leaves as before (crossing-sliding); where the sliding
+                    # flow enters the region, it slides away (switching-sliding, seen from
+                    # its crossing side)
+                    beyond = sw.above if fk.index == sw.below else sw.below
+                    sign = 1.0 if beyond == sw.above else -1.0
+                    value = sign * _hd(ctx, b.surface, beyond)(te, y)
+                    kind = "CS" if _boundary_rate(ctx, b.ref, beyond, te, y) * sign > 0 else "SS"
+                    out[f"{kind}/{sw.name}@{i}"] = Monitor(float(value), i, sw.name,
+                                                           float(te), y)
             if b.kind == "impact":
                 e = m.events[b.ref]
                 f_in = _state_field(ctx, fk, te, y)
@@ -1252,7 +1279,24 @@ class OrbitProblem:
                 other = sw.above if fk.index == sw.below else sw.below
                 sign = -1.0 if other == sw.above else 1.0
                 rate = _hd(ctx, b.surface, other)(te, y)
-                out[f"SS/{sw.name}@{i}"] = Monitor(float(sign * rate), i, sw.name, float(te), y)
+                # where the sliding flow at the entry leaves the region into that other mode,
+                # entry and exit meet on the boundary and the sliding segment shrinks to
+                # nothing: past it the orbit just crosses (crossing-sliding, seen from its
+                # sliding side); else it slides away and the exit is elsewhere
+                # (switching-sliding)
+                kind = "CS" if _boundary_rate(ctx, b.ref, other, te, y) * sign < 0 else "SS"
+                out[f"{kind}/{sw.name}@{i}"] = Monitor(float(sign * rate), i, sw.name,
+                                                       float(te), y)
+                nb = self.bounds[(i + 1) % self.m]
+                if nb.kind == "slide_end" and nb.mode == fk.index:
+                    # grazing-sliding seen from the sliding side: the orbit arrives ever more
+                    # tangentially and leaves back into the same mode; where its normal
+                    # velocity vanishes the sliding segment shrinks to nothing and past it
+                    # the orbit only touches the surface
+                    into = 1.0 if fk.index == sw.above else -1.0
+                    arrival = _hd(ctx, b.surface, fk.index)(te, y)
+                    out[f"GS/{sw.name}@{i}"] = Monitor(float(-into * arrival), i, sw.name,
+                                                       float(te), y)
             elif b.kind == "slide_end":
                 # adding-sliding: the field the orbit leaves the surface with is tangent to it
                 # at the exit (h_x f = 0) and its normal acceleration vanishes too (a cubic
@@ -1261,6 +1305,33 @@ class OrbitProblem:
                 acc = _acc(ctx, b.surface, b.mode)(te, y)
                 sign = 1.0 if b.mode == sw.above else -1.0
                 out[f"AS/{sw.name}@{i}"] = Monitor(float(sign * acc), i, sw.name, float(te), y)
+        return out
+
+    def _sliding_monitors(self, i, s, p, ctx) -> dict:
+        """``"AS/<switch>:<above|below>/<i>"``: along sliding segment ``i``, the smallest
+        interior local minimum of the normal velocity of the field on each side, signed
+        positive while it points into the surface (inside the sliding region). Where it
+        reaches zero the sliding flow touches the region's boundary (``h_x f = 0`` and
+        ``(h_x f)_x f = 0`` there: adding-sliding, the slides' defining conditions); past it
+        the orbit leaves at the touching point, runs a short arc and slides again."""
+        sw = self.model.switches[self.fields[i].index]
+        tr = self._dense_segment(i, s, p)
+        if tr is None:
+            return {}
+        ts = _sample_times(tr)[1:-1]
+        if len(ts) < 3:
+            return {}
+        n = self.n
+        Y = np.asarray(tr(ts))[:, :n]
+        out = {}
+        for side, mode, sign in (("above", sw.above, -1.0), ("below", sw.below, 1.0)):
+            fn = _hd(ctx, sw.surface, mode)
+            vals = np.array([sign * fn(t, y) for t, y in zip(ts, Y)])
+            found = _interior_minimum(lambda tt: sign * fn(tt, tr(tt)[:n]), ts, vals)
+            if found is not None:
+                tg, hg = found
+                out[f"AS/{sw.name}:{side}/{i}"] = Monitor(
+                    float(hg), i, sw.name, float(tg), np.asarray(tr(tg)[:n], dtype=float))
         return out
 
     # ==================================================================================
@@ -1799,6 +1870,16 @@ def _acc(ctx, k, mode):
         return float(ctx._eval(W_HDT, k * nm + mode, t, x, 1)[0]
                      + ctx._eval(W_HDX, k * nm + mode, t, x, ctx.n) @ f)
     return _Fn(fn)
+
+
+def _boundary_rate(ctx, j, mode, t, x) -> float:
+    """``d/dt (h_x f_mode)`` along the sliding field of switch ``j`` at ``(t, x)`` (its
+    convex combination extended smoothly where the point is not in the sliding region): the
+    rate at which the sliding flow crosses the sliding region's boundary ``h_x f_mode = 0``."""
+    nm, k = ctx.nm, ctx.model.switches[j].surface
+    f = _state_field(ctx, FieldKey("slide", j), t, x)
+    return float(ctx._eval(W_HDT, k * nm + mode, t, x, 1)[0]
+                 + ctx._eval(W_HDX, k * nm + mode, t, x, ctx.n) @ f)
 
 
 def _guard(ctx, j, t, x) -> bool:
