@@ -448,7 +448,8 @@ def controlled_model(model=MODEL, *, gains: ControlGains | None = None,
     a_star : float, optional
         Default of the law's reference amplitude (default ``b + Fd/k`` at the model's ``b``).
     """
-    from ..model import as_model, with_discrete_control
+    from ..model import with_discrete_control
+    from ..model.spec import as_model
 
     base = as_model(model, kind="flow", caller="controlled_model()")
     p = base.parameters
