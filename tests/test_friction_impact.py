@@ -480,3 +480,50 @@ def test_section_on_events_of_with_discrete_control():
                               law_params={"c": "x"})
     with pytest.raises(ArgumentError, match="expression law"):
         with_discrete_control(MODEL, "b", law="linear", law_params={"c": 1.0})
+
+
+# -------------------------------------------------------------------------------------------
+# continuation through the saddle-node to the non-smooth fold, and the gallery
+# -------------------------------------------------------------------------------------------
+def test_continued_branch_folds_at_the_closed_form_saddle_node_and_ends_at_the_graze():
+    """gamma = 2.5 (Fig. 2.3 (a)): continued down from the upper stable orbit, the branch
+    passes the saddle-node where the closed-form map's quadratic has a double root, a_SN =
+    sqrt(8 K (b + 1) - 16)/K (K = gamma), and ends at its graze at a* (the non-smooth fold:
+    the impact velocity falls to zero; there the saltation matrix is infinite and the point
+    has no multipliers, which must not stop the branch)."""
+    g = 2.5
+    s = _fio(g, 2.03)
+    x_up = _quadratic_fixed_point(g, 2.03, upper=True)
+    orb = pwsdyn.find_periodic_orbit(MODEL, [x_up, 0.0], t0=0.0, params=s.params(),
+                                     mode="stick")
+    assert orb.stable
+    br = pwsdyn.continue_orbit(MODEL, orb, "a", span=(1.9, 2.05), ds=-0.005)
+    lp = [sp for sp in br.special("LP") if sp.value < 1.99]
+    assert len(lp) == 1
+    assert lp[0].value == pytest.approx(math.sqrt(8 * g * 2 - 16) / g, abs=1e-8)
+    gr = br.special("GR")
+    assert len(gr) == 1 and gr[0].value == pytest.approx(A_STAR, abs=1e-8)
+    # the unstable part between: multiplier > 1 (gamma - 1 near the graze)
+    k = lp[0].index
+    assert np.all(~br.stable[k + 1:gr[0].index])
+    end = br.problem_of(br.points[-1]).orbit(br.points[-1].u, br.points[-1].lam)
+    assert end.events[0].kind == "impact"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["plot_friction_impact_fig_2_3.py",
+                                  "plot_friction_impact_fig_5_4.py"])
+def test_gallery_scripts_run(name, tmp_path, monkeypatch):
+    import runpy
+    from pathlib import Path
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    monkeypatch.chdir(tmp_path)
+    path = Path(__file__).resolve().parents[1] / "examples" / name
+    runpy.run_path(str(path), run_name="__main__")
+    fig = plt.gcf()
+    assert len(fig.axes) == 2 and all(len(ax.get_lines()) > 5 for ax in fig.axes)
+    plt.close("all")

@@ -453,6 +453,10 @@ def controlled_model(model=MODEL, *, gains: ControlGains | None = None,
 
     base = as_model(model, kind="flow", caller="controlled_model()")
     p = base.parameters
+    missing = [n for n in _NAMES if n not in p]
+    if missing:
+        raise ArgumentError(f"model {base.name!r} is not the friction impact oscillator: it "
+                            f"lacks the parameter(s) {missing}")
     ref = p["b"] + p["Fd"] / p["k"] if a_star is None else V.number("a_star", a_star)
     g = ControlGains(0.5, 1.0) if gains is None else gains
     values = {"c_x": g.c_x, "c_a": g.c_a, "a_star": ref, "eps_1": g.eps_1, "eps_2": g.eps_2,
