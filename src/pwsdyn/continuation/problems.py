@@ -81,7 +81,15 @@ class OrbitBranchProblem:
     def analyse(self, u, lam, _evaluation=None) -> dict:
         prob = self.orbit_problem
         ev = self._evaluation(u, lam)
-        mu = np.asarray(prob.multipliers(ev), dtype=complex)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            M = prob.monodromy(ev)
+        if np.all(np.isfinite(M)):
+            mu = np.asarray(prob.multipliers(ev), dtype=complex)
+        else:
+            # an event of the orbit at zero normal velocity (the orbit grazes the surface:
+            # its saltation matrix is infinite): no multipliers, and the point counts as
+            # unstable; the test functions built on them are NaN (never a sign change)
+            mu = np.full(self.orbit_problem.n - (0 if prob.forced else 1), np.nan + 0j)
         adm = prob.admissibility(u, np.array([lam]), evaluation=ev)
         stable = bool(mu.size == 0 or np.max(np.abs(mu)) < 1.0)
         out = {"multipliers": mu, "stable": stable, "admissible": bool(adm),

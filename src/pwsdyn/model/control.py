@@ -7,6 +7,13 @@ position of the impact surface -- is updated by a law, and held in between. The 
 model carries ``delta`` as a state with ``delta' = 0`` and the update as the reset of a
 transition event on ``C``, so that every analysis of the package (simulation, orbits and
 their multipliers, sweeps, continuation, the discontinuity map) sees the controlled system.
+
+The section can also be events of the model itself (``section="event:stop_neg"``): the
+update is then added to those events' resets. This is the section of a law that acts where
+the model already has an event and a surface section would be degenerate -- thesis eq. 5.3
+updates the constraint of the friction impact oscillator at the crossings of ``{v = 0}``,
+and ``v`` is identically 0 while the mass sticks, so the surface ``v`` is crossed only at
+the events that end a slip (``stop_*`` / ``reverse_*`` of the zoo model).
 The law is
 
 * ``"linear"`` (thesis eq. 5.2): ``delta -> delta* + c . (x - x*) + c0 (delta - delta*)``, with
@@ -32,7 +39,8 @@ LAWS = ("linear",)
 
 
 def with_discrete_control(model, parameter: str, *, section: str = "stroboscopic",
-                          law: str = "linear", name: str | None = None) -> Model:
+                          law: str = "linear", law_params=None,
+                          name: str | None = None) -> Model:
     """The model with ``parameter`` updated by a discrete control law at a section.
 
     Parameters
@@ -44,11 +52,18 @@ def with_discrete_control(model, parameter: str, *, section: str = "stroboscopic
         name, constant between the control events.
     section : str
         ``"stroboscopic"`` (forced models: ``t = t_c`` modulo the forcing period, ``t_c`` a new
-        parameter, default 0) or the expression of a surface ``h(t, x, p)`` whose zeros (in
-        either direction) are the control moments.
+        parameter, default 0), the expression of a surface ``h(t, x, p)`` whose zeros (in
+        either direction) are the control moments, or ``"event:<name>[,<name>...]"``: events
+        of the model, whose resets then also set the parameter to the law. The law is then
+        evaluated, like the rest of the event's reset, at the state just before the event,
+        and acts exactly when (and only when) the event fires; no event is added.
     law : str
         ``"linear"`` (eq. 5.2, with its parameters added) or an expression of the new value in
         the states and parameters.
+    law_params : dict, optional
+        Parameters of an expression ``law`` added to the model with their default values
+        (gains, references), so that one controlled model serves every value of them and
+        they can be swept or continued. Their names must be new.
     name : str, optional
         The controlled model's name (default ``"<model>+control(<parameter>)"``).
 
@@ -86,7 +101,17 @@ def with_discrete_control(model, parameter: str, *, section: str = "stroboscopic
         rhs = dict(rhs)
         rhs[parameter] = "0"
         modes[mname] = rhs
-    if section == "stroboscopic":
+    on_events: list[str] = []
+    events = [dict(e) for e in spec.get("events", [])]
+    if isinstance(section, str) and section.startswith("event:"):
+        on_events = [n.strip() for n in section[len("event:"):].split(",")]
+        known = [e.get("name") for e in events]
+        bad = [n for n in on_events if n not in known]
+        if not on_events or bad or len(set(on_events)) != len(on_events):
+            raise ArgumentError(f"`section` {section!r} must name distinct events of model "
+                                f"{base.name!r} after 'event:'; its events: {known}")
+        surface = None
+    elif section == "stroboscopic":
         if base.forcing_period is None:
             raise ArgumentError(f"model {base.name!r} is autonomous: a stroboscopic section "
                                 f"needs a forcing period; give the section as a surface")
@@ -97,8 +122,8 @@ def with_discrete_control(model, parameter: str, *, section: str = "stroboscopic
     elif isinstance(section, str) and section.strip():
         surface = section
     else:
-        raise ArgumentError(f"`section` must be 'stroboscopic' or a surface expression, got "
-                            f"{section!r}")
+        raise ArgumentError(f"`section` must be 'stroboscopic', 'event:<name>' or a surface "
+                            f"expression, got {section!r}")
     if law == "linear":
         new = {"delta_star": value, "c0": 0.0}
         for s in base.states:
@@ -112,11 +137,28 @@ def with_discrete_control(model, parameter: str, *, section: str = "stroboscopic
                           + [f"c0*({parameter} - delta_star)"])
     elif isinstance(law, str) and law.strip():
         expr = law
+        from .. import _validate as V
+
+        new = {k: V.number(f"law_params[{k!r}]", v)
+               for k, v in V.mapping("law_params", law_params).items()}
+        taken = [k for k in new if not isinstance(k, str) or k in params or k in states]
+        if taken:
+            raise ArgumentError(f"the names {taken} of `law_params` are taken")
+        params.update(new)
     else:
         raise ArgumentError(f"`law` must be 'linear' or an expression, got {law!r}")
-    events = [dict(e) for e in spec.get("events", [])]
-    events.append({"name": "control", "kind": "transition", "surface": surface,
-                   "direction": 0, "reset": {parameter: expr}})
+    if law_params and law == "linear":
+        raise ArgumentError("`law_params` are for an expression law; the linear law has its "
+                            "own parameters")
+    if on_events:
+        # the update composed with the event's own reset: both are evaluated at the state
+        # before the event, so the law sees the same x the event does
+        for ev in events:
+            if ev.get("name") in on_events:
+                ev["reset"] = {**dict(ev.get("reset") or {}), parameter: expr}
+    else:
+        events.append({"name": "control", "kind": "transition", "surface": surface,
+                       "direction": 0, "reset": {parameter: expr}})
     x0 = dict(defaults.get("x0", {}) or {})
     if isinstance(defaults.get("x0"), dict):
         x0[parameter] = value

@@ -1360,7 +1360,10 @@ class OrbitProblem:
         C = s.X_y[:n, :n] - np.outer(Fo, s.tau_y[:n])
         cx = s.c_z[:n]
         den = s.c_t + cx @ fi
-        return C - np.outer(s.X_t[:n] + C @ fi - Fo * s.tau_t, cx) / den
+        # den = 0 at an event with zero normal velocity (a graze): the matrix is infinite,
+        # left to the callers to see (multipliers NaN)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return C - np.outer(s.X_t[:n] + C @ fi - Fo * s.tau_t, cx) / den
 
     def multipliers(self, ev: ProblemEvaluation) -> np.ndarray:
         """Floquet multipliers of the orbit at ``ev`` (nontrivial ones, autonomous)."""
@@ -1489,7 +1492,11 @@ class OrbitProblem:
         autonomous = not self.forced
         ctx = _context(self.model, self.param_dict(p), self.sliding)
         trivial = pj = nv = None
-        if autonomous:
+        if not np.all(np.isfinite(M)):
+            # an event at zero normal velocity (the orbit at a graze of its own impact): the
+            # saltation matrix is infinite there and the orbit has no multipliers
+            mult = np.full(n - (1 if autonomous else 0), np.nan + 0j)
+        elif autonomous:
             f0 = _state_field(ctx, self.fields[k], t_base, x0)
             nv = f0 if phase_normal is None else np.asarray(phase_normal, dtype=float)
             mult = floquet_multipliers(M, flow_direction=f0, section_normal=nv)
