@@ -74,11 +74,9 @@ def design(graze):
     br = pwsdyn.continue_orbit("quarter-car", orb, "delta", span=(0.04, 0.06), ds=-0.002,
                                on_dib="stop")
     gr = br.special("CC")[0]
-    from pwsdyn.grazing.discontinuity import _tangency
-
-    mon = _tangency(gr)[3]
-    seg = gr.problem.orbit_problem.evaluate(gr.point.u, np.array([gr.value])).segs[mon.segment]
-    t_c = (mon.t + 0.25 * seg.T) % T
+    # the graze ends segment i (compression); the section lies in segment i + 1 (expansion)
+    segs = gr.problem.orbit_problem.evaluate(gr.point.u, np.array([gr.value])).segs
+    t_c = (gr.monitor.t + 0.25 * segs[(gr.monitor.segment + 1) % len(segs)].T) % T
     return gr, pwsdyn.design_control(gr, t_c=t_c, max_gain=0.05)
 
 
@@ -374,3 +372,21 @@ def test_metrics_sweep_dataset_and_plot():
         plot_metrics(ds, ["comfort"])
     with pytest.raises(ArgumentError, match="one per metric"):
         plot_metrics(ds, ["rms_acceleration"], ax=axes)
+
+
+def test_metric_units_follow_the_model():
+    """Units from the model's [units]: the acceleration the velocity's per time unit, the
+    travel a linear combination of quantities of one unit (m), the impact velocity the
+    bumpstop surface's unit per time unit; none for a travel that mixes units."""
+    from pwsdyn.explore.metrics import _linear_unit
+
+    m = pwsdyn.load_model("quarter-car")
+    assert _linear_unit(m, m.surfaces[m.events[0].surface].expr) == "m"
+    ds = metrics_sweep({"q": {"model": m, "params": PARAMS}}, "A", [0.005], velocity="vs",
+                       travel="zs - zu", event="bumpstop", transient=1, periods=1)
+    assert ds.travel_range.attrs["units"] == "m"
+    assert ds.impact_velocity_max.attrs["units"] == "m s-1"
+    assert ds.rms_acceleration.attrs["units"] == "m s-1 s-1"
+    ds = metrics_sweep({"q": {"model": m, "params": PARAMS}}, "A", [0.005], velocity="vs",
+                       travel="zs*vs", transient=1, periods=1)
+    assert "units" not in ds.travel_range.attrs

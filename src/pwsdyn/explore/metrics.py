@@ -157,6 +157,24 @@ def _travel_function(model, travel):
     return rows
 
 
+def _linear_unit(model, expr) -> str | None:
+    """The unit of ``expr`` where it is a linear combination (numeric coefficients, plus a
+    constant) of states and parameters that all have one unit (``zs - zu``, the bumpstop's
+    ``zs - zu + delta``); None otherwise."""
+    expr = sp.sympify(expr)
+    syms = sorted(expr.free_symbols, key=str)
+    if not syms or any(str(s) == "t" for s in syms):
+        return None
+    try:
+        poly = sp.Poly(expr, *syms)
+    except sp.PolynomialError:
+        return None
+    if poly.total_degree() > 1:
+        return None
+    units = {model.unit(str(s)) for s in syms}
+    return units.pop() if len(units) == 1 and None not in units else None
+
+
 # ======================================================================================
 # one trajectory
 # ======================================================================================
@@ -487,8 +505,22 @@ def metrics_sweep(variants, param: str, values, *, velocity: str, travel: str | 
     tu = time_units(first)
     vu = first.unit(velocity)
     acc_u = f"{vu} {tu}-1" if vu and tu and tu.isidentifier() else None
+    travel_u = None
+    if travel is not None:
+        from ..model.expressions import parse_expression
+        from ..model.spec import TIME
+
+        known = {TIME: sp.Symbol(TIME, real=True)}
+        known.update({str(q): q for q in first.state_symbols + first.parameter_symbols})
+        known.update(getattr(first, "definitions", {}) or {})
+        travel_u = _linear_unit(first, parse_expression(travel, known, field="travel"))
+    surf = [first.surfaces[first.events[j].surface].expr for j in _impact_events(first, event)]
+    hu = {_linear_unit(first, e) for e in surf}
+    hu = hu.pop() if len(hu) == 1 else None
     units = {"rms_acceleration": acc_u, "peak_acceleration": acc_u,
-             "impact_velocity_max": None, "impulse_per_period": vu,
+             "travel_min": travel_u, "travel_max": travel_u, "travel_range": travel_u,
+             "impact_velocity_max": f"{hu} {tu}-1" if hu and tu and tu.isidentifier()
+             else None, "impulse_per_period": vu,
              "stick_time_per_period": tu, "impacts_per_period": "1",
              "chatter_per_period": "1"}
     dims = ("variant", "direction", param)
