@@ -1266,3 +1266,77 @@ def plot_branch(branch, y=None, path: str | Path | None = None, *, ax: Axes | No
     if path is not None:
         _save_figure(fig, path, overwrite)
     return fig
+
+
+# ======================================================================================
+# response metrics over a parameter
+# ======================================================================================
+#: Metrics drawn by :func:`plot_metrics` by default (variables of
+#: :func:`pwsdyn.explore.metrics.metrics_sweep`).
+DEFAULT_METRICS = ("rms_acceleration", "travel_range", "impact_velocity_max")
+#: Colours of the variants of :func:`plot_metrics`, in order (Okabe-Ito).
+VARIANT_COLORS = ("#000000", "#D55E00", "#0072B2", "#009E73", "#CC79A7", "#E69F00")
+
+
+def plot_metrics(ds: xr.Dataset, metrics: Sequence[str] | None = None,
+                 path: str | Path | None = None, *, overwrite: bool = False,
+                 ax: Axes | Sequence[Axes] | None = None) -> Figure:
+    """Response metrics against the swept parameter, one panel per metric, one colour per
+    variant, the up sweep solid with dots and the down sweep dashed with crosses (so that
+    hysteresis reads as two curves of one colour).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        The result of :func:`pwsdyn.explore.metrics.metrics_sweep`.
+    metrics : sequence of str, optional
+        Its variables drawn (default :data:`DEFAULT_METRICS`).
+    path : str or Path, optional
+        Also save the figure there (see :func:`plot_trajectory`).
+    overwrite : bool
+        Replace an existing file at ``path``.
+    ax : matplotlib.axes.Axes or sequence of Axes, optional
+        Draw into your own axes, one per metric.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    if ds.attrs.get("kind") != "metrics" or "variant" not in ds.dims:
+        raise ArgumentError("`ds` must be a result of pwsdyn.explore.metrics.metrics_sweep()")
+    metrics = list(DEFAULT_METRICS if metrics is None else metrics)
+    if isinstance(metrics, str) or not metrics:
+        raise ArgumentError("`metrics` must be a non-empty sequence of variable names")
+    known = [k for k in ds.data_vars if k != "status"]
+    for k in metrics:
+        if k not in known:
+            raise ArgumentError(f"unknown metric {k!r}; the dataset has {known}")
+    if path is not None:
+        _check_figure_path(path, overwrite)
+    if ax is None:
+        fig = Figure(figsize=(7.0, 2.2 * len(metrics) + 0.6), layout="constrained")
+        axes = list(np.atleast_1d(fig.subplots(len(metrics), 1, sharex=True)))
+    else:
+        axes, fig = _user_axes(ax, {len(metrics): "one per metric"})
+    pname = ds.attrs["parameter"]
+    pv = ds[pname].values
+    variants = [str(v) for v in ds.variant.values]
+    for a, k in zip(axes, metrics):
+        for vi, v in enumerate(variants):
+            color = VARIANT_COLORS[vi % len(VARIANT_COLORS)]
+            for d in [str(x) for x in ds.direction.values]:
+                y = ds[k].sel(variant=v, direction=d).values
+                a.plot(pv, y, color=color, ls="-" if d == "up" else "--",
+                       marker="o" if d == "up" else "x", ms=3, lw=1.0,
+                       label=f"{v} ({d})" if len(ds.direction) > 1 else v)
+        unit = ds[k].attrs.get("units")
+        label = k.replace("_", " ")
+        a.set_ylabel(f"{label} ({unit})" if unit and unit != "1" else label, fontsize=8)
+        a.grid(True, lw=0.3)
+    axes[0].legend(fontsize=7, loc="best")
+    axes[-1].set_xlabel(_tex(pname))
+    axes[0].set_title(f"response metrics of {ds.attrs.get('model', '')} in "
+                      f"{_tex(pname)}", fontsize="medium")
+    if path is not None:
+        _save_figure(fig, path, overwrite)
+    return fig

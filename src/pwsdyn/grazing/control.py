@@ -89,8 +89,10 @@ def design_control(point, *, t_c: float = 0.0, c0_values=None, max_gain: float =
     Parameters
     ----------
     point : SpecialPoint
-        A ``GR`` point of a forced orbit branch continued in the constraint position (the
-        parameter of the branch; the surface must depend on it).
+        A grazing point of a forced orbit branch continued in the constraint position (the
+        parameter of the branch; the surface must depend on it): a ``GR`` point, or a ``CC``
+        point that is a graze at a kink of the field (as :func:`pwsdyn.discontinuity_map`
+        accepts).
     t_c : float
         The control section's time (modulo the forcing period).
     c0_values : sequence of float, optional
@@ -108,7 +110,7 @@ def design_control(point, *, t_c: float = 0.0, c0_values=None, max_gain: float =
 
     from .. import _validate as V
     from ..orbits.problem import _context
-    from .discontinuity import discontinuity_map
+    from .discontinuity import _tangency, discontinuity_map
 
     dm = discontinuity_map(point)
     prob = point.problem.orbit_problem
@@ -123,7 +125,7 @@ def design_control(point, *, t_c: float = 0.0, c0_values=None, max_gain: float =
                                            hi_open=True) for v in c0_values]))
     m, n = prob.model, prob.n
     param = point.parameter
-    mon = point.monitor
+    mon = _tangency(point)[3]          # a graze at a kink: on the segment after it
     k = m.events[[j for j, e in enumerate(m.events)
                   if e.kind == "impact" and m.surfaces[e.surface].name == mon.surface][0]].surface
     p = np.array([point.value])

@@ -99,14 +99,81 @@ class DiscontinuityMap:
 
 
 def _tangency(point):
-    """``(problem, u, p, monitor)`` of a GR special point of an orbit branch."""
+    """``(problem, u, p, monitor)`` of a grazing point of an orbit branch: a ``GR`` point
+    (a segment touching a surface inside it), or a ``CC`` point that is a graze at a kink
+    (:func:`_kink_graze`)."""
     mon = getattr(point, "monitor", None)
-    if getattr(point, "kind", None) != "GR" or mon is None or "@" in point.key:
+    kind = getattr(point, "kind", None)
+    if kind == "CC" and mon is not None:
+        return _kink_graze(point)
+    if kind != "GR" or mon is None or "@" in point.key:
         raise ArgumentError("discontinuity_map needs a GR special point where a segment "
                             "grazes a surface inside it (pwsdyn.continue_orbit; not the end "
-                            "of an impacting branch)")
+                            "of an impacting branch), or a CC point where the orbit grazes an "
+                            "impact surface at a kink of the field")
     prob = point.problem.orbit_problem
     return prob, point.point.u, np.array([point.value]), mon
+
+
+#: Relative size below which the normal velocity ``h_t + h_x f`` of a surface at a corner
+#: collision counts as zero (a tangency) and the two fields at a crossing count as equal:
+#: far above the rounding of a located point (~1e-12), far below an O(1) transversal rate.
+_KINK_TOL = 1e-7
+
+
+def _kink_graze(point):
+    """A corner collision that is a graze at a kink of the field, as a monitor on the
+    segment after the kink.
+
+    Where the surface ``h_turning = h_t + h_x f`` of an impact surface is itself a surface
+    across which the field is continuous with a jump in its slope (a ``continuous`` surface:
+    ``Max``, ``Min``, ``Abs`` -- the quarter-car's bilinear damper, whose kink ``vr = 0`` is
+    the zero of the suspension's relative velocity), the orbit reaches its minimum of ``h``
+    exactly at the crossing of the kink: the graze is an event point, and continuation sees
+    it as the event point reaching the impact surface (``CC``). Conditions 2.30-2.32 hold
+    with the one field ``f(x*)`` of both sides, and the lowest-order discontinuity map
+    (eq. 2.33-2.34) uses only ``f``, ``h_x``, ``(h_x f)_x f`` and ``g_x`` at ``x*``, which
+    the two sides share; the smooth Poincare map crosses the kink with the identity as its
+    saltation matrix (equal fields). So the graze is analysed on the segment that starts at
+    the kink, at its start.
+    """
+    from ..orbits.problem import Monitor, _context
+
+    mon = point.monitor
+    prob = point.problem.orbit_problem
+    u, p = point.point.u, np.array([point.value])
+    m, n = prob.model, prob.n
+    i = mon.segment
+    b = prob.bounds[i] if i < len(prob.bounds) else None
+    impacts = [e for e in m.events if e.kind == "impact"
+               and m.surfaces[e.surface].name == mon.surface]
+    if b is None or b.kind != "crossing" or not impacts:
+        raise ArgumentError(f"the corner collision at {point.parameter} = {point.value:.12g} "
+                            f"is not a graze at a kink: the discontinuity map needs an impact "
+                            f"surface met at the crossing of a surface of continuity")
+    nseg = len(prob.fields)
+    j = (i + 1) % nseg
+    fa, fb = prob.fields[i], prob.fields[j]
+    if fa.kind != "mode" or fb.kind != "mode":
+        raise ArgumentError("the corner collision is not between two modes")
+    ctx = _context(m, prob.param_dict(p), prob.sliding)
+    t, x = float(mon.t), np.asarray(mon.x, dtype=float)
+    f_in = ctx.mode_field(fa.index, t, x)
+    f_out = ctx.mode_field(fb.index, t, x)
+    scale = float(np.linalg.norm(f_in)) or 1.0
+    if np.linalg.norm(f_out - f_in) > _KINK_TOL * scale:
+        raise ArgumentError(f"the field jumps across {m.surfaces[b.surface].name!r} at the "
+                            f"corner collision: not a graze at a kink (the discontinuity map "
+                            f"of eq. 2.34 assumes one field at the graze)")
+    k = impacts[0].surface
+    h_x = ctx.h_x(k, t, x)
+    rate = float(h_x @ f_in + ctx.h_t(k, t, x))
+    if abs(rate) > _KINK_TOL * (float(np.linalg.norm(h_x)) * scale + abs(ctx.h_t(k, t, x))):
+        raise ArgumentError(f"the orbit crosses {mon.surface!r} at the corner collision with "
+                            f"normal velocity {rate:.3e}: a transversal corner collision, not "
+                            f"a graze")
+    t0 = float(prob.evaluate(u, p).segs[j].t)
+    return prob, u, p, Monitor(mon.value, j, mon.surface, t0, x)
 
 
 def discontinuity_map(point) -> DiscontinuityMap:
@@ -116,7 +183,9 @@ def discontinuity_map(point) -> DiscontinuityMap:
     ----------
     point : SpecialPoint
         A ``GR`` point of an orbit branch where a segment touches an impact surface inside it
-        (``Branch.special("GR")``).
+        (``Branch.special("GR")``), or a ``CC`` point where the orbit touches an impact
+        surface at a kink of its field (``Branch.special("CC")``: the quarter-car's bumpstop,
+        grazed where the bilinear damper switches; see :func:`_kink_graze`).
 
     Returns
     -------
