@@ -177,6 +177,43 @@ def test_the_api_reference_lists_every_public_name():
     assert modules <= listed, f"public modules missing from docs/api.rst: {sorted(modules - listed)}"
 
 
+# ---- the pages' code ------------------------------------------------------------------------
+
+_CODE_BLOCK = re.compile(r"^\.\. code-block:: python\n\n((?:(?:    .*)?\n)+)", re.M)
+
+
+def page_code(page: Path) -> str:
+    """The ``.. code-block:: python`` blocks of an RST page, in order, as one script (a page's
+    later blocks use the names of its earlier ones)."""
+    text = page.read_text(encoding="utf-8")
+    blocks = [re.sub(r"^    ", "", m.group(1), flags=re.M) for m in _CODE_BLOCK.finditer(text)]
+    return "\n".join(blocks)
+
+
+def _pages_with_code() -> list[Path]:
+    return [p for p in sorted(DOCS.glob("*.rst")) + sorted(DOCS.glob("guide/*.rst"))
+            if page_code(p).strip()]
+
+
+def test_the_pages_code_blocks_are_found():
+    names = {p.name for p in _pages_with_code()}
+    assert {"getting_started.rst", "model_format.rst", "simulation.rst"} <= names
+    assert "continue_orbit" in page_code(DOCS / "getting_started.rst")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("page", _pages_with_code(), ids=lambda p: p.name)
+def test_the_pages_python_runs(page, tmp_path):
+    """Each page's Python, run as a script in a fresh process in a temporary directory
+    (files it writes land there), like the README's blocks (tests/test_readme.py)."""
+    script = tmp_path / "page.py"
+    script.write_text(page_code(page), encoding="utf-8")
+    env = {**os.environ, "MPLBACKEND": "Agg", "PWSDYN_QUIET": "1"}
+    res = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env,
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+
+
 # ---- the gallery -----------------------------------------------------------------------------
 
 def _gallery_conf() -> dict:
