@@ -987,7 +987,7 @@ def orbit_cmd(model, params, sets, x0, t0, period, periods, transient, mode, nod
 @click.option("--equilibrium", is_flag=True,
               help="Continue an equilibrium of the initial mode instead of a periodic orbit.")
 @click.option("--ds", type=float, default=None,
-              help="First step in arclength (default min(0.02, |to - from| / 100)).")
+              help="First step in arclength (default min(0.02, abs(to - from) / 100)).")
 @click.option("--max-points", "max_points", type=int, default=200, show_default=True,
               help="Most points on the branch.")
 @click.option("--rtol", type=float, default=None, help="Relative tolerance (default 1e-12).")

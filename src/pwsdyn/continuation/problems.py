@@ -385,7 +385,7 @@ class PseudoEquilibriumProblem(_PointProblem):
     """Pseudo-equilibria of a Filippov switching surface: points on ``h(x) = 0`` where the
     sliding vector field vanishes, followed in a parameter.
 
-    Unknowns ``u = (x, alpha)``; with ``f_+`` (``f_-``) the field above (below) the surface,
+    Unknowns ``u = (x, alpha)``; with ``f_+`` (``f_-``) the field above (below) the surface::
 
         (1 - alpha) f_-(x) + alpha f_+(x) = 0,    h(x) = 0
 

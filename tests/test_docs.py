@@ -1,0 +1,279 @@
+"""The documentation's sources cover the code: the bibliography has an entry for every work
+the code cites, the API reference lists every public name, the gallery builds every script.
+
+Fast and without Sphinx: these read the sources (``src/pwsdyn``, ``docs/``, ``examples/``) as
+text. The build itself (``python -m sphinx -W ... docs docs/_build/html``, in ``.ci/run``) runs
+the gallery and fails on any warning; the slow test below runs each gallery script on its own,
+as a user would.
+"""
+
+from __future__ import annotations
+
+import ast
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import pwsdyn
+
+ROOT = Path(__file__).resolve().parent.parent
+SRC = ROOT / "src" / "pwsdyn"
+DOCS = ROOT / "docs"
+EXAMPLES = ROOT / "examples"
+
+# ---- the bibliography ------------------------------------------------------------------------
+
+#: How the code cites a work (a regular expression) -> its key in docs/references.bib. The
+#: thesis is cited as "thesis eq. 2.36", "thesis section 5.2", "thesis Paper B", its appended
+#: papers as "Paper A" .. "Paper E" (handled below, with ranges such as "Papers B-E"), the
+#: slides as "the slides"; other works by their authors.
+CITATIONS = {
+    r"\bthesis\b|\bSvahn,? \(?2009\b": "svahn2009thesis",
+    r"\bslides\b": "piiroinen2015slides",
+    r"\bBudd\b": "budd1994",
+    r"\bNordmark & Piiroinen\b": "nordmark2009",
+    r"\bNordmark (\(|, )?1991\b|\bNordmark's (discontinuity map|square-root)": "nordmark1991",
+    r"thesis's refs?\. \[(16, )?19\]|\bFredriksson\b": "fredriksson1997",
+    r"\bDankowicz & Piiroinen\b|\bDankowicz and P\. T\. Piiroinen\b": "dankowicz2002",
+    r"\bdi Bernardo\b": "dibernardo2001",
+    r"\bPiiroinen & Kuznetsov\b|\bPiiroinen and Yu\. A\. Kuznetsov\b": "piiroinen2008",
+    r"\bLeine\b": "leine1998",
+    r"\bAdolfsson\b": "adolfsson2001",
+    r"\bFilippov\b": "filippov1988",
+    r"\bUtkin\b": "utkin1992",
+    r"\bKuznetsov, Rinaldi & Gragnani\b": "kuznetsov2003",
+    r"\bKuznetsov,? (\*Elements|section)": "kuznetsov2004",
+    r"\bKeller's\b": "keller1977",
+    r"\bAllgower\b": "allgower2003",
+    r"\bDankowicz & Schilder\b": "dankowicz2013",
+    r"\bThota & Dankowicz\b": "thota2008",
+    r"\bDormand\b": "dormand1980",
+    r"\bShampine\b": "shampine1986",
+    r"\bHairer\b": "hairer1993",
+    r"\bParlett & Reinsch\b": "parlett1969",
+    r"\bBenettin\b": "benettin1980",
+    r"\bVan Loan\b": "vanloan1978",
+    r"\bDeuflhard\b": "deuflhard2004",
+    r"\bM(ü|ue)ller\b": "muller1995",
+    r"\bSvahn & Dankowicz\b|\bSvahn and H\. Dankowicz\b": "svahn2008paperD",
+    r"\bDankowicz and F\. Svahn\b|\bDankowicz & Svahn\b": "dankowicz2007paperB",
+    r"\bSvahn, J\. Jerrelind\b": "svahn2009paperC",
+}
+#: The thesis's appended papers.
+PAPERS = {"A": "wilcox2009paperA", "B": "dankowicz2007paperB", "C": "svahn2009paperC",
+          "D": "svahn2008paperD", "E": "svahn2009paperE"}
+_PAPERS = re.compile(r"\bPapers? ([A-E](?:(?:, |,? and | to |-)[A-E])*)\b")
+
+#: What looks like an author-year citation: "Name & Name", "Name et al.", "Name (1991)",
+#: "Name 1991". Each one found must be matched by a pattern of CITATIONS (a work cited in a
+#: new way needs an entry in the bibliography and a line above).
+_AUTHOR = r"[A-Z][a-zà-ÿ'-]+(?: [A-Z][a-zà-ÿ'-]+)?"
+_CITATION_LIKE = re.compile(
+    rf"\b{_AUTHOR}(?: & {_AUTHOR}|,? et al\.?|,? \(?(?:1[89]|20)\d\d\)?)")
+#: Capitalised words before a year or an ampersand that are not authors (publishers, places,
+#: journals, software).
+NOT_AUTHORS = {"Stockholm", "Springer", "SIAM", "KTH", "Galway", "NUI Galway", "Math",
+               "Softw", "Dyn", "Vib", "Control", "Chaos", "Appl", "Syst", "Comput",
+               "Systems", "Dynamics", "Mathematics", "The", "In", "ACM"}
+
+
+def _code_texts() -> list[tuple[Path, str]]:
+    files = sorted(SRC.rglob("*.py")) + sorted((SRC / "model" / "zoo").glob("*.toml"))
+    return [(p, p.read_text(encoding="utf-8")) for p in files if "__pycache__" not in p.parts]
+
+
+def _bib_keys() -> set[str]:
+    text = (DOCS / "references.bib").read_text(encoding="utf-8")
+    return set(re.findall(r"^@\w+\{([^,\s]+),", text, re.M))
+
+
+def _paper_letters(spec: str) -> set[str]:
+    """``"B-E"`` -> B, C, D, E; ``"D and E"`` -> D, E; ``"B, C and E"`` -> B, C, E."""
+    out = set()
+    for a, b in re.findall(r"([A-E])(?:(?:-| to )([A-E]))?", spec):
+        out |= {chr(c) for c in range(ord(a), ord(b or a) + 1)}
+    return out
+
+
+def cited_keys() -> dict[str, set[str]]:
+    """The bibliography keys the code cites, each with the files that cite it."""
+    found: dict[str, set[str]] = {}
+    for path, text in _code_texts():
+        rel = str(path.relative_to(ROOT))
+        for pattern, key in CITATIONS.items():
+            if re.search(pattern, text):
+                found.setdefault(key, set()).add(rel)
+        for m in _PAPERS.finditer(text):
+            for letter in _paper_letters(m.group(1)):
+                found.setdefault(PAPERS[letter], set()).add(rel)
+    return found
+
+
+def test_every_work_the_code_cites_has_a_bibliography_entry():
+    found = cited_keys()
+    # the scan sees the code's citations: the thesis, its papers and the slides are cited in
+    # dozens of places, so an empty result would mean the scan is broken, not the code clean
+    assert {"svahn2009thesis", "piiroinen2015slides", "wilcox2009paperA",
+            "nordmark1991"} <= set(found)
+    missing = {k: sorted(v)[:3] for k, v in found.items() if k not in _bib_keys()}
+    assert not missing, f"cited in the code but not in docs/references.bib: {missing}"
+
+
+def test_every_author_year_citation_in_the_code_is_known():
+    """A citation in a form CITATIONS does not know (a new work) must be added there and to
+    docs/references.bib."""
+    unknown = {}
+    for path, text in _code_texts():
+        for m in _CITATION_LIKE.finditer(text):
+            cite = m.group(0)
+            first = re.match(_AUTHOR, cite).group(0)
+            if first in NOT_AUTHORS or first.split()[0] in NOT_AUTHORS:
+                continue
+            # the pattern may need the text around the match ("Kuznetsov, section")
+            window = text[max(0, m.start() - 20): m.end() + 40]
+            if not any(re.search(p, window) for p in CITATIONS):
+                unknown.setdefault(cite, str(path.relative_to(ROOT)))
+    assert not unknown, f"citations without a bibliography entry: {unknown}"
+
+
+def test_every_bibliography_entry_is_complete():
+    text = (DOCS / "references.bib").read_text(encoding="utf-8")
+    entries = re.split(r"^@", text, flags=re.M)[1:]
+    assert len(entries) == len(_bib_keys())                # no duplicate or unparsed keys
+    for entry in entries:
+        key = entry.split("{", 1)[1].split(",", 1)[0]
+        for field in ("author", "title", "year"):
+            assert re.search(rf"^\s*{field}\s*=", entry, re.M), f"{key} has no {field}"
+
+
+def test_the_closed_forms_of_the_paper_ranges():
+    # the ranges the code writes ("Papers D and E", "Papers B-E", "Papers B, C and E")
+    assert _paper_letters("D and E") == {"D", "E"}
+    assert _paper_letters("B-E") == {"B", "C", "D", "E"}
+    assert _paper_letters("B, C and E") == {"B", "C", "E"}
+    assert _PAPERS.search("thesis's Papers B-E as a model").group(1) == "B-E"
+
+
+# ---- the API reference -----------------------------------------------------------------------
+
+def test_the_api_reference_lists_every_public_name():
+    api = (DOCS / "api.rst").read_text(encoding="utf-8")
+    listed = set(re.findall(r"^   ([A-Za-z_][\w.]*)\s*$", api, re.M))
+    missing = sorted(n for n in pwsdyn.__all__ if n not in listed)
+    assert not missing, f"public names missing from docs/api.rst: {missing}"
+    # and every public module (no part of its dotted name private), relative to pwsdyn
+    modules = set()
+    for path in SRC.rglob("*.py"):
+        parts = path.relative_to(SRC).with_suffix("").parts
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        if parts and not any(p.startswith("_") for p in parts):
+            modules.add(".".join(parts))
+    assert "integrate.simulate" in modules and "io" in modules   # the walk sees them
+    assert modules <= listed, f"public modules missing from docs/api.rst: {sorted(modules - listed)}"
+
+
+# ---- the pages' code ------------------------------------------------------------------------
+
+_CODE_BLOCK = re.compile(r"^\.\. code-block:: python\n\n((?:(?:    .*)?\n)+)", re.M)
+
+
+def page_code(page: Path) -> str:
+    """The ``.. code-block:: python`` blocks of an RST page, in order, as one script (a page's
+    later blocks use the names of its earlier ones)."""
+    text = page.read_text(encoding="utf-8")
+    blocks = [re.sub(r"^    ", "", m.group(1), flags=re.M) for m in _CODE_BLOCK.finditer(text)]
+    return "\n".join(blocks)
+
+
+def _pages_with_code() -> list[Path]:
+    return [p for p in sorted(DOCS.glob("*.rst")) + sorted(DOCS.glob("guide/*.rst"))
+            if page_code(p).strip()]
+
+
+def test_the_pages_code_blocks_are_found():
+    names = {p.name for p in _pages_with_code()}
+    assert {"getting_started.rst", "model_format.rst", "simulation.rst"} <= names
+    assert "continue_orbit" in page_code(DOCS / "getting_started.rst")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("page", _pages_with_code(), ids=lambda p: p.name)
+def test_the_pages_python_runs(page, tmp_path):
+    """Each page's Python, run as a script in a fresh process in a temporary directory
+    (files it writes land there), like the README's blocks (tests/test_readme.py)."""
+    script = tmp_path / "page.py"
+    script.write_text(page_code(page), encoding="utf-8")
+    env = {**os.environ, "MPLBACKEND": "Agg", "PWSDYN_QUIET": "1"}
+    res = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env,
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+
+
+# ---- the gallery -----------------------------------------------------------------------------
+
+def _gallery_conf() -> dict:
+    """The literal entries of ``sphinx_gallery_conf`` in docs/conf.py."""
+    tree = ast.parse((DOCS / "conf.py").read_text(encoding="utf-8"))
+    for node in tree.body:
+        if (isinstance(node, ast.Assign) and len(node.targets) == 1
+                and getattr(node.targets[0], "id", None) == "sphinx_gallery_conf"):
+            out = {}
+            for k, v in zip(node.value.keys, node.value.values):
+                try:
+                    out[ast.literal_eval(k)] = ast.literal_eval(v)
+                except ValueError:
+                    pass                          # computed entries (the directories)
+            return out
+    raise AssertionError("docs/conf.py defines no sphinx_gallery_conf")
+
+
+def gallery_scripts() -> list[Path]:
+    return sorted(EXAMPLES.glob("*.py"))
+
+
+def test_every_gallery_script_is_built():
+    """sphinx-gallery runs the scripts whose path matches ``filename_pattern`` (searched in
+    the path, as sphinx-gallery does) and lists the others without running them: a script
+    the pattern misses would show no figure and never be checked."""
+    conf = _gallery_conf()
+    pattern = re.compile(conf["filename_pattern"])
+    ignore = re.compile(conf["ignore_pattern"])
+    scripts = [p for p in gallery_scripts() if not ignore.search(p.name)]
+    assert scripts, "no gallery scripts in examples/"
+    not_run = [p.name for p in scripts if not pattern.search(os.sep + p.name)]
+    assert not not_run, f"gallery scripts that would not be run: {not_run} (name them plot_*.py)"
+    assert not conf.get("only_warn_on_example_error", False)   # a failing script fails the build
+    assert (EXAMPLES / "README.rst").exists()                  # the gallery's header
+
+
+@pytest.mark.parametrize("script", gallery_scripts(), ids=lambda p: p.name)
+def test_gallery_script_begins_with_a_title_and_a_paragraph(script):
+    doc = ast.get_docstring(ast.parse(script.read_text(encoding="utf-8")), clean=False)
+    assert doc, f"{script.name} has no docstring"
+    lines = doc.strip("\n").splitlines()
+    assert len(lines) >= 4, f"{script.name}: a title, its underline and a paragraph"
+    title, underline = lines[0].rstrip(), lines[1].rstrip()
+    # an RST section title: one punctuation character repeated, at least as long as the title
+    assert title and re.fullmatch(r"([=\-~^\"'`#*+:.])\1*", underline) \
+        and len(underline) >= len(title), (
+        f"{script.name}: the docstring must begin with an RST title and its underline")
+    assert lines[2].strip() == "" and lines[3].strip(), f"{script.name}: a paragraph after it"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("script", gallery_scripts(), ids=lambda p: p.name)
+def test_gallery_script_runs_on_its_own_and_writes_nothing(script, tmp_path):
+    """As a user runs it: ``MPLBACKEND=Agg python examples/plot_x.py``, from another
+    directory; it must neither fail nor leave files in examples/ or the working directory."""
+    before = sorted(p.name for p in EXAMPLES.iterdir())
+    env = {**os.environ, "MPLBACKEND": "Agg", "PWSDYN_QUIET": "1"}
+    res = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env,
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    assert sorted(p.name for p in EXAMPLES.iterdir()) == before
+    assert not list(tmp_path.iterdir())
