@@ -5,7 +5,7 @@ The model is the zoo's ``friction-impact-oscillator`` (thesis eq. 3.3-3.5, 5.4):
 spring, ``m q'' + k q = F`` with dry friction ``F``, forced only by impacts with a constraint at
 ``q = -b + a sin(omega t)`` (restitution ``e`` on the relative velocity). Papers D and E take
 one friction level ``F_f`` (``Fs = Fd``); section 5.3.1 of the thesis a static level ``Fs`` above
-the dynamic one ``Fd``. Everything here is written in the thesis's scaled variables
+the dynamic one ``Fd``. Everything here is written in the thesis's scaled variables::
 
     x = k q / Fd,   tau = sqrt(k/m) t,   a~ = k a / Fd,   b~ = k b / Fd,   Omega = omega sqrt(m/k),
 
@@ -19,7 +19,7 @@ edge ``x = 1`` of the stick set and the stick solutions at the edge start to be 
 
 The stick-position map (Paper E; thesis Fig. 5.2). Let the mass rest at ``x`` and the constraint
 reach it on its rising branch, at ``a~ sin(theta) = x + b~``. After the impact (3.5) it moves up
-with the velocity ``v+ = (1 + e) a~ Omega cos(theta)``, so that, exactly,
+with the velocity ``v+ = (1 + e) a~ Omega cos(theta)``, so that, exactly::
 
     v+^2 = (1 + e)^2 Omega^2 (a~^2 - (x + b~)^2).                                        (1)
 
@@ -29,13 +29,13 @@ there if ``x_max <= Fs/Fd``, and otherwise reverses and slips down on the ellips
 not touch the mass again during this excursion and has fallen away before the mass is at
 rest (the thesis's restriction to driving frequencies below twice the natural one: the
 down-slip takes half a natural period), the map from one stick position to the next,
-``P^2`` of the thesis (two crossings of ``S = {dx/dtau = 0}``), is therefore in closed form:
+``P^2`` of the thesis (two crossings of ``S = {dx/dtau = 0}``), is therefore in closed form::
 
     x' = 3 - sqrt((x + 1)^2 + (1 + e)^2 Omega^2 (a~^2 - (x + b~)^2)).                      (2)
 
 To lowest order about the graze (``x = 1 - xi``, ``a~ = a~* + Delta``, ``xi, Delta`` small),
 ``v+^2 = (1 + e)^2 Omega^2 (Delta + xi)(2 a~* + Delta - xi)`` and ``x_max - 1 = -xi + v+^2 / 4
-+ O(2)``, so
++ O(2)``, so::
 
     x' - 1 = (gamma - 1)(x - 1) - gamma (a~ - a~*) + O(|x - 1| + |a~ - a~*|)^2,              (3)
     gamma = (1 + e)^2 Omega^2 a~* / 2 = m a* omega^2 (1 + e)^2 / (2 F_f)          (thesis 5.1).
@@ -52,14 +52,14 @@ during the excursion, so (2) and (3) apply for ``1 < gamma`` only; and the down-
 before the constraint comes back.
 
 Control (thesis eq. 5.3, 5.5, 5.11). The constraint's neutral position is reset where the mass
-comes to rest, from the stick position ``x`` and the amplitude:
+comes to rest, from the stick position ``x`` and the amplitude::
 
     b~ = a~* - 1 + (1 - c_a)((1 + eps_1)(a~ - a~*) + delta_1)
                  + (1 - 2 c_x / gamma)((1 + eps_2)(1 - x) + delta_2),
 
 with ``eps_1, eps_2`` multiplicative (5.5) and ``delta_1, delta_2`` additive (5.11) measurement
 errors (all 0: law 5.3; ``c_a = 1, c_x = gamma / 2``: no control). With it the top of the
-constraint is at ``a~ - b~ - 1`` above the edge, and (3) becomes (thesis 5.6 and 5.12)
+constraint is at ``a~ - b~ - 1`` above the edge, and (3) becomes (thesis 5.6 and 5.12)::
 
     x' - 1 = mu (x - 1) - gamma (c_a + (c_a - 1) eps_1)(a~ - a~*) - gamma (c_a - 1) delta_1
              + (gamma - 2 c_x) delta_2,         mu = 2 c_x - 1 + (2 c_x - gamma) eps_2,      (4)
