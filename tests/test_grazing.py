@@ -311,8 +311,14 @@ def test_corner_collision_of_an_impact_with_a_switching_surface(ds):
     while c is below the impact velocity v_imp (closed form), and impacts above it. At
     c = v_imp the impact point lies on both surfaces -- a corner collision, located once to
     1e-10 -- and beyond it the orbit crosses back below c before it impacts (its velocity
-    peaks before the impact), as direct simulation shows on either side."""
-    from _orbit_cases import io_one_impact, io_orbit
+    peaks before the impact), as direct simulation shows on either side; the branch goes on
+    with that sequence. Further up, c reaches the orbit's peak velocity v_max (closed form,
+    maximized along the closed-form orbit): the arc above c shrinks to nothing between its
+    two crossings -- a graze of v = c from below, located to 1e-10 -- and past it the orbit
+    only impacts."""
+    from scipy.optimize import minimize_scalar
+
+    from _orbit_cases import IO, closed_form_state, io_closed_form, io_one_impact, io_orbit
 
     m = pwsdyn.load_model(CORNER)
     v_imp = io_one_impact(2.8, 1)[0]
@@ -322,7 +328,12 @@ def test_corner_collision_of_an_impact_with_a_switching_surface(ds):
     br = pwsdyn.continue_orbit(m, orb, "c", span=(0.5, 2.0), ds=ds, ds_max=10 * ds)
     cc = br.special("CC")
     assert len(cc) == 1 and abs(cc[0].value - v_imp) < 1e-10
-    assert "CC located" in br.stop_reason
+    assert [str(s) for s in br.signatures] == [
+        "(free[v-c<0]) crossing:v-c (free[v-c>0]) impact:impact (free[v-c<0])",
+        "(free[v-c<0]) crossing:v-c (free[v-c>0]) crossing:v-c (free[v-c<0]) impact:impact "
+        "(free[v-c<0])",
+        "(free[v-c<0]) impact:impact (free[v-c<0])"]
+    assert br.admissible.all() and br.values.max() == pytest.approx(2.0)
     T = 2 * math.pi / 2.8
     for dc, kinds in ((-0.01, ["crossing", "impact"]),
                       (0.01, ["crossing", "crossing", "impact"])):
@@ -330,6 +341,19 @@ def test_corner_collision_of_an_impact_with_a_switching_surface(ds):
                              rtol=1e-12, atol=1e-12)
         last = [e.kind for e in tr.events if e.t > o.t0 + 39 * T]
         assert last == kinds, (dc, last)
+    # the graze of v = c: the closed-form orbit's peak velocity
+    cf = io_closed_form()["stable"]
+
+    def v(t):
+        return closed_form_state(cf, IO["sigma"], IO["r"], t)[1]
+    ts = np.linspace(cf["t0"], cf["t0"] + cf["T"], 2001)[:-1]
+    k = int(np.argmax([v(t) for t in ts]))
+    peak = minimize_scalar(lambda t: -v(t), bounds=(ts[k - 1], ts[k + 1]), method="bounded",
+                           options={"xatol": 1e-12})
+    v_max = -peak.fun
+    gr = [sp for sp in br.special("GR") if sp.key.endswith("/arc")]
+    assert len(gr) == 1 and abs(gr[0].value - v_max) < 1e-10
+    assert not br.special("LP") and not br.special("BP")
 
 
 # ---- crossing-sliding and adding-sliding ---------------------------------------------------

@@ -23,7 +23,13 @@ At a graze located on an orbit branch (monitor ``GR`` of
   and slides again -- the segment is split; seen from the split side (``AS/<switch>@<i>``,
   an exit whose field no longer curves away) the two sliding segments join;
 * an orbit arriving ever more tangentially at a sliding entry that leaves back into the same
-  mode (``GS/<switch>@<i>``, grazing-sliding from its sliding side): the sliding segment goes.
+  mode (``GS/<switch>@<i>``, grazing-sliding from its sliding side): the sliding segment goes;
+* an arc between two crossings of one surface shrinking to nothing (``GR/<surface>/<i>/arc``):
+  both crossings and the arc go;
+* an event point reaching another surface (``CC``, a corner collision): the order of the
+  events around the corner changes in ways the old sequence does not tell, so the new one is
+  the sequence a direct simulation follows over one period from the old orbit, a short step
+  past the corner.
 
 Where the old signature has no solution past the bifurcation (a segment that shrank to
 nothing: the locked branch folds back there), the new signature is built at the bifurcation
@@ -424,6 +430,19 @@ def remove_sliding(op, u, lam, seg: int):
     return _merge_run(op, u, lam, seg, 2)
 
 
+def remove_arc(op, u, lam, seg: int):
+    """Past the graze where the arc of segment ``seg`` between two crossings of one surface
+    vanished: the orbit stays on the side it crossed from. Both crossings and the arc go,
+    and the segments before and after become one: ``(problem, u)`` or a reason string."""
+    mm = len(op.signature)
+    if len(op.bounds) != mm or mm < 2:
+        return "only orbits whose boundaries are single events are re-segmented"
+    first = (seg - 1) % mm
+    if op.fields[first] != op.fields[(seg + 1) % mm]:
+        return "the segments on either side of the arc are in different states"
+    return _merge_run(op, u, lam, first, 2)
+
+
 def slide_instead_of_arc(op, u, lam, seg: int):
     """Past a switching-sliding seen from its crossing side (the crossing ending segment
     ``seg`` is followed by a short arc beyond the surface and a sliding entry back): the
@@ -464,16 +483,59 @@ def cross_instead_of_sliding(op, u, lam, seg: int):
                                                        old_in.mode_before, old_out.mode_after))
 
 
+def resimulated(op, u, lam):
+    """Past a bifurcation whose new event sequence is not built from the old one (a corner
+    collision, where the order of events around the corner changes): the sequence a direct
+    simulation follows over one period from the old solution's start at ``lam`` (close to the
+    new orbit, a short step past the bifurcation), and that simulation as the start of
+    Newton on it: ``(problem, u)`` or a reason string."""
+    from ..integrate.simulate import _simulate_compiled
+    from ..orbits.problem import _context
+    from ..orbits.signature import Signature
+
+    if not op.forced or len(op.bounds) != len(op.signature):
+        return "only forced orbits whose boundaries are single events are re-simulated"
+    p = np.array([lam])
+    t0, xs, _ = op.unpack(u)
+    x0 = np.asarray(xs[0], dtype=float)
+    ctx = _context(op.model, op.param_dict(p), op.sliding)
+    st = ctx.state(str(op.state_names[0]))
+    P = op.period_value(p)
+    opts = dict(op.opts, variational=False, dense=False, throw=False, mode=None)
+    try:
+        tr = _simulate_compiled(ctx.cm, x0, float(t0), float(t0) + 1.5 * P, ctx.p, opts,
+                                mode0=st.mode, dkind0=st.kind, didx0=st.index, admit=False)
+    except (ValueError, FloatingPointError) as exc:
+        return f"the simulation past the bifurcation failed: {exc}"
+    # one period: up to the event back into the starting state nearest to t0 + P (the old
+    # start lies on the old orbit's last event, which the new orbit passes a little before
+    # or after)
+    evs = list(tr.events)
+    start = str(op.state_names[0])
+    ends = [i for i, e in enumerate(evs) if str(e.mode_after) == start]
+    if not ends:
+        return "a simulation past the bifurcation does not come back to its starting state"
+    last = min(ends, key=lambda i: abs(float(evs[i].t_after) - float(t0) - P))
+    sig = Signature(evs[:last + 1])
+    prob = op.replace(signature=list(sig))
+    u2 = prob.from_simulation(float(t0), x0, p)
+    if u2 is None:
+        return f"the simulation past the bifurcation does not repeat its sequence {sig}"
+    return prob, u2
+
+
 def past_graze(op, key: str, u, lam, solve_at=None):
     """The new signature's problem and solution just past the graze ``key`` at ``lam``:
     ``(problem, u)``, or a reason string. ``u`` solves the old signature at ``lam``; with
     ``solve_at`` the new problem is built there and solved at ``solve_at``."""
     kind, body = key.split("/", 1)
-    if kind not in ("GR", "GS", "SS", "CS", "AS"):
+    if kind not in ("GR", "GS", "SS", "CS", "AS", "CC"):
         return (f"the orbit's new event sequence past a {kind} is not built yet (the branch "
                 f"stops here; on_dib='continue' follows the old one, not admissible beyond)")
     try:
-        if kind == "AS":
+        if kind == "CC":
+            made = resimulated(op, u, lam)
+        elif kind == "AS":
             where, seg = body.rsplit("/", 1) if "/" in body else (body, "")
             if ":" in where:
                 made = split_sliding(op, u, lam, int(seg), where.rsplit(":", 1)[1])
@@ -490,6 +552,8 @@ def past_graze(op, key: str, u, lam, solve_at=None):
         elif "@" in body:
             seg = int(body.rsplit("@", 1)[1])
             made = (remove_sliding if kind == "GS" else remove_impact)(op, u, lam, seg)
+        elif body.endswith("/arc"):
+            made = remove_arc(op, u, lam, int(body[:-len("/arc")].rsplit("/", 1)[1]))
         elif kind == "GS":
             surface, seg = body.rsplit("/", 1)
             made = insert_sliding(op, u, lam, int(seg), surface)

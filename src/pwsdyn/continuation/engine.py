@@ -408,11 +408,11 @@ class Continuation:
                 self._bar = None
 
     def _fold_at_special(self, p: Point) -> None:
-        """A fold located at the very point of another special point (before or after it) is
-        that point's consequence, not a second bifurcation: the branch of an orbit's locked
-        signature turns back where a segment shrinks to nothing at a graze (its duration
-        grows like the square root of the parameter's distance). The fold keeps its point
-        but loses its label."""
+        """A fold (or a branch point) located at the very point of another special point
+        (before or after it) is that point's consequence, not a second bifurcation: the branch
+        of an orbit's locked signature turns back where a segment shrinks to nothing at a
+        graze (its duration grows like the square root of the parameter's distance), and its
+        Jacobian is singular there. The fold keeps its point but loses its label."""
         if not p.special:
             return
         # at the same parameter (the fold's arclength may differ: the unknowns that vanish
@@ -421,9 +421,9 @@ class Continuation:
         for q in reversed(self.points[-3:]):
             if abs(q.lam - p.lam) > near:
                 continue
-            pair = {p.special, q.special}
-            if "LP" in pair and not pair <= {"LP", "BP", ""}:
-                (p if p.special == "LP" else q).special = ""
+            generic = {"LP", "BP"}
+            if (p.special in generic) != (q.special in generic) and q.special:
+                (p if p.special in generic else q).special = ""
                 return
 
     def _tick(self):

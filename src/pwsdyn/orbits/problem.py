@@ -1214,6 +1214,7 @@ class OrbitProblem:
         out = {}
         for i, s in enumerate(ev.segs):
             fk = self.fields[i]
+            out.update(self._arc_monitor(i, s))
             if fk.kind == "mode" and s.T > 0:
                 tr = self._dense_segment(i, s, p)
                 if tr is None:
@@ -1306,6 +1307,22 @@ class OrbitProblem:
                 sign = 1.0 if b.mode == sw.above else -1.0
                 out[f"AS/{sw.name}@{i}"] = Monitor(float(sign * acc), i, sw.name, float(te), y)
         return out
+
+    def _arc_monitor(self, i, s) -> dict:
+        """``"GR/<surface>/<i>/arc"``: for segment ``i`` entered and left by crossings of one
+        switching surface (an arc on its other side), the arc's duration. Where it falls to
+        zero the two crossings meet: the orbit grazes the surface from the side it used to
+        cross from, and past it stays there. (Not the arc's height: the branch of the locked
+        signature folds back at the graze, so the height only touches zero; the duration
+        changes sign along the branch.)"""
+        if not self.m or len(self.bounds) != len(self.signature):
+            return {}
+        before, after = self.bounds[(i - 1) % self.m], self.bounds[i]
+        if not (before.kind == after.kind == "crossing" and before.ref == after.ref):
+            return {}
+        name = self.model.surfaces[after.surface].name
+        return {f"GR/{name}/{i}/arc": Monitor(float(s.T), i, name, float(s.t),
+                                              np.asarray(s.y[:self.n], dtype=float))}
 
     def _sliding_monitors(self, i, s, p, ctx) -> dict:
         """``"AS/<switch>:<above|below>/<i>"``: along sliding segment ``i``, the smallest
