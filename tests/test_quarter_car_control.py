@@ -390,3 +390,20 @@ def test_metric_units_follow_the_model():
     ds = metrics_sweep({"q": {"model": m, "params": PARAMS}}, "A", [0.005], velocity="vs",
                        travel="zs*vs", transient=1, periods=1)
     assert "units" not in ds.travel_range.attrs
+
+
+def test_cli_grazing_finds_the_graze_at_the_kink(graze):
+    """``pwsdyn grazing`` takes a corner collision that is a graze (the bumpstop reached at
+    the damper's kink) as it takes a graze inside a segment: the same A* as the API's and
+    the loss the persistence test predicts."""
+    from click.testing import CliRunner
+
+    from pwsdyn.cli import main
+
+    args = ["grazing", "quarter-car", "--param", "A", "--from", "0.015", "--to", "0.03"]
+    args += [a for k, v in PARAMS.items() if k != "A" for a in ("-p", f"{k}={v}")]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 0, res.output
+    line = next(s for s in res.output.splitlines() if s.startswith("graze"))
+    assert abs(float(line.split("=")[1].split(":")[0]) - graze.value) < 1e-9
+    assert "scenario    loss" in res.output

@@ -1177,7 +1177,7 @@ def grazing_cmd(model, params, sets, start, stop, x0, t0, periods, period, trans
           -p omega=2.8 -p eps=0.1 --x0 x=-0.006,v=-0.41 --t0 0
     """
     import pwsdyn
-    from .errors import PwsdynError
+    from .errors import ArgumentError, PwsdynError
     from .orbits import OrbitError
 
     mdl, param, all_params, cli_x0, x0_val, t0, t_end, span = _branch_setup(
@@ -1187,13 +1187,22 @@ def grazing_cmd(model, params, sets, start, stop, x0, t0, periods, period, trans
         orbit = _start_orbit(mdl, x0_val, t0, t_end, all_params, cli_x0, transient, period,
                              periods, {})
         branch = pwsdyn.continue_orbit(mdl, orbit, param, span=span, ds=step, on_dib="stop",
-                                       locate=("GR",))
-        grazes = [sp for sp in branch.special("GR") if "@" not in sp.key]
-        if not grazes:
-            _fail(f"no graze inside a segment between {param} = {_fmt(start)} and "
-                  f"{_fmt(stop)} ({branch.stop_reason})")
-        gr = grazes[0]
-        dm = pwsdyn.discontinuity_map(gr)
+                                       locate=("GR", "CC"))
+        # a segment touching an impact surface inside it, or at a kink of the field (a
+        # corner collision that is a graze: the quarter-car's bumpstop at its damper's kink)
+        gr, dm, why = None, None, ""
+        for sp in branch.special_points:
+            if sp.kind in ("GR", "CC"):
+                try:
+                    dm = pwsdyn.discontinuity_map(sp)
+                except ArgumentError as exc:
+                    why = f"; the {sp.kind} at {param} = {_fmt(sp.value)} is not one: {exc}"
+                    continue
+                gr = sp
+                break
+        if gr is None:
+            _fail(f"no graze of an impact surface between {param} = {_fmt(start)} and "
+                  f"{_fmt(stop)} ({branch.stop_reason}{why})")
     except OrbitError as exc:
         _fail(f"no starting orbit ({exc.reason}): {exc}")
     except (PwsdynError, ValueError, TypeError) as exc:

@@ -106,7 +106,7 @@ def _tangency(point):
     kind = getattr(point, "kind", None)
     if kind == "CC" and mon is not None:
         return _kink_graze(point)
-    if kind != "GR" or mon is None or "@" in point.key:
+    if kind != "GR" or mon is None or "@" in point.key or point.key.endswith("/arc"):
         raise ArgumentError("discontinuity_map needs a GR special point where a segment "
                             "grazes a surface inside it (pwsdyn.continue_orbit; not the end "
                             "of an impacting branch), or a CC point where the orbit grazes an "
