@@ -16,7 +16,7 @@ Condition 5.1 of the thesis decides the scenario: with
 ``gamma = m a* omega^2 (1 + e)^2 / (2 F_f)``, the stick-position map has the multiplier
 ``gamma - 1``. (a) ``gamma = 2.5 > 2``: loss of the local attractor. The unstable impacting
 branch leaves the graze at the non-smooth fold NSF towards smaller ``a``, turns at a saddle-node
-SN (at ``a^2 = (8 K (b + 1) - 16)/K^2``, ``K = (1 + e)^2 omega^2``, from the closed-form map) and
+SN (labelled LP, a fold of the branch, at ``a^2 = (8 K (b + 1) - 16)/K^2``, ``K = (1 + e)^2 omega^2``, from the closed-form map) and
 comes back as the stable upper branch: sweeping up, the mass sticks up to ``a*`` and jumps to the
 upper branch; sweeping down it stays there down to SN -- hysteresis, as the thesis describes for
 Fig. 2.3 (a). (b) ``gamma = 1.5 < 2``: persistence. A stable branch of impacting orbits grows
@@ -40,32 +40,9 @@ def omega_for(gamma):
     return math.sqrt(2 * gamma / ((1 + E) ** 2 * (B + 1)))
 
 
-def impact_velocity_of(orbit):
+def velocity_after_the_impact(orbit):
     """The velocity just after the orbit's impact (its largest over the period)."""
     return max(ev.x_after[1] for ev in orbit.events if ev.kind == "impact")
-
-
-def draw_branch(ax, branch):
-    """The branch by stability and admissibility, with its special points."""
-    y = np.array([impact_velocity_of(branch.problem_of(p).orbit(p.u, p.lam))
-                  for p in branch.points])
-    a = branch.values
-    style = np.where(~branch.admissible, ":", np.where(branch.stable, "-", "--"))
-    start = 0
-    for i in range(1, len(a) + 1):
-        if i == len(a) or style[i] != style[start]:
-            j = min(i + 1, len(a))
-            ax.plot(a[start:j], y[start:j], ls=style[start], color="k", lw=1.5)
-            start = i
-    grazes = [sp.value for sp in branch.special("GR")]
-    for sp in branch.special("LP"):
-        # on its locked event sequence the branch also folds at the graze itself (the
-        # impact velocity changes sign there): that fold is the NSF, not a saddle-node
-        if any(abs(sp.value - g) < 1e-6 for g in grazes):
-            continue
-        k = sp.index
-        ax.plot(a[k], y[k], "ks", ms=6)
-        ax.annotate("SN", (a[k], y[k]), textcoords="offset points", xytext=(-22, -4))
 
 
 def sweep_points(ax, s, values):
@@ -97,7 +74,7 @@ def panel(ax, gamma, a_lo, a_hi, title):
     orbit = pwsdyn.find_periodic_orbit(MODEL, [x_star * s.scale, 0.0], t0=0.0,
                                        params=s.params(), mode="stick")
     branch = pwsdyn.continue_orbit(MODEL, orbit, "a", span=(a_lo, a_hi), ds=-0.005)
-    draw_branch(ax, branch)
+    branch.plot(y=velocity_after_the_impact, ax=ax)
     ax.plot(s.a_star, 0, "ko", ms=5)
     ax.annotate("NSF", (s.a_star, 0), textcoords="offset points", xytext=(4, 6))
     ax.set_title(f"{title}: $\\gamma$ = {s.gamma:.2g}")

@@ -13,7 +13,7 @@ pseudo-arclength (stable solid, unstable dashed; dotted where it is not an orbit
 because its reversal point has fallen into the static stick set, where the mass would stay),
 the stick solutions, and the points of brute-force sweeps up (blue) and down (orange).
 
-(a) ``gamma > 2`` (the opposite of inequality 5.1): as in Fig. 2.3 (a) a saddle-node SN ends the
+(a) ``gamma > 2`` (the opposite of inequality 5.1): as in Fig. 2.3 (a) a saddle-node (LP) ends the
 upper branch, but the unstable branch does not exist for an interval of ``a`` near ``a*``, and
 the stick solutions last up to ``a**``. (b) ``gamma < 2`` (5.1 holds): the stick solutions again
 last up to ``a**``, and the stable impacting branch has lost the interval where its reversal
@@ -38,31 +38,9 @@ def omega_for(gamma):
     return math.sqrt(2 * gamma / ((1 + E) ** 2 * (B + 1)))
 
 
-def impact_velocity_of(orbit):
+def velocity_after_the_impact(orbit):
     """The velocity just after the orbit's impact (its largest over the period)."""
     return max(ev.x_after[1] for ev in orbit.events if ev.kind == "impact")
-
-
-def draw_branch(ax, branch):
-    """The branch by stability and admissibility, with its saddle-nodes."""
-    y = np.array([impact_velocity_of(branch.problem_of(p).orbit(p.u, p.lam))
-                  for p in branch.points])
-    a = branch.values
-    style = np.where(~branch.admissible, ":", np.where(branch.stable, "-", "--"))
-    start = 0
-    for i in range(1, len(a) + 1):
-        if i == len(a) or style[i] != style[start]:
-            j = min(i + 1, len(a))
-            ax.plot(a[start:j], y[start:j], ls=style[start], color="k", lw=1.5)
-            start = i
-    grazes = [sp.value for sp in branch.special("GR")]
-    for sp in branch.special("LP"):
-        # the fold of the locked event sequence at its graze is not a saddle-node
-        if any(abs(sp.value - g) < 1e-6 for g in grazes):
-            continue
-        k = sp.index
-        ax.plot(a[k], y[k], "ks", ms=6)
-        ax.annotate("SN", (a[k], y[k]), textcoords="offset points", xytext=(-22, -4))
 
 
 def sweep_points(ax, s, values):
@@ -93,7 +71,7 @@ def panel(ax, gamma, a_lo, a_hi, title):
     orbit = pwsdyn.find_periodic_orbit(MODEL, [x_star * s.scale, 0.0], t0=0.0,
                                        params=s.params(), mode="stick")
     branch = pwsdyn.continue_orbit(MODEL, orbit, "a", span=(a_lo, a_hi), ds=-0.005)
-    draw_branch(ax, branch)
+    branch.plot(y=velocity_after_the_impact, ax=ax)
     for val, name in ((s.a_star, "$a^*$"), (s.a_star_star, "$a^{**}$")):
         ax.axvline(val, color="0.6", lw=0.8)
         ax.annotate(name, (val, 1.0), xycoords=("data", "axes fraction"),

@@ -1153,6 +1153,14 @@ SPECIAL_MARKERS = {"LP": "s", "BP": "D", "PD": "o", "NS": "^", "HB": "*", "EP": 
 def _branch_y(branch, y):
     """The quantity plotted against the parameter and its axis label."""
     names = list(branch.problem.state_names)
+    if callable(y):
+        if branch.kind != "orbit":
+            raise ArgumentError("`y` as a function is a measure of an orbit: the branch is of "
+                                f"{branch.kind}s")
+        # any measure of the orbit (a PeriodicOrbit: its events, trajectory, multipliers)
+        vals = np.array([float(y(branch.problem_of(p).orbit(p.u, p.lam)))
+                         for p in branch.points])
+        return vals, getattr(y, "__name__", "y").replace("_", " ")
     if isinstance(y, str) and y.split(":")[0] in ("max", "min") and branch.kind == "orbit":
         # a measure of the whole orbit (its largest or smallest value of a state over one
         # period): the same on both sides of a graze, where the section state jumps
@@ -1198,11 +1206,12 @@ def plot_branch(branch, y=None, path: str | Path | None = None, *, ax: Axes | No
     Parameters
     ----------
     branch : Branch
-    y : str or int, optional
+    y : str, int or callable, optional
         A state (at the section: the start of the orbit's first segment), ``"norm"`` or, for
-        orbits, ``"period"`` or ``"max:<state>"`` / ``"min:<state>"`` (over the whole orbit:
-        continuous across a graze, where the section state jumps). Default: the state that
-        varies most along the branch.
+        orbits, ``"period"``, ``"max:<state>"`` / ``"min:<state>"`` (over the whole orbit:
+        continuous across a graze, where the section state jumps) or a function of the
+        :class:`~pwsdyn.PeriodicOrbit` at each point (its name, underscores as spaces, labels
+        the axis). Default: the state that varies most along the branch.
     path : str or Path, optional
         Also save the figure there.
     ax : matplotlib.axes.Axes, optional

@@ -334,9 +334,10 @@ class Branch:
 
     # ---- the figure ------------------------------------------------------------------
     def plot(self, y=None, *, ax=None, labels: bool = True, **kw):
-        """Bifurcation diagram: the parameter against ``y`` (a state name, ``"period"``, or
-        ``"norm"``, default the first state at the section), stable parts solid, unstable
-        dashed, non-admissible dotted, special points marked and labelled."""
+        """Bifurcation diagram: the parameter against ``y`` (a state name, ``"period"``,
+        ``"norm"``, ``"max:<state>"``, ``"min:<state>"`` or a function of the orbit at each
+        point; see :func:`pwsdyn.plot.plot_branch`), stable parts solid, unstable dashed,
+        non-admissible dotted, special points marked and labelled."""
         from ..plot import plot_branch
 
         return plot_branch(self, y=y, ax=ax, labels=labels, **kw)
