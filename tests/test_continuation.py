@@ -247,6 +247,18 @@ def test_plot(io_up, io_down, tmp_path):
     a = own.subplots()
     assert io_up.plot(y="period", ax=a) is own
 
+    # any measure of the orbit: here its impact velocity, read off its event log
+    def impact_velocity(orbit):
+        return orbit.events[0].x_before[1]
+    b = Figure().subplots()
+    io_up.plot(y=impact_velocity, ax=b)
+    want = [impact_velocity(io_up.problem_of(p).orbit(p.u, p.lam)) for p in io_up.points]
+    drawn = np.concatenate([ln.get_ydata() for ln in b.get_lines()
+                            if ln.get_linestyle() in ("-", "--", ":")])
+    assert b.get_ylabel() == "impact velocity"
+    assert np.allclose(sorted(set(np.round(drawn, 12))), sorted(set(np.round(want, 12))))
+    assert min(want) > 0
+
 
 # ---- equilibria ------------------------------------------------------------------------
 
