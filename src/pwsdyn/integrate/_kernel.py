@@ -164,7 +164,19 @@ from ._codes import (  # noqa: F401 (re-exported for the kernel's users)
 #: sticking or sliding state, measured a third of the time of an event and of a landing step.
 #: The arrays are the kernel's, alive for the whole run, so borrowing them is safe; a helper
 #: that allocates (growing the outputs, saltation matrices) keeps ``njit(cache=True)``.
-_hot = njit(cache=True, _nrt=False)
+_hot = njit(cache=True, _nrt=False, forceinline=False)
+#: The same, and inlined by LLVM into every caller (``forceinline``: the function's body
+#: replaces the call after numba has compiled it without reference counting, so the caller
+#: counts nothing either; numba's ``inline="always"`` inlines its IR instead, whose array
+#: arguments the caller then counts: measured no faster). For the exact stepper and the
+#: helpers of its full step: as calls they cost 5-7% of an exact run (callgrind instruction
+#: counts, ``benchmarks/compare_revisions.py``), ~130 words of arguments pushed per step for
+#: a few dozen multiply-adds. The Taylor sum of a shorter step (``_exact_step``) stays a call:
+#: inlined as well it saved another 1.5% of an exact run but cost the Runge-Kutta runs 1.5%
+#: (a longer stepping loop, more of it spilled). ``forceinline=False`` is explicit on
+#: ``_hot``: numba passes an unset flag on from a caller to the functions it compiles for it,
+#: so a helper first compiled for an inlined caller would be inlined too.
+_hot_inline = njit(cache=True, _nrt=False, forceinline=True)
 
 _EPS = np.finfo(np.float64).eps
 #: Relative step of the central differences of the variational code (cube root of eps).
@@ -683,7 +695,7 @@ def _exact_propagator(M, wt, md, nz, h, Pm, T1, T2):
             break
 
 
-@_hot
+@_hot_inline
 def _exact_apply(M, sc, Pm, md, nz, n, t, y, z, ynew):
     """``x(t + h)`` from a cached propagator ``Pm[md] = exp(h M)`` (see :func:`_exact_step`)."""
     _augment(M, sc, md, nz, n, t, y, z)
@@ -818,7 +830,7 @@ def _affine_setup(ev, t0, x0, p, n, nm, enabled):
     return nz, aff_ok, aff_M, aff_h, aff_s, aff_w
 
 
-@_hot
+@_hot_inline
 def _augment(M, sc, md, nz, n, t, y, z):
     """The augmented state ``z = (x, s_0, s_1 cos(w_1 t), s_1 sin(w_1 t), ...)``, the
     frequencies read off the rotation blocks ``(0, -w_j; w_j, 0)`` of ``M`` and the scales
@@ -1590,15 +1602,16 @@ def state_field(ev, p, dkind, didx, mode, nm, t, x, etab, stab, slide_c, out):
 # --------------------------------------------------------------------------------------
 # The Runge-Kutta step itself is written out in the stepping loop of run_kernel (its cost is
 # that of a few multiply-adds and field calls, and any call costs a visible fraction of it);
-# the exact stepper, the dense output and the landing step are functions with the same
-# arguments. Each is a plain call of a ``_hot`` function with at most 30 arguments: longer
-# calls are made by Python as ``f(*args)``, for which numba builds a tuple of the arrays (a
-# reference-count update per array: measured 1.7x the cost of an RK45 step), and numba's
-# inlining assigns each array argument to a new variable (the same updates). The work vectors
+# the exact stepper (inlined by LLVM: ``_hot_inline``), the dense output and the landing step
+# are functions with the same arguments. Each is a plain call of a ``_hot`` function with at
+# most 30 arguments: longer calls are made by Python as ``f(*args)``, for which numba builds a
+# tuple of the arrays (a reference-count update per array: measured 1.7x the cost of an RK45
+# step), and numba's inlining assigns each array argument to a new variable (the same
+# updates). The work vectors
 # of the vector fields travel as one tuple ``wk = (w1, w2, gx, hdx, jac, xt, ft)`` and the
 # affine tables as ``aff = (M, sc, wt, z, v)``, both built once per run.
 
-@_hot
+@_hot_inline
 def _exact_stepper(ev, p, mode, t, y, h, K, s_fsal, ynew, kst, Q, aff, aff_P, aff_ph, aff_full,
                    nz, T1, T2):
     """One exact step of affine mode ``mode`` (see "Exact propagation" in the module
