@@ -315,3 +315,56 @@ def test_a_sweep_in_a_script_without_main_guard_runs(tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert proc.stdout.strip() == "24"
     assert "Traceback" not in proc.stderr
+
+
+# ======================================================================================
+# numba's cache against the sources the compiled code reads at compile time
+# ======================================================================================
+
+def test_stale_cache_entries_of_a_compiled_module_are_removed(tmp_path):
+    """Numba keys a cached function on its own file only: the kernel's entries must go when
+    a file it reads at compile time (its codes) changes, and stay while nothing changed."""
+    from pwsdyn._compiling import STAMP_SUFFIX, refresh_cache, sources_digest
+
+    pkg = tmp_path / "pkg"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "sub" / "_kernel.py").write_text("x = 1\n")
+    (pkg / "_codes.py").write_text("A = 1\n")
+    sources = ("sub/_kernel.py", "_codes.py")
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    mine = [cache / "_kernel.run_kernel-10.py311.nbi", cache / "_kernel.run_kernel-10.py311.1.nbc"]
+    other = [cache / "_map_kernels.orbit_kernel-5.py311.nbi", cache / "_kernel_notes.txt"]
+    for f in mine + other:
+        f.write_bytes(b"x")
+    d1 = sources_digest(sources, package=pkg)
+    assert refresh_cache(cache, "_kernel", d1)                 # no stamp yet: removed
+    assert not any(f.exists() for f in mine) and all(f.exists() for f in other)
+    assert (cache / f"_kernel{STAMP_SUFFIX}").read_text().strip() == d1
+    for f in mine:
+        f.write_bytes(b"x")
+    assert not refresh_cache(cache, "_kernel", d1)             # unchanged sources: kept
+    assert all(f.exists() for f in mine)
+    (pkg / "_codes.py").write_text("A = 2\n")                  # a code changes
+    d2 = sources_digest(sources, package=pkg)
+    assert d2 != d1 and refresh_cache(cache, "_kernel", d2)
+    assert not any(f.exists() for f in mine) and all(f.exists() for f in other)
+
+
+def test_the_kernel_cache_is_located_where_numba_writes_it():
+    """The guard looks where numba's own locators put the kernel's cache (here: the
+    __pycache__ next to the source, or NUMBA_CACHE_DIR), and its stamp matches the sources
+    after a load."""
+    import numba
+
+    from pwsdyn._compiling import PACKAGE, STAMP_SUFFIX, numba_cache_dir, sources_digest
+    from pwsdyn.integrate._load import KERNEL_SOURCES, kernel
+
+    kernel()
+    where = numba_cache_dir(PACKAGE / KERNEL_SOURCES[0])
+    assert where is not None
+    assert where == Path(kernel().run_kernel._cache._cache_path)
+    assert any(where.glob("_kernel.run_kernel-*.nbi"))
+    assert (where / f"_kernel{STAMP_SUFFIX}").read_text().strip() == sources_digest(
+        KERNEL_SOURCES)
+    assert numba.config.CACHE_DIR in ("", None) or str(where).startswith(numba.config.CACHE_DIR)

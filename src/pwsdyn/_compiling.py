@@ -11,16 +11,23 @@ announces a real compilation -- a cache miss, never a load from the cache -- wit
 
 to stderr only when compiling really happens (on a terminal the first line counts the
 seconds as they pass). ``PWSDYN_QUIET=1`` in the environment silences it.
+
+Numba keys each cached function on its own source file only; :func:`check_cache` removes a
+compiled module's cached entries when any file it depends on at compile time has changed
+since they were written (the integer codes it reads as constants, the interface it is
+compiled against), so that an edit there can never run with stale machine code.
 """
 
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import sys
 import threading
 import time
 import warnings
+from pathlib import Path
 
 #: Environment variable that silences the message (any value but "", "0", "false", "no").
 QUIET_ENV = "PWSDYN_QUIET"
@@ -130,3 +137,81 @@ def compile_notice(what: str, modules, *, expected: str = "about a minute", stre
         event.unregister("numba:compile", listener)
         if notice is not None:
             notice.finish(failed)
+
+
+# ======================================================================================
+# numba's cache against the sources the compiled code depends on
+# ======================================================================================
+#: pwsdyn's package directory (the paths of :func:`check_cache` are relative to it).
+PACKAGE = Path(__file__).resolve().parent
+#: The file next to numba's cache holding the digest of the sources it was compiled from
+#: (one per compiled module: ``<module>.digest``).
+STAMP_SUFFIX = ".digest"
+
+
+def sources_digest(sources, package: Path = PACKAGE) -> str:
+    """SHA-256 of the files ``sources`` (relative to ``package``), numba's version and
+    Python's."""
+    import numba
+
+    h = hashlib.sha256(f"numba {numba.__version__}; python {sys.version}".encode())
+    for rel in sources:
+        h.update(rel.encode() + b"\0" + (package / rel).read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def refresh_cache(cache_dir, module: str, digest: str) -> bool:
+    """Remove numba's cached entries of ``module`` (``<module>.*.nbi`` and ``.nbc``) from
+    ``cache_dir`` unless its stamp there holds ``digest``; then store ``digest``. Returns
+    whether entries were removed. A directory that cannot be written is left alone (numba
+    then caches elsewhere, or not at all)."""
+    cache_dir = Path(cache_dir)
+    stamp = cache_dir / f"{module}{STAMP_SUFFIX}"
+    try:
+        if stamp.read_text().strip() == digest:
+            return False
+    except OSError:
+        pass
+    removed = False
+    try:
+        for f in cache_dir.glob(f"{module}.*"):
+            if f.suffix in (".nbi", ".nbc"):
+                f.unlink(missing_ok=True)
+                removed = True
+        cache_dir.mkdir(parents=True, exist_ok=True)
+        tmp = cache_dir / f"{module}{STAMP_SUFFIX}.{os.getpid()}"
+        tmp.write_text(digest + "\n")
+        os.replace(tmp, stamp)
+    except OSError:
+        pass
+    return removed
+
+
+def numba_cache_dir(py_file) -> Path | None:
+    """Where numba caches the functions of ``py_file``: asked of numba's own cache locators
+    (``NUMBA_CACHE_DIR``, the ``__pycache__`` next to the file, a user-wide directory), in
+    numba's order; ``None`` where that cannot be told."""
+    try:
+        from numba.core.caching import FunctionCache
+
+        def probe():                         # a function of that file, as numba sees one
+            pass
+        for cls in FunctionCache._impl_class._locator_classes:
+            loc = cls.from_function(probe, str(py_file))
+            if loc is not None:
+                return Path(loc.get_cache_path())
+    except Exception:                        # a numba without these internals: no guard
+        return None
+    return None
+
+
+def check_cache(sources) -> bool:
+    """Before importing the compiled module ``sources[0]`` (a path relative to the package):
+    numba keys its cache on that file alone, so entries compiled when any of ``sources``
+    (constants it reads at compile time, the interface it is compiled against) differed are
+    removed. Returns whether any were."""
+    py_file = PACKAGE / sources[0]
+    where = numba_cache_dir(py_file)
+    if where is None:
+        return False
+    return refresh_cache(where, py_file.stem, sources_digest(sources))

@@ -145,8 +145,8 @@ from ..model.codegen import (W_AFFINE, W_F, W_FU, W_FX, W_G, W_GUARD, W_GX, W_GT
 
 # The integer codes (discrete states, watch types, actions, log kinds, statuses, options) are
 # defined once in ._codes, shared with the Python side; numba reads them as compile-time
-# constants. Numba's on-disk cache is keyed on this file, not on ._codes: after changing a
-# code there, clear the cache (or touch this file) so the kernel is recompiled.
+# constants. Numba's on-disk cache is keyed on this file alone; the loader (._load) removes
+# the cached kernel when ._codes or the model interface changes (its KERNEL_SOURCES).
 from ._codes import (  # noqa: F401 (re-exported for the kernel's users)
     ACT_EVENT, ACT_EXIT_ABOVE, ACT_EXIT_BELOW, ACT_INTERSECTION, ACT_RELEASE, ACT_SWITCH,
     EV_IMPACT, EV_TRANSITION, FO_ATOL, FO_CHAT_ABS, FO_CHAT_REL, FO_H0, FO_HMAX, FO_N, FO_RTOL,

@@ -6,6 +6,14 @@ module level: ``import pwsdyn``, ``pwsdyn --help`` and argument checks never wai
 first run that needs the kernel calls :func:`kernel`, which imports it once per process,
 under :func:`pwsdyn._compiling.compile_notice`, so a real compilation is announced on stderr
 (a load from the cache is silent).
+
+Numba keys a cached function on its own source file only. The kernel reads its integer codes
+from :mod:`pwsdyn._codes` and the model interface's from :mod:`pwsdyn.model.codegen` as
+compile-time constants, so an edit there would leave machine code built with the old values
+in the cache. Before the import, :func:`kernel` therefore compares a digest of every file the
+compiled code depends on (and numba's and Python's versions) with the one stored next to the
+cache, and removes the kernel's cached entries where they differ
+(:func:`pwsdyn._compiling.check_cache`).
 """
 
 from __future__ import annotations
@@ -15,6 +23,9 @@ import threading
 _KERNEL = None
 _LOCK = threading.Lock()
 
+#: The files whose contents the compiled kernel depends on, relative to the package.
+KERNEL_SOURCES = ("integrate/_kernel.py", "integrate/_codes.py", "_codes.py", "model/codegen.py")
+
 
 def kernel():
     """The module :mod:`pwsdyn.integrate._kernel`, compiled (or loaded from numba's cache) on
@@ -23,8 +34,9 @@ def kernel():
     if _KERNEL is None:
         with _LOCK:
             if _KERNEL is None:
-                from .._compiling import compile_notice
+                from .._compiling import check_cache, compile_notice
 
+                check_cache(KERNEL_SOURCES)
                 with compile_notice("the integrator", __package__ + "._kernel"):
                     from . import _kernel
                 _KERNEL = _kernel
