@@ -127,7 +127,7 @@ def test_start_inside_the_wall_is_refused():
 
 
 def test_round_off_band_is_the_kernels():
-    # 64 ulps of the state scale times the gradient scale (_kernel._surface_offset)
+    # 64 ulps of the state scale times the gradient scale (_kernel.fields._surface_offset)
     assert BAND_ULPS == 64.0
     assert round_off_band(1.0, np.array([0.5, 0.0])) == 64 * EPS
     assert round_off_band(3.0, np.array([2.0, -4.0])) == 64 * EPS * 3.0 * 4.0

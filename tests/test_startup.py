@@ -352,19 +352,23 @@ def test_stale_cache_entries_of_a_compiled_module_are_removed(tmp_path):
 
 
 def test_the_kernel_cache_is_located_where_numba_writes_it():
-    """The guard looks where numba's own locators put the kernel's cache (here: the
-    __pycache__ next to the source, or NUMBA_CACHE_DIR), and its stamp matches the sources
+    """The guard looks where numba's own locators put each part's cache (here: the
+    __pycache__ next to the sources, or NUMBA_CACHE_DIR), and the stamps match the sources
     after a load."""
     import numba
 
     from pwsdyn._compiling import PACKAGE, STAMP_SUFFIX, numba_cache_dir, sources_digest
-    from pwsdyn.integrate._load import KERNEL_SOURCES, kernel
+    from pwsdyn.integrate._load import KERNEL_DEPENDS, KERNEL_PARTS, kernel
 
     kernel()
-    where = numba_cache_dir(PACKAGE / KERNEL_SOURCES[0])
-    assert where is not None
-    assert where == Path(kernel().run_kernel._cache._cache_path)
-    assert any(where.glob("_kernel.run_kernel-*.nbi"))
-    assert (where / f"_kernel{STAMP_SUFFIX}").read_text().strip() == sources_digest(
-        KERNEL_SOURCES)
-    assert numba.config.CACHE_DIR in ("", None) or str(where).startswith(numba.config.CACHE_DIR)
+    digest = sources_digest(list(KERNEL_PARTS) + list(KERNEL_DEPENDS))
+    for rel in KERNEL_PARTS:
+        where = numba_cache_dir(PACKAGE / rel)
+        stem = Path(rel).stem
+        assert where is not None
+        assert (where / f"{stem}{STAMP_SUFFIX}").read_text().strip() == digest
+        assert numba.config.CACHE_DIR in ("", None) or str(where).startswith(
+            numba.config.CACHE_DIR)
+    run = Path(kernel().run_kernel._cache._cache_path)
+    assert run == numba_cache_dir(PACKAGE / "integrate/_kernel/run.py")
+    assert any(run.glob("run.run_kernel-*.nbi"))

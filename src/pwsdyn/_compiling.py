@@ -205,13 +205,19 @@ def numba_cache_dir(py_file) -> Path | None:
     return None
 
 
-def check_cache(sources) -> bool:
-    """Before importing the compiled module ``sources[0]`` (a path relative to the package):
-    numba keys its cache on that file alone, so entries compiled when any of ``sources``
-    (constants it reads at compile time, the interface it is compiled against) differed are
-    removed. Returns whether any were."""
-    py_file = PACKAGE / sources[0]
-    where = numba_cache_dir(py_file)
-    if where is None:
-        return False
-    return refresh_cache(where, py_file.stem, sources_digest(sources))
+def check_cache(compiled, depends=()) -> bool:
+    """Before importing compiled modules (``compiled``: their files, relative to the
+    package): numba keys each function's cache on its own file alone, so a caller cached in
+    one file keeps the machine code of a callee it inlined from another, and every file keeps
+    the constants it read (``depends``: the codes, the interface compiled against). Where
+    any of these files changed since the entries were written, the entries of every compiled
+    module are removed. Returns whether any were."""
+    compiled = list(compiled)
+    digest = sources_digest(compiled + list(depends))
+    removed = False
+    for rel in compiled:
+        py_file = PACKAGE / rel
+        where = numba_cache_dir(py_file)
+        if where is not None:
+            removed |= refresh_cache(where, py_file.stem, digest)
+    return removed

@@ -23,8 +23,14 @@ import threading
 _KERNEL = None
 _LOCK = threading.Lock()
 
-#: The files whose contents the compiled kernel depends on, relative to the package.
-KERNEL_SOURCES = ("integrate/_kernel.py", "integrate/_codes.py", "_codes.py", "model/codegen.py")
+#: The kernel's parts: the compiled modules of the package ``integrate/_kernel`` (paths
+#: relative to pwsdyn's package).
+KERNEL_PARTS = tuple(f"integrate/_kernel/{name}.py" for name in (
+    "_base", "fields", "steppers", "watch", "actions", "run"))
+#: The other files whose contents the compiled kernel depends on (constants read at compile
+#: time, the model interface it is compiled against).
+KERNEL_DEPENDS = ("integrate/_kernel/__init__.py", "integrate/_codes.py", "_codes.py",
+                  "model/codegen.py")
 
 
 def kernel():
@@ -36,7 +42,7 @@ def kernel():
             if _KERNEL is None:
                 from .._compiling import check_cache, compile_notice
 
-                check_cache(KERNEL_SOURCES)
+                check_cache(KERNEL_PARTS, KERNEL_DEPENDS)
                 with compile_notice("the integrator", __package__ + "._kernel"):
                     from . import _kernel
                 _KERNEL = _kernel

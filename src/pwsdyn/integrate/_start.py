@@ -38,7 +38,7 @@ switching surface as the kernel does, :func:`side_mode`), with ``H = sigma h``:
     kernel does after a chattering sequence;
   - ``Hdot < -band_v`` (moving into the constraint): left with ``H >= 0``, so the kernel
     registers the **impact at the start time** (a watch value that starts at zero and moves
-    in the event direction crosses, ``_kernel._crosses``);
+    in the event direction crosses, ``_kernel.watch._crosses``);
   - otherwise (moving away, or at rest with the free motion leaving): **free motion** from
     ``H >= 0``.
 * ``H`` further behind: the state is inside the wall. ``refuse=True`` (the public entry

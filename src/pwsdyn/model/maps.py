@@ -347,7 +347,7 @@ def _map_kernel(name: str):
             if _LOADED is None:
                 from .._compiling import check_cache, compile_notice
 
-                check_cache(("model/_map_kernels.py", "model/_map_step.py"))
+                check_cache(("model/_map_kernels.py",), ("model/_map_step.py",))
                 with compile_notice("the map iteration", __package__ + "._map_kernels",
                                     expected="a few seconds"):
                     from . import _map_kernels

@@ -20,7 +20,7 @@ Fields and derivatives (all from the model's expressions; ``f`` the mode's field
 ``hd = h_t + h_x f`` the normal velocity, ``a = hd_t + hd_x f`` the free normal acceleration):
 
 * sticking on impact event ``j`` (slides, "Simulation: Chattering"; the kernel's
-  :func:`~pwsdyn.integrate._kernel._field`): ``f - lambda W`` with
+  :func:`~pwsdyn.integrate._kernel.fields._field`): ``f - lambda W`` with
   ``W = (g_x - I) hd_x^T / |hd_x|^2`` and ``lambda = a / (hd_x W)``;
 * sliding on switch ``s`` (thesis eq. 2.7-2.8): ``(1 - alpha) f_above + alpha f_below`` with
   ``alpha = hd_above / (hd_above - hd_below)``; for ``sliding='utkin'`` the family

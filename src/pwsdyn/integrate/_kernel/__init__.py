@@ -1,0 +1,147 @@
+"""The compiled event-driven integrator (numba).
+
+One function, :func:`run_kernel`, integrates a hybrid model from ``t0`` to ``t_end`` with an
+embedded explicit Runge-Kutta pair and handles every discontinuity in the same compiled loop:
+no Python call is made per step or per event. The model enters as one first-class function
+``evaluate(which, idx, t, x, p, out)`` (see :mod:`pwsdyn.model.codegen`), so this kernel is
+compiled once for all models and cached on disk.
+
+Discrete state
+--------------
+``dkind`` is what governs the motion now:
+
+* ``REGULAR``: the vector field of mode ``mode``;
+* ``STICK``: sticking on the surface of impact event ``didx`` after a complete chattering
+  sequence, or after an impact that leaves the normal velocity at round-off while the free
+  motion presses into the surface (a plastic impact, an impact at rest): constrained motion
+  ``f - lambda W`` (slides "Simulation: Chattering"), on an oblique or curved surface the
+  frictionless motion along it, released where the constraint force vanishes;
+* ``SLIDE``: Filippov sliding on switch ``didx`` with the convex field
+  ``f12 = (1 - alpha) f_above + alpha f_below`` (thesis eq. 2.7-2.8) or Utkin's equivalent
+  control ``f(t, x, u_eq)`` (slides; switch table column 4), optionally with the stabilising
+  term ``-C h h_x^T`` of the slides; each accepted sliding step is projected back onto
+  ``h = 0``.
+
+Switching surfaces
+------------------
+At the start, and after every reset, release or change of mode by an event, the mode is made
+consistent with the side of every switching surface (:func:`_resolve`); a state on a Filippov
+surface starts sliding if both fields point into it. An arrival at a surface crosses or starts
+sliding according to the signs of ``h_t + h_x f`` of the two modes (thesis eq. 2.6-2.8);
+switches of kind ``SW_CONTINUOUS`` (kinks of ``Abs``/``Max``/``Min``) always cross. Sliding
+ends (``slide_end``) where ``hdot`` of the mode above turns positive (``alpha = 0``) or that of
+the mode below turns negative (``alpha = 1``), located by Newton on that ``hdot``. Reaching
+another switching surface while sliding crosses it if the sliding motion continues on its far
+side; if the sliding fields on both sides point into it (sliding on the intersection) the run
+ends with ``ST_INTERSECTION``.
+
+Watch functions
+---------------
+In each discrete state the kernel watches a small list of scalar functions of ``(t, x)`` for
+zero crossings: surfaces ``h`` (events, switches), normal velocities ``hdot`` (sliding exit)
+and normal accelerations ``hddot`` (release from sticking). On every accepted step each is
+sampled on the dense output -- surfaces at the ends and at the interior extrema of the cubic
+Hermite fit from ``h`` and ``hdot`` at the ends, the other functions at the ends and the
+midpoint (the normal acceleration of a sticking motion also at the extrema of its Hermite
+fit, its slopes by central differences). Where such a function has one sign at two
+consecutive samples and an extremum towards zero between them (``hdot`` changes sign: near
+grazing, a short release window), that extremum is searched for on the dense output -- the
+exact flow on an exact step -- with a lower bound from the tangents at the bracket's ends
+(:func:`_extremum_search`), so a crossing and re-crossing inside one step is found whenever
+it is deeper than the dense output's error. The earliest crossing is bracketed and located
+by the Illinois method on the dense output to a few ulps, then the step is re-taken exactly
+to that time ("landing step") and the time is polished with Newton steps on ``h`` (or
+``hdot`` for a sliding exit) so the event state comes from the integrator itself, not from
+the interpolant.
+A surface that depends on ``t`` explicitly (a moving constraint) must also be resolved by the
+step: where the Hermite fit misses ``h`` at the step's midpoint by more than 1% the step is
+retaken shorter, so a state at rest cannot step over an oscillating wall.
+
+A function that is zero at the start of a step fires at that time if the next sample lies on
+the far side of the event direction, never otherwise. On the first step after a restart (the
+start of the run, every event) a surface within its round-off band (:func:`_surface_offset`)
+counts as zero, and its rate within its own band (:func:`_rate_band`) as tangency: a start on
+a wall moving (or curving) into it, a sliding exit or release that ends on another surface,
+is an event at that time whatever the sign of the round-off; a start on a surface moving away
+is none. The same band decides after an event: a round-off normal velocity is not "moving
+away", and after an impact with the free normal acceleration into the surface it is contact
+(``STICK``).
+
+Watch arrays are sized from the model (one entry per event and switch, plus spares), so any
+number of events and switches per mode is watched.
+
+Output
+------
+``iopt[IO_SAVE]``: ``SAVE_EVENTS`` stores the nodes on both sides of every event and the end
+(sweeps); ``SAVE_DENSE`` every step with its power-form dense output; ``SAVE_NODES`` every
+step with its length only -- the dense output is rebuilt when it is read by taking the step
+again from its start node (:func:`dense_coefficients`: the same stages from the same numbers,
+so the same coefficients), which costs the run nothing (storing it doubled the cost of a
+Runge-Kutta run and added the three extra stages of DOP853's interpolant to every step).
+
+Sampling
+--------
+With ``FO_SAMPLE_DT > 0`` the state at ``FO_SAMPLE_T0 + k FO_SAMPLE_DT`` is recorded from each
+step's dense output as the integration passes it (stroboscopic sections: no event, no landing
+step); across a chattering gap it is the linear interpolation the trajectory also uses.
+
+Exact propagation
+-----------------
+With ``iopt[IO_EXACT]`` the regular modes that are affine in the state with harmonic forcing
+(:mod:`pwsdyn.model.affine`) are not integrated but propagated by the exact flow
+``z(t + h) = exp(h M) z(t)`` of the state augmented with the forcing. Steps are limited to
+``||h D^-1 M D||_inf <= 1`` (after scaling the constant and forcing columns; ``D`` balances
+``M`` by powers of two, so a stiff spring's steps follow its frequency, not its stiffness:
+:func:`_affine_setup`): a full step is one
+product with a propagator made once per mode and run (:func:`_exact_propagator`), any other
+step sums the Taylor series of the vector (:func:`_exact_step`), whose terms are the step's
+dense output -- the exact flow, so the event search runs on it and the landing on an event
+is its evaluation, the terms then rescaled to the shortened interval. Their error estimate
+is zero; sticking, sliding, non-affine modes and the variational equations stay on the
+Runge-Kutta pair.
+
+Termination
+-----------
+No input makes the kernel spin. Non-finite input (``t0``, ``t_end``, ``x0``, first step,
+a NaN largest step, tolerances, sampling time or period) ends the run before any work with
+``ST_NONFINITE``, as does a non-finite time, state or field at the start and after every
+event (a NaN reset) or a step size that turns NaN. A Runge-Kutta stage or a watch function
+that turns non-finite inside a step has the step retaken shorter, down to 4 ulp of ``t``:
+the run ends with ``ST_NONFINITE`` at the last finite state. Accepted steps are counted
+against ``max_steps`` and events against ``max_events``; a rejection shrinks the step by at
+least 10% (an accepted step grows it at most 10x) and a step below 4 ulp of ``t`` ends the
+run, so rejections are bounded too; samples are bounded by ``max_steps`` (more requested
+ends the run at once with ``ST_MAX_STEPS``); inner loops (event location, Newton
+polishing, projections, the equivalent control) have fixed iteration caps.
+
+Time never passes ``t_end``: the last step ends at ``t_end`` exactly, and a complete-
+chattering jump is taken only where its accumulation point lies within ``t_end``; before a
+later one the impacts are integrated one by one, and where they fall below the velocity
+floor (unresolvable) the run ends at ``t_end`` on the chord of the chattering gap.
+
+Variational equations
+---------------------
+With ``variational`` the state is augmented by the n x n matrix ``Phi`` (row-major), integrated
+with ``Phi' = J Phi`` and updated at every event by the full saltation matrix (slides,
+"Saltation matrices"; Adolfsson et al. 2001) with the ``h_t`` and ``g_t`` terms of
+time-dependent surfaces and resets: :func:`_event_saltation` (impacts, transitions),
+:func:`_switch_saltation` (Filippov crossing, sliding entry), :func:`_chatter_saltation`
+(complete chattering, the slides' ``G = C + (f_out - C f_in) h_x / (h_x f_in)`` with the time
+derivatives of the map); release and sliding exit leave the field continuous (``S = I``).
+``J`` is symbolic in a regular mode and a central difference (step ~ eps^(1/3)) of the
+sticking or sliding field. Steps are accepted only when ``Phi`` meets the tolerances too.
+With ``iopt[IO_VAR] == VAR_SEGMENTS`` ``Phi`` restarts at the identity after every event and
+each event record carries the segment's ``Phi`` and ``S`` (the per-segment transfer matrices;
+see :mod:`pwsdyn.integrate._variational`).
+"""
+
+
+from __future__ import annotations
+
+from .actions import chatter_saltation
+from .fields import state_field
+from .run import dense_coefficients, run_kernel
+from .watch import GRAZING_RTOL
+
+__all__ = ["GRAZING_RTOL", "chatter_saltation", "dense_coefficients", "run_kernel",
+           "state_field"]
