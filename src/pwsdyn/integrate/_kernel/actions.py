@@ -80,17 +80,26 @@ def _switch_saltation(ev, p, dkind, didx, mode_in, mode_out, nm, k, t, x, n, S, 
 
 
 @_hot
-def _chatter_map(ev, p, j, k, mode, nm, t, x, n, out, W, gx, hdx, f, buf):
-    """Complete-chattering map Q and time q at x (slides; Nordmark & Piiroinen 2009).
-    Returns the duration q(x) - t; writes Q(x) into out."""
-    ev(W_HD, k * nm + mode, t, x, p, buf)
-    vin = buf[0]
+def _impact_law(ev, p, j, k, mode, nm, t, x, n, W, gx, hdx, f, buf):
+    """``(a, r)`` of impact event ``j`` on surface ``k`` at ``(t, x)``: the free normal
+    acceleration ``a = hdot_t + hdot_x f`` and the restitution ``r = -(1 + hdot_x W)`` of the
+    impact law ``x+ = x- + W hdot`` (writes ``f``, ``hdot_x`` and ``W``). What the
+    complete-chattering map, its coefficients and the impact action all start from."""
     ev(W_F, mode, t, x, p, f)
     ev(W_HDX, k * nm + mode, t, x, p, hdx)
     ev(W_HDT, k * nm + mode, t, x, p, buf)
     acc = buf[0] + _dot(hdx, f, n)
     hw = _impact_direction(ev, p, j, k, mode, nm, t, x, n, W, gx, hdx)
-    r = -(1.0 + hw)
+    return acc, -(1.0 + hw)
+
+
+@_hot
+def _chatter_map(ev, p, j, k, mode, nm, t, x, n, out, W, gx, hdx, f, buf):
+    """Complete-chattering map Q and time q at x (slides; Nordmark & Piiroinen 2009).
+    Returns the duration q(x) - t; writes Q(x) into out."""
+    ev(W_HD, k * nm + mode, t, x, p, buf)
+    vin = buf[0]
+    acc, r = _impact_law(ev, p, j, k, mode, nm, t, x, n, W, gx, hdx, f, buf)
     for i in range(n):
         out[i] = x[i] + (2.0 * r * f[i] / acc + W[i]) * vin / (1.0 - r)
     return 2.0 * r * vin / ((1.0 - r) * acc)
@@ -113,12 +122,7 @@ def _chatter_coef(ev, p, j, k, mode, nm, t, x, n, c, W, gx, hdx, f, buf):
     """The coefficients of the complete-chattering map, smooth functions of ``(t, x)``:
     ``Q = x + c hdot``, ``q = b hdot`` with ``b = 2 r / ((1 - r) a)`` and
     ``c = (2 r f / a + W) / (1 - r)`` (:func:`_chatter_map`). Writes c; returns b."""
-    ev(W_F, mode, t, x, p, f)
-    ev(W_HDX, k * nm + mode, t, x, p, hdx)
-    ev(W_HDT, k * nm + mode, t, x, p, buf)
-    acc = buf[0] + _dot(hdx, f, n)
-    hw = _impact_direction(ev, p, j, k, mode, nm, t, x, n, W, gx, hdx)
-    r = -(1.0 + hw)
+    acc, r = _impact_law(ev, p, j, k, mode, nm, t, x, n, W, gx, hdx, f, buf)
     for i in range(n):
         c[i] = (2.0 * r * f[i] / acc + W[i]) / (1.0 - r)
     return 2.0 * r / ((1.0 - r) * acc)
@@ -427,12 +431,7 @@ def _act_impact(ev, p, j, dkind, didx, mode, nm, t, y, xs, n, etab, t_end, fopt,
     # normal velocity and acceleration at impact, impact direction W, restitution r
     ev(W_HD, k * nm + mode, t, y, p, buf)
     vin = buf[0]
-    ev(W_F, mode, t, y, p, fbuf)
-    ev(W_HDX, k * nm + mode, t, y, p, hdx)
-    ev(W_HDT, k * nm + mode, t, y, p, buf)
-    acc = buf[0] + _dot(hdx, fbuf, n)
-    hw = _impact_direction(ev, p, j, k, mode, nm, t, y, n, w1, gx, hdx)
-    r = -(1.0 + hw)
+    acc, r = _impact_law(ev, p, j, k, mode, nm, t, y, n, w1, gx, hdx, fbuf, buf)
     if chain_event != j:
         chain_event = j
         chain_vmax = 0.0
