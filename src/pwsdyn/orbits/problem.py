@@ -1886,13 +1886,15 @@ def _hd(ctx, k, mode):
     return _Fn(fn)
 
 
-def _acc(ctx, k, mode):
-    nm = ctx.nm
+def _hdot_rate(ctx, k, mode, t, x, f) -> float:
+    """``d/dt (h_x f_mode)`` on surface ``k`` at ``(t, x)`` along the field ``f``."""
+    i = k * ctx.nm + mode
+    return float(ctx._eval(W_HDT, i, t, x, 1)[0] + ctx._eval(W_HDX, i, t, x, ctx.n) @ f)
 
+
+def _acc(ctx, k, mode):
     def fn(t, x):
-        f = ctx.mode_field(mode, t, x)
-        return float(ctx._eval(W_HDT, k * nm + mode, t, x, 1)[0]
-                     + ctx._eval(W_HDX, k * nm + mode, t, x, ctx.n) @ f)
+        return _hdot_rate(ctx, k, mode, t, x, ctx.mode_field(mode, t, x))
     return _Fn(fn)
 
 
@@ -1900,10 +1902,8 @@ def _boundary_rate(ctx, j, mode, t, x) -> float:
     """``d/dt (h_x f_mode)`` along the sliding field of switch ``j`` at ``(t, x)`` (its
     convex combination extended smoothly where the point is not in the sliding region): the
     rate at which the sliding flow crosses the sliding region's boundary ``h_x f_mode = 0``."""
-    nm, k = ctx.nm, ctx.model.switches[j].surface
-    f = _state_field(ctx, FieldKey("slide", j), t, x)
-    return float(ctx._eval(W_HDT, k * nm + mode, t, x, 1)[0]
-                 + ctx._eval(W_HDX, k * nm + mode, t, x, ctx.n) @ f)
+    k = ctx.model.switches[j].surface
+    return _hdot_rate(ctx, k, mode, t, x, _state_field(ctx, FieldKey("slide", j), t, x))
 
 
 def _guard(ctx, j, t, x) -> bool:
