@@ -18,7 +18,7 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 # Document the checkout being built, whatever pwsdyn is installed elsewhere.
 sys.path.insert(0, str(ROOT / "src"))
-sys.path.insert(0, str(HERE))            # the _ext helpers (model zoo table)
+sys.path.insert(0, str(HERE))            # the _ext helpers (model zoo table, gallery scraper)
 os.environ.setdefault("MPLBACKEND", "Agg")
 os.environ.setdefault("PWSDYN_QUIET", "1")
 
@@ -85,7 +85,11 @@ sphinx_gallery_conf = {
     "plot_gallery": "True",
     "remove_config_comments": True,
     "matplotlib_animations": False,
-    "image_scrapers": ("matplotlib",),
+    # pyplot's figures, and the Figure objects pwsdyn's plotting functions return (by name:
+    # a function in the configuration could not be cached between builds)
+    "image_scrapers": ("matplotlib", "_ext.gallery_scrapers.pwsdyn_figures"),
+    # an example that ends a block with its figure shows the figure, not the figure's repr
+    "ignore_repr_types": r"matplotlib\.(text|axes|figure)",
 }
 
 # -- HTML -----------------------------------------------------------------------------------
