@@ -236,12 +236,13 @@ def _notice(tmp_path, tag: str, watched: str | None = None, **env):
 
 def test_compile_message_only_when_numba_really_compiles(tmp_path):
     """The first import compiles (no cache next to the module): the message and the time;
-    the second loads from numba's cache: nothing."""
-    first = _notice(tmp_path, "a", PWSDYN_QUIET="")
+    the second loads from numba's cache: nothing. (NUMBA_CACHE_DIR empty: numba's default,
+    the cache next to the module, whatever the calling environment sets.)"""
+    first = _notice(tmp_path, "a", PWSDYN_QUIET="", NUMBA_CACHE_DIR="")
     assert "pwsdyn: compiling the test function (first run only, about a minute)..." in first
     assert "pwsdyn: compiled the test function in " in first
     assert list((tmp_path / "__pycache__").glob("jitmod_a.twice-*.nbi"))
-    assert _notice(tmp_path, "a", PWSDYN_QUIET="") == ""
+    assert _notice(tmp_path, "a", PWSDYN_QUIET="", NUMBA_CACHE_DIR="") == ""
 
 
 def test_compile_message_can_be_silenced_and_is_scoped(tmp_path):
