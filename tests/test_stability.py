@@ -164,9 +164,36 @@ def test_sliding_entry_saltation_closed_form():
     S = tr.transfer_matrices[2 * k + 1]
     np.testing.assert_allclose(S, S_hand, rtol=1e-12, atol=1e-12)
     assert np.max(np.abs(hx @ S)) < 1e-12
+    # the same matrix from the model's derivatives (Python), named by the switch; both fields
+    # point into the surface, so the side it arrives from is given
+    np.testing.assert_allclose(saltation_matrix(BELT, "slip", t, x, mode=ev.mode_before), S_hand,
+                               rtol=1e-12, atol=1e-12)
     # leaving the sliding surface does not change the field: S = I
     kend = [e.kind for e in tr.events].index("slide_end")
     np.testing.assert_array_equal(tr.transfer_matrices[2 * kend + 1], np.eye(2))
+
+
+def test_crossing_saltation_closed_form():
+    """Crossing v = vb from one mode into the other: f_out - f_in = (0, -+2 mu) and h_x =
+    (0, 1) give S = I + (f_out - f_in) h_x / (h_x f_in) = diag(1, f_out_v / f_in_v). The
+    kernel's matrix and the one saltation_matrix computes for the switch by name both match."""
+    p = dict(BELT["parameters"], A=3.0)
+    spec = dict(BELT, parameters=p)
+    tr = pwsdyn.simulate(spec, [0.5, 0.0], (0, 12), variational=True, **TIGHT)
+    crossings = [k for k, e in enumerate(tr.events) if e.kind == "crossing"]
+    assert len(crossings) >= 2
+    for k in crossings:
+        ev = tr.events[k]
+        x, t = ev.x_before, ev.t
+        common = -p["k"] * x[0] - p["c"] * x[1] + p["A"] * np.cos(p["w"] * t)
+        above, below = common - p["mu"], common + p["mu"]
+        # arriving from above the flow goes down (v' < 0), and the other way round
+        f_in, f_out = (above, below) if below < 0 else (below, above)
+        S_hand = np.diag([1.0, f_out / f_in])
+        np.testing.assert_allclose(tr.transfer_matrices[2 * k + 1], S_hand, rtol=1e-12,
+                                   atol=1e-12)
+        np.testing.assert_allclose(saltation_matrix(spec, "slip", t, x), S_hand, rtol=1e-12,
+                                   atol=1e-12)
 
 
 def test_saltation_forms_full_and_projected():

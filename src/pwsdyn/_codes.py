@@ -6,13 +6,15 @@ integer of a name is its position, so adding a code is adding a name at the end 
 (see docs/extending.md). The kernel's ``K_*``, ``ST_*``, ... constants are generated from the
 tuples below, so the two sides cannot drift apart.
 
-Also here: :func:`kernel_options`, the only place that builds the kernel's option arrays
-``iopt``/``fopt`` from named arguments, and :class:`KernelResult`, the named form of the
-tuple :func:`pwsdyn.integrate._kernel.run_kernel` returns.
+Also here: the record types of the kernel's event and switch tables and of its options
+(:data:`KERNEL_OPTIONS`), with :func:`kernel_options`, the only place that builds the options,
+and :class:`KernelResult`, the named form of the tuple
+:func:`pwsdyn.integrate._kernel.run_kernel` returns.
 """
 
 from __future__ import annotations
 
+import operator
 from typing import NamedTuple
 
 import numpy as np
@@ -63,34 +65,68 @@ SLIDE_CONVEX, SLIDE_UTKIN = range(2)
 INTERVAL_KINDS = ("step", "jump", "chatter_gap")
 IV_STEP, IV_JUMP, IV_CHATTER = range(3)
 
-#: What a run stores (``IO_SAVE``): the nodes of events and the end; every step with its dense
-#: output; every step with its length only (the dense output rebuilt on demand).
+#: What a run stores (``KERNEL_OPTIONS`` field ``save``): the nodes of events and the end; every step
+#: with its dense output; every step with its length only (the dense output rebuilt on demand).
 SAVE_MODES = ("events", "dense", "nodes")
 SAVE_EVENTS, SAVE_DENSE, SAVE_NODES = range(3)
 
-#: Variational equations (``IO_VAR``): none; Phi through every event; Phi per segment.
+#: Variational equations (field ``variational``): none; Phi through every event; Phi
+#: per segment.
 VAR_MODES = ("none", "global", "segments")
 VAR_NONE, VAR_GLOBAL, VAR_SEGMENTS = range(3)
 
 # --------------------------------------------------------------------------------------
-# option arrays
+# the kernel's tables
 # --------------------------------------------------------------------------------------
 
-#: Integer options, by position in ``iopt``.
-INT_OPTIONS = ("mode0", "n_modes", "max_steps", "max_events", "method", "variational",
-               "chatter", "save", "stop_mask", "stop_ref", "stop_count", "dkind0", "didx0",
-               "exact", "order")
-(IO_MODE0, IO_NMODES, IO_MAXSTEPS, IO_MAXEVENTS, IO_METHOD, IO_VAR, IO_CHATTER, IO_SAVE,
- IO_STOP_MASK, IO_STOP_REF, IO_STOP_COUNT, IO_DKIND0, IO_DIDX0, IO_EXACT, IO_ORDER) = range(
-    len(INT_OPTIONS))
-IO_N = len(INT_OPTIONS)
+#: The event table: one record per model event (numba reads a field of a record as it read a
+#: column of a 2-d array). ``kind``: ``EV_*``; ``target``: the mode after a transition (-1:
+#: unchanged); ``time_dependent``: 1 if the event's surface depends on t explicitly.
+EVENT_TABLE = np.dtype([("surface", np.int64), ("direction", np.int64), ("kind", np.int64),
+                        ("target", np.int64), ("terminal", np.int64), ("has_reset", np.int64),
+                        ("time_dependent", np.int64)])
 
-#: Float options, by position in ``fopt``.
-FLOAT_OPTIONS = ("rtol", "atol", "first_step", "max_step", "chatter_ratio", "chatter_velocity",
-                 "sliding_gain", "sample_t0", "sample_dt")
-(FO_RTOL, FO_ATOL, FO_H0, FO_HMAX, FO_CHAT_REL, FO_CHAT_ABS, FO_SLIDE_C, FO_SAMPLE_T0,
- FO_SAMPLE_DT) = range(len(FLOAT_OPTIONS))
-FO_N = len(FLOAT_OPTIONS)
+#: The switch table: one record per switching surface between two modes. ``above``/``below``:
+#: the mode on either side; ``kind``: ``SW_*``; ``sliding``: ``SLIDE_*`` (the sliding vector
+#: field); ``time_dependent`` as in :data:`EVENT_TABLE`.
+SWITCH_TABLE = np.dtype([("surface", np.int64), ("above", np.int64), ("below", np.int64),
+                         ("kind", np.int64), ("sliding", np.int64), ("time_dependent", np.int64)])
+
+
+# --------------------------------------------------------------------------------------
+# the kernel's options
+# --------------------------------------------------------------------------------------
+
+#: The options of one kernel run, by name: one record (a structured array of shape (1,),
+#: which numba passes as cheaply as a plain array; a named tuple of these fields cost ~1.6 us
+#: more per call to dispatch). The kernel reads ``opts.rtol`` from ``options[0]``. Built by
+#: :func:`kernel_options` only.
+KERNEL_OPTIONS = np.dtype([
+    ("mode0", np.int64),               # mode at t0
+    ("n_modes", np.int64),
+    ("max_steps", np.int64),
+    ("max_events", np.int64),
+    ("method", np.int64),              # the tableau's code (its error estimator)
+    ("variational", np.int64),         # VAR_*
+    ("chatter", np.int64),             # 1: the complete-chattering map is on
+    ("save", np.int64),                # SAVE_*
+    ("stop_mask", np.int64),           # stop after a logged event: K_* bit mask (0: never) ...
+    ("stop_ref", np.int64),            # ... of this event or switch (-1: any) ...
+    ("stop_count", np.int64),          # ... the count-th time
+    ("dkind0", np.int64),              # discrete state at t0: kind and index
+    ("didx0", np.int64),
+    ("exact", np.int64),               # 1: affine modes with harmonic forcing propagated exactly
+    ("order", np.int64),               # exponent of the step-size control (0: from ``method``)
+    ("rtol", np.float64),
+    ("atol", np.float64),
+    ("first_step", np.float64),        # 0: estimated
+    ("max_step", np.float64),
+    ("chatter_ratio", np.float64),     # negative: the default, where the chattering map is accurate
+    ("chatter_velocity", np.float64),  # negative: the floor from the tolerances
+    ("sliding_gain", np.float64),      # rate of the sliding field's stabilising term
+    ("sample_t0", np.float64),         # stroboscopic samples at sample_t0 + k sample_dt ...
+    ("sample_dt", np.float64),         # ... (<= 0: none)
+])
 
 
 def kernel_options(*, mode0: int, n_modes: int, max_steps: int, max_events: int, method: int,
@@ -100,8 +136,10 @@ def kernel_options(*, mode0: int, n_modes: int, max_steps: int, max_events: int,
                    first_step: float = 0.0, max_step: float = np.inf,
                    chatter_ratio: float, chatter_velocity: float = -1.0,
                    sliding_gain: float = 0.0,
-                   sample: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The kernel's option arrays ``(iopt, fopt)`` from named values.
+                   sample: tuple[float, float] | None = None) -> np.ndarray:
+    """The kernel's options (one record of :data:`KERNEL_OPTIONS`) from named values: integers
+    (numpy's too, and bools) for the integer fields, real numbers for the others; anything else
+    raises TypeError.
 
     ``stop``: ``(kind_mask, ref, count)``, stop after the ``count``-th logged event whose
     ``K_*`` kind has its bit set in ``kind_mask`` and whose event or switch index is ``ref``
@@ -110,32 +148,16 @@ def kernel_options(*, mode0: int, n_modes: int, max_steps: int, max_events: int,
     the tolerances. ``sample``: ``(t0, dt)`` of stroboscopic samples (``dt <= 0``: none).
     ``method``: the tableau's ``code`` (its error estimator), ``order`` its order (the
     exponent of the step-size control; 0: 5 for code 0, 8 for code 1)."""
-    iopt = np.zeros(IO_N, dtype=np.int64)
-    iopt[IO_MODE0] = mode0
-    iopt[IO_NMODES] = n_modes
-    iopt[IO_MAXSTEPS] = max_steps
-    iopt[IO_MAXEVENTS] = max_events
-    iopt[IO_METHOD] = method
-    iopt[IO_VAR] = variational
-    iopt[IO_CHATTER] = 1 if chatter else 0
-    iopt[IO_SAVE] = save
-    if stop is not None:
-        iopt[IO_STOP_MASK], iopt[IO_STOP_REF], iopt[IO_STOP_COUNT] = stop
-    iopt[IO_DKIND0] = dkind0
-    iopt[IO_DIDX0] = didx0
-    iopt[IO_EXACT] = exact
-    iopt[IO_ORDER] = order
-    fopt = np.zeros(FO_N, dtype=float)
-    fopt[FO_RTOL] = rtol
-    fopt[FO_ATOL] = atol
-    fopt[FO_H0] = first_step
-    fopt[FO_HMAX] = max_step
-    fopt[FO_CHAT_REL] = chatter_ratio
-    fopt[FO_CHAT_ABS] = chatter_velocity
-    fopt[FO_SLIDE_C] = sliding_gain
-    if sample is not None:
-        fopt[FO_SAMPLE_T0], fopt[FO_SAMPLE_DT] = sample
-    return iopt, fopt
+    stop_mask, stop_ref, stop_count = stop if stop is not None else (0, 0, 0)
+    sample_t0, sample_dt = sample if sample is not None else (0.0, 0.0)
+    # an integer field takes an integer (numpy would truncate 1.5 silently), a float field a
+    # real number (numpy would store None as NaN); in the order of KERNEL_OPTIONS
+    i, f = operator.index, float
+    row = (i(mode0), i(n_modes), i(max_steps), i(max_events), i(method), i(variational),
+           1 if chatter else 0, i(save), i(stop_mask), i(stop_ref), i(stop_count), i(dkind0),
+           i(didx0), i(exact), i(order), f(rtol), f(atol), f(first_step), f(max_step),
+           f(chatter_ratio), f(chatter_velocity), f(sliding_gain), f(sample_t0), f(sample_dt))
+    return np.array([row], dtype=KERNEL_OPTIONS)
 
 
 # --------------------------------------------------------------------------------------

@@ -58,7 +58,7 @@ import numpy as np
 
 from ..errors import ArgumentError
 from ..model.codegen import W_F, W_GUARD, W_GX, W_H, W_HD, W_HDT, W_HDX, W_HX
-from ._codes import REGULAR, SLIDE, STICK  # noqa: F401 (SLIDE re-exported: stability)
+from ._codes import EV_IMPACT, REGULAR, SLIDE, STICK, SW_FILIPPOV  # noqa: F401 (SLIDE: stability)
 
 #: Ulps of the round-off band: the kernel's ``_surface_offset`` (64 eps xmax gmax).
 BAND_ULPS = 64.0
@@ -125,26 +125,26 @@ def side_mode(E: _Eval, stab, t, x, mode: int) -> tuple:
     for _ in range(n_sw + 1):
         changed = False
         for s in range(n_sw):
-            a, b = int(stab[s, 1]), int(stab[s, 2])
+            a, b = int(stab[s]["above"]), int(stab[s]["below"])
             if mode not in (a, b):
                 continue
-            hv, tol = offset(int(stab[s, 0]))
+            hv, tol = offset(int(stab[s]["surface"]))
             new = a if hv > tol else b if hv < -tol else mode
             if new != mode:
                 mode, changed = new, True
         if not changed:
             break
     for s in range(n_sw):
-        a, b = int(stab[s, 1]), int(stab[s, 2])
+        a, b = int(stab[s]["above"]), int(stab[s]["below"])
         if mode not in (a, b):
             continue
-        k = int(stab[s, 0])
+        k = int(stab[s]["surface"])
         hv, tol = offset(k)
         if abs(hv) > tol:
             continue
         sa = E.scalar(W_HD, k * E.nm + a, t, x)
         sb = E.scalar(W_HD, k * E.nm + b, t, x)
-        filippov = stab.shape[1] <= 3 or stab[s, 3] == 0
+        filippov = stab[s]["kind"] == SW_FILIPPOV
         if filippov and sa < 0.0 and sb > 0.0:
             return a, s
         if (sa >= 0.0 and sb > 0.0) or (sa > 0.0 and sb >= 0.0):
@@ -211,7 +211,8 @@ def start_state(cm, etab, eact, stab, t, x, p, mode: int, *, pos_tol: float = 0.
     model = cm.model
     x = np.array(x, dtype=float)
     n = model.n_states
-    impacts = [j for j in range(etab.shape[0]) if etab[j, 2] == 0 and etab[j, 1] != 0]
+    impacts = [j for j in range(etab.shape[0])
+               if etab[j]["kind"] == EV_IMPACT and etab[j]["direction"] != 0]
     if not impacts or not np.all(np.isfinite(x)):
         return Start(x, REGULAR, -1, mode)
     E = _Eval(cm, p)
@@ -220,17 +221,17 @@ def start_state(cm, etab, eact, stab, t, x, p, mode: int, *, pos_tol: float = 0.
     if sliding:
         # the kernel slides on that surface (it keeps the mode above, watching the events
         # of both modes); only keep the state on the admissible side of the constraints
-        modes = {int(stab[slide, 1]), int(stab[slide, 2])}
+        modes = {int(stab[slide]["above"]), int(stab[slide]["below"])}
     else:
         modes = {mode_r}
     xmax = max(1.0, float(np.max(np.abs(x))))
     actions = []
     done = set()
     for j in impacts:
-        k = int(etab[j, 0])
+        k = int(etab[j]["surface"])
         if k in done or not any(eact[j, m] for m in modes):
             continue
-        sigma = -float(etab[j, 1])
+        sigma = -float(etab[j]["direction"])
         h = E.scalar(W_H, k, t, x)
         hx = E(W_HX, k, t, x, n)
         gmax = max(1.0, float(np.max(np.abs(hx))))
@@ -274,7 +275,7 @@ def start_state(cm, etab, eact, stab, t, x, p, mode: int, *, pos_tol: float = 0.
             hw = 0.0
             jj = -1
             for j2 in impacts:
-                if etab[j2, 0] != k or not eact[j2, mode_r]:
+                if etab[j2]["surface"] != k or not eact[j2, mode_r]:
                     continue
                 if E.scalar(W_GUARD, j2, t, x) != 0.0:
                     jj = j2

@@ -16,8 +16,8 @@ from ..model.codegen import CompiledModel
 from ..model.affine import affine_structure
 from ..model.spec import as_model, run_defaults
 from ._load import kernel
-from ._codes import (SAVE_DENSE, SAVE_EVENTS, SAVE_NODES, STATS, VAR_NONE, VAR_SEGMENTS,
-                     KernelResult, kernel_options)
+from ._codes import (EVENT_TABLE, SAVE_DENSE, SAVE_EVENTS, SAVE_NODES, STATS, SWITCH_TABLE,
+                     VAR_NONE, VAR_SEGMENTS, KernelResult, kernel_options)
 from ._start import ADMIT_BEHIND, STICK, start_state
 from ._variational import assemble_segments
 from .tableaus import METHODS
@@ -280,16 +280,17 @@ def simulate(model: ModelLike, x0: StateLike | Trajectory | None = None,
     return _simulate_compiled(cm, x, t0, t_end, p, opts, refuse=True)
 
 
-def _lazy_dense(cm, p, etab, stab, iopt, fopt, tab, t0, x0, nodes_t, nodes_y, nodes_s, hstep,
+def _lazy_dense(cm, p, etab, stab, kopts, tab, t0, x0, nodes_t, nodes_y, nodes_s, hstep,
                 deg) -> LazyDense:
     """The dense output of a ``SAVE_NODES`` run, rebuilt from its nodes when it is read
     (:func:`pwsdyn.integrate._kernel.dense_coefficients`)."""
     ev = cm.evaluate
 
     def rebuild(which):
-        return kernel().dense_coefficients(ev, p, etab, stab, iopt, fopt, tab.A, tab.C, tab.P,
-                                  tab.n_stages, t0, x0, nodes_t, nodes_y, nodes_s, hstep,
-                                  np.ascontiguousarray(which, dtype=np.int64), deg)
+        return kernel().dense_coefficients(ev, p, etab, stab, kopts, tab.A, tab.C, tab.P,
+                                           tab.n_stages, t0, x0, nodes_t, nodes_y, nodes_s,
+                                           hstep, np.ascontiguousarray(which, dtype=np.int64),
+                                           deg)
 
     return LazyDense((len(hstep), nodes_y.shape[1], deg), rebuild)
 
@@ -386,7 +387,7 @@ def resolve_method(opts) -> str:
 
 
 def _exact_code(model, exact) -> int:
-    """``iopt[IO_EXACT]``: 1 (the affine modes propagated exactly) for ``exact=True``, after
+    """The kernel option ``exact``: 1 (the affine modes propagated exactly) for ``exact=True``, after
     checking that the model has one, and for ``'auto'`` (the kernel finds the affine modes;
     a model without any runs on the Runge-Kutta pair alone); 0 for False."""
     if isinstance(exact, str):
@@ -422,10 +423,11 @@ def _check_exact(model) -> None:
 
 
 def kernel_tables(cm: CompiledModel, sliding: str = "convex"):
-    """The kernel's event table (surface, direction, kind, target, terminal, has_reset,
-    surface moves in time), event activity per mode and switch table (surface, above, below,
-    kind, sliding method, surface moves in time). Built once per model and sliding method:
-    loops (shooting, sweeps) call the kernel many times."""
+    """The kernel's event table (records of ``EVENT_TABLE``: surface, direction, kind,
+    target, terminal, has_reset, time_dependent), event activity per mode and switch table
+    (records of ``SWITCH_TABLE``: surface, above, below, kind, sliding, time_dependent).
+    Built once per model and sliding method: loops (shooting, sweeps) call the kernel many
+    times."""
     key = (cm.model.hash, cm.source_path, sliding)
     if key not in _TABLES:
         _TABLES[key] = _build_kernel_tables(cm, sliding)
@@ -438,20 +440,20 @@ def _build_kernel_tables(cm: CompiledModel, sliding: str):
     tdep = cm.surface_time_dependent
     if tdep is None:
         tdep = np.zeros(len(model.surfaces), dtype=np.int64)
-    etab = np.zeros((max(ne, 0), 7), dtype=np.int64)
+    etab = np.zeros(max(ne, 0), dtype=EVENT_TABLE)
     for j in range(ne):
-        etab[j] = [cm.event_surface[j], cm.event_direction[j], cm.event_kind[j],
+        etab[j] = (cm.event_surface[j], cm.event_direction[j], cm.event_kind[j],
                    cm.event_target[j], cm.event_terminal[j], cm.event_has_reset[j],
-                   tdep[cm.event_surface[j]]]
+                   tdep[cm.event_surface[j]])
     eact = np.ascontiguousarray(cm.event_active[:ne].astype(np.int64)).reshape(ne, len(model.modes))
     ns = len(model.switches)
     if sliding not in SLIDING_METHODS:
         raise ArgumentError(f"`sliding` must be one of {sorted(SLIDING_METHODS)}, got {sliding!r}")
-    stab = np.zeros((ns, 6), dtype=np.int64)
+    stab = np.zeros(ns, dtype=SWITCH_TABLE)
     kinds = cm.switch_kind if cm.switch_kind is not None else np.zeros(ns, dtype=np.int64)
     for s in range(ns):
-        stab[s] = [cm.switch_surface[s], cm.switch_above[s], cm.switch_below[s], kinds[s],
-                   SLIDING_METHODS[sliding], tdep[cm.switch_surface[s]]]
+        stab[s] = (cm.switch_surface[s], cm.switch_above[s], cm.switch_below[s], kinds[s],
+                   SLIDING_METHODS[sliding], tdep[cm.switch_surface[s]])
     return etab, eact, stab
 
 
@@ -498,7 +500,7 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
     # with the variational equations, whose nodes are transformed after the run
     save = (SAVE_EVENTS if not opts["dense"] else
             SAVE_DENSE if opts["variational"] or store_dense else SAVE_NODES)
-    iopt, fopt = kernel_options(
+    kopts = kernel_options(
         mode0=mode0, n_modes=len(model.modes), max_steps=opts["max_steps"],
         max_events=opts["max_events"], method=tab.code, order=tab.order,
         variational=VAR_SEGMENTS if opts["variational"] else VAR_NONE, chatter=opts["chatter"],
@@ -514,11 +516,11 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
     pv = np.ascontiguousarray(p if p.size else np.zeros(1), dtype=float)
     x = np.array(x, dtype=float)
     res = KernelResult(*K.run_kernel(cm.evaluate, float(t0), float(t_end), x, pv, etab, eact,
-                                     stab, iopt, fopt, tab.A, tab.C, tab.E, tab.P, tab.n_stages))
+                                     stab, kopts, tab.A, tab.C, tab.E, tab.P, tab.n_stages))
     (status, t_fin, y_fin, dstate, nodes_t, nodes_y, nodes_s, dense, ikind, ev_t, ev_t2, ev_info,
      ev_xb, ev_xa, stats, samples, hstep) = res
     if save == SAVE_NODES:
-        dense = _lazy_dense(cm, pv, etab, stab, iopt, fopt, tab, float(t0), x, nodes_t, nodes_y,
+        dense = _lazy_dense(cm, pv, etab, stab, kopts, tab, float(t0), x, nodes_t, nodes_y,
                             nodes_s, hstep, dense.shape[2])
     n = model.n_states
     jac = transfer = None

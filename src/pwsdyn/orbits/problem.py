@@ -60,6 +60,7 @@ from ..integrate.trajectory import EventRecord, Trajectory
 from ..model.codegen import W_GUARD, W_HD, W_HDT, W_HDX
 from ..model.spec import as_model
 from ..newton import TrialRejected, newton
+from ..integrate._codes import REGULAR, SLIDE, STICK
 from ..integrate.trajectory import DiscreteState
 from ..stability._context import KernelState, ModelContext
 from ..stability._floquet import floquet_multipliers
@@ -897,11 +898,11 @@ class OrbitProblem:
         fk = self.fields[0]
 
         if fk.kind == "mode":
-            st = KernelState(0, -1, fk.index)
+            st = KernelState(REGULAR, -1, fk.index)
         elif fk.kind == "stick":
-            st = KernelState(1, fk.index, fk.mode)
+            st = KernelState(STICK, fk.index, fk.mode)
         else:
-            st = KernelState(2, fk.index, int(ctx.stab[fk.index, 1]))
+            st = KernelState(SLIDE, fk.index, int(ctx.stab[fk.index]["above"]))
         opts = dict(self.opts, variational=False, dense=False, throw=False, mode=None)
         nev = len(self.signature)
         try:
@@ -1916,11 +1917,11 @@ def _state_field(ctx, fk: FieldKey, t, x):
     from ..stability._context import KernelState
 
     if fk.kind == "mode":
-        st = KernelState(0, -1, fk.index)
+        st = KernelState(REGULAR, -1, fk.index)
     elif fk.kind == "stick":
-        st = KernelState(1, fk.index, fk.mode)
+        st = KernelState(STICK, fk.index, fk.mode)
     else:
-        st = KernelState(2, fk.index, int(ctx.stab[fk.index, 1]))
+        st = KernelState(SLIDE, fk.index, int(ctx.stab[fk.index]["above"]))
     return ctx.field(t, x, st)
 
 

@@ -198,8 +198,8 @@ class ModelContext:
         """Index of the surface of the event (impact, transition, chatter) or switch
         (crossing, slide_start) ``name``."""
         if kind in ("crossing", "slide_start", "slide_end"):
-            return int(self.stab[self.switch_index(name), 0])
-        return int(self.etab[self.event_index(name), 0])
+            return int(self.stab[self.switch_index(name)]["surface"])
+        return int(self.etab[self.event_index(name)]["surface"])
 
     def state(self, name, mode_hint: str | int | None = None) -> KernelState:
         """The kernel code of a discrete state (a :class:`DiscreteState` or its text, as in
@@ -223,7 +223,7 @@ class ModelContext:
         s = self.switch_index(st.name)
         # the kernel keeps the `above` mode while sliding (only the switch index matters
         # for the sliding field)
-        return KernelState(SLIDE, s, int(self.stab[s, 1]))
+        return KernelState(SLIDE, s, int(self.stab[s]["above"]))
 
     def state_name(self, st: KernelState) -> DiscreteState:
         if st.kind == REGULAR:

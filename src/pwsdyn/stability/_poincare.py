@@ -132,11 +132,11 @@ def section_spec(ctx: ModelContext, section: str):
     if section in ev_names:
         kinds = _EVENT_SECTION_KINDS
         ref = ev_names.index(section)
-        surface = int(ctx.etab[ref, 0])
+        surface = int(ctx.etab[ref]["surface"])
     elif section in sw_names:
         kinds = _SWITCH_SECTION_KINDS
         ref = sw_names.index(section)
-        surface = int(ctx.stab[ref, 0])
+        surface = int(ctx.stab[ref]["surface"])
     else:
         raise ArgumentError(f"unknown section {section!r}: give 'stroboscopic' or the name of an "
                          f"event {ev_names} or switch {sw_names} of model {ctx.model.name!r}")

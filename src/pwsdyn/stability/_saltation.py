@@ -94,11 +94,11 @@ def _saltation_pair(ctx: ModelContext, kind: str, name: str, t: float, x_before,
         return _chatter_full(ctx, name, t, x_before, st_before.mode, sliding_gain), None
     if kind in ("impact", "transition"):
         j = ctx.event_index(name)
-        k = int(ctx.etab[j, 0])
+        k = int(ctx.etab[j]["surface"])
         gx = ctx.g_x(j, t, x_before)
         gt = ctx.g_t(j, t, x_before)
     elif kind in ("crossing", "slide_start"):
-        k = int(ctx.stab[ctx.switch_index(name), 0])
+        k = int(ctx.stab[ctx.switch_index(name)]["surface"])
         gx = np.eye(n)
         gt = np.zeros(n)
     else:
@@ -206,7 +206,8 @@ def saltation_matrix(model: ModelLike, event: str, t: float, x: StateLike, *,
         raise ArgumentError(f"chatter=True needs an impact event; {event!r} is a switch")
     else:
         s = ctx.switch_index(event)
-        k, a, b = (int(v) for v in ctx.stab[s])
+        sw = ctx.stab[s]
+        k, a, b = int(sw["surface"]), int(sw["above"]), int(sw["below"])
         ha = ctx.h_t(k, t, x) + ctx.h_x(k, t, x) @ ctx.mode_field(a, t, x)
         hb = ctx.h_t(k, t, x) + ctx.h_x(k, t, x) @ ctx.mode_field(b, t, x)
         if mode is None:

@@ -72,7 +72,7 @@ number of events and switches per mode is watched.
 
 Output
 ------
-``iopt[IO_SAVE]``: ``SAVE_EVENTS`` stores the nodes on both sides of every event and the end
+``opts.save``: ``SAVE_EVENTS`` stores the nodes on both sides of every event and the end
 (sweeps); ``SAVE_DENSE`` every step with its power-form dense output; ``SAVE_NODES`` every
 step with its length only -- the dense output is rebuilt when it is read by taking the step
 again from its start node (:func:`dense_coefficients`: the same stages from the same numbers,
@@ -81,13 +81,13 @@ Runge-Kutta run and added the three extra stages of DOP853's interpolant to ever
 
 Sampling
 --------
-With ``FO_SAMPLE_DT > 0`` the state at ``FO_SAMPLE_T0 + k FO_SAMPLE_DT`` is recorded from each
+With ``opts.sample_dt > 0`` the state at ``opts.sample_t0 + k opts.sample_dt`` is recorded from each
 step's dense output as the integration passes it (stroboscopic sections: no event, no landing
 step); across a chattering gap it is the linear interpolation the trajectory also uses.
 
 Exact propagation
 -----------------
-With ``iopt[IO_EXACT]`` the regular modes that are affine in the state with harmonic forcing
+With ``opts.exact`` the regular modes that are affine in the state with harmonic forcing
 (:mod:`pwsdyn.model.affine`) are not integrated but propagated by the exact flow
 ``z(t + h) = exp(h M) z(t)`` of the state augmented with the forcing. Steps are limited to
 ``||h D^-1 M D||_inf <= 1`` (after scaling the constant and forcing columns; ``D`` balances
@@ -130,7 +130,7 @@ time-dependent surfaces and resets: :func:`_event_saltation` (impacts, transitio
 derivatives of the map); release and sliding exit leave the field continuous (``S = I``).
 ``J`` is symbolic in a regular mode and a central difference (step ~ eps^(1/3)) of the
 sticking or sliding field. Steps are accepted only when ``Phi`` meets the tolerances too.
-With ``iopt[IO_VAR] == VAR_SEGMENTS`` ``Phi`` restarts at the identity after every event and
+With ``opts.variational == VAR_SEGMENTS`` ``Phi`` restarts at the identity after every event and
 each event record carries the segment's ``Phi`` and ``S`` (the per-segment transfer matrices;
 see :mod:`pwsdyn.integrate._variational`).
 """

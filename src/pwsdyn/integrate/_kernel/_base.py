@@ -5,7 +5,10 @@ constants, small vector helpers, and the growable output buffers and event log.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import from_dtype, njit
+from numba import types as nt
+
+from .._codes import EVENT_TABLE, KERNEL_OPTIONS, SWITCH_TABLE
 
 
 #: The decorator of the helpers that allocate nothing: compiled without numba's reference
@@ -27,6 +30,12 @@ _hot = njit(cache=True, _nrt=False, forceinline=False)
 #: ``_hot``: numba passes an unset flag on from a caller to the functions it compiles for it,
 #: so a helper first compiled for an inlined caller would be inlined too.
 _hot_inline = njit(cache=True, _nrt=False, forceinline=True)
+
+#: numba's types of the options (one record), the event and the switch tables: contiguous
+#: 1-d arrays of records, part of the kernel's signature.
+OPTIONS_TYPE = nt.Array(from_dtype(KERNEL_OPTIONS), 1, "C")
+EVENT_TABLE_TYPE = nt.Array(from_dtype(EVENT_TABLE), 1, "C")
+SWITCH_TABLE_TYPE = nt.Array(from_dtype(SWITCH_TABLE), 1, "C")
 
 _EPS = np.finfo(np.float64).eps
 #: Relative step of the central differences of the variational code (cube root of eps).

@@ -9,11 +9,10 @@ import numpy as np
 from numba import njit
 
 from ...model.codegen import W_F, W_G, W_GX, W_GT, W_HD, W_HDT, W_HDX, W_HT, W_HX
-from .._codes import (ACT_EVENT, ACT_INTERSECTION, ACT_SWITCH, FO_ATOL, FO_CHAT_ABS, FO_CHAT_REL,
-                      FO_RTOL, K_CHATTER, K_CROSSING, K_IMPACT, K_RELEASE, K_SLIDE_END,
-                      K_SLIDE_START, REGULAR, SLIDE, STICK, ST_INTERSECTION, ST_SUCCESS,
-                      SW_FILIPPOV)
-from ._base import _FD_STEP, _dot, _hot
+from .._codes import (ACT_EVENT, ACT_INTERSECTION, ACT_SWITCH, K_CHATTER, K_CROSSING, K_IMPACT,
+                      K_RELEASE, K_SLIDE_END, K_SLIDE_START, REGULAR, SLIDE, STICK,
+                      ST_INTERSECTION, ST_SUCCESS, SW_FILIPPOV)
+from ._base import EVENT_TABLE_TYPE, SWITCH_TABLE_TYPE, _FD_STEP, _dot, _hot
 from .fields import _field, _find_switch, _impact_direction, _partner, _project_surface, _resolve
 from .watch import _free_normal_acc, _grazing, _project_stick, _stays_in_contact, _surface_rate
 
@@ -385,9 +384,8 @@ def _chatter_saltation_signature():
 
     from ...model.codegen import EVALUATE_TYPE
     f1 = nt.float64[::1]
-    i2 = nt.int64[:, ::1]
-    return nt.void(EVALUATE_TYPE, f1, nt.int64, nt.int64, nt.int64, nt.float64, f1, i2, i2,
-                   nt.float64, nt.float64[:, ::1])
+    return nt.void(EVALUATE_TYPE, f1, nt.int64, nt.int64, nt.int64, nt.float64, f1,
+                   EVENT_TABLE_TYPE, SWITCH_TABLE_TYPE, nt.float64, nt.float64[:, ::1])
 
 
 @njit(_chatter_saltation_signature(), cache=True)
@@ -395,7 +393,8 @@ def chatter_saltation(ev, p, j, mode, nm, t, x, etab, stab, slide_c, S):
     """The saltation matrix :func:`_chatter_saltation` of the complete-chattering map of
     impact event ``j`` entered from mode ``mode`` at ``(t, x)`` into ``S`` (n x n): the matrix
     the kernel applies, for Python callers (:func:`pwsdyn.stability.saltation_matrix`)."""
-    _chatter_saltation(ev, p, j, etab[j, 0], mode, nm, t, x, x.shape[0], S, etab, stab, slide_c)
+    _chatter_saltation(ev, p, j, etab[j].surface, mode, nm, t, x, x.shape[0], S, etab, stab,
+                       slide_c)
 
 
 # --------------------------------------------------------------------------------------
@@ -410,8 +409,8 @@ def chatter_saltation(ev, p, j, mode, nm, t, x, etab, stab, slide_c, S):
 # helper) are compiled without (with it, measured 5-10% of an event-dominated run).
 
 @_hot
-def _act_impact(ev, p, j, dkind, didx, mode, nm, t, y, xs, n, etab, t_end, fopt, chatter_on,
-                chain_event, chain_vmax, buf, fbuf, ytmp, wk):
+def _act_impact(ev, p, j, dkind, didx, mode, nm, t, y, xs, n, etab, t_end, rtol, atol, chat_rel,
+                chat_abs, chatter_on, chain_event, chain_vmax, buf, fbuf, ytmp, wk):
     """Impact on event ``j``: the reset ``g``, or the complete-chattering map where the
     sequence of impacts accumulates (:func:`_act_chatter`), or, where the accumulation point
     lies past ``t_end`` and the bounces are below the velocity floor, the end of the run on
@@ -420,14 +419,10 @@ def _act_impact(ev, p, j, dkind, didx, mode, nm, t, y, xs, n, etab, t_end, fopt,
     Returns ``(dkind, didx, mode, log_kind, t_after, chatter_tail, chain_event, chain_vmax,
     chattered)``."""
     w1, w2, gx, hdx, jac, xt, ft = wk
-    rtol = fopt[FO_RTOL]
-    atol = fopt[FO_ATOL]
-    chat_rel = fopt[FO_CHAT_REL]
     # a negative ratio is the default one, applied only where the chattering map is accurate
     chat_gated = chat_rel < 0.0
     chat_rel = abs(chat_rel)
-    chat_abs = fopt[FO_CHAT_ABS]
-    k = etab[j, 0]
+    k = etab[j].surface
     # normal velocity and acceleration at impact, impact direction W, restitution r
     ev(W_HD, k * nm + mode, t, y, p, buf)
     vin = buf[0]
@@ -505,8 +500,8 @@ def _act_impact(ev, p, j, dkind, didx, mode, nm, t, y, xs, n, etab, t_end, fopt,
         ev(W_G, j, t, xs, p, ytmp)
         for i in range(n):
             y[i] = ytmp[i]
-        if etab[j, 3] >= 0:
-            mode = etab[j, 3]
+        if etab[j].target >= 0:
+            mode = etab[j].target
         log_kind = K_IMPACT
     return dkind, didx, mode, log_kind, t_after, chatter_tail, chain_event, chain_vmax, chattered
 
@@ -530,8 +525,8 @@ def _act_transition(ev, p, j, mode, t, y, xs, n, etab, ytmp):
     ev(W_G, j, t, xs, p, ytmp)
     for i in range(n):
         y[i] = ytmp[i]
-    if etab[j, 3] >= 0:
-        return etab[j, 3]
+    if etab[j].target >= 0:
+        return etab[j].target
     return mode
 
 
@@ -548,10 +543,10 @@ def _after_reset(ev, p, j, log_kind, chatter_tail, dkind, didx, mode, nm, t, y, 
     matrix then maps into the sticking field). Returns ``(dkind, didx, mode,
     contact_stick)``."""
     w1, w2, gx, hdx, jac, xt, ft = wk
-    k = etab[j, 0]
+    k = etab[j].surface
     contact_stick = False
     if (log_kind != K_CHATTER and not chatter_tail and stab.shape[0] > 0
-            and (dkind == REGULAR or etab[j, 5] == 1 or etab[j, 3] >= 0)):
+            and (dkind == REGULAR or etab[j].has_reset == 1 or etab[j].target >= 0)):
         dkind, didx, mode = _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx)
     if (log_kind == K_IMPACT and dkind == REGULAR
             and _stays_in_contact(ev, p, k, mode, nm, t, y, n, buf, fbuf, hdx)):
@@ -586,14 +581,14 @@ def _act_switch(ev, p, s, old_kind, old_idx, old_mode, nm, t, y, n, stab, buf, h
     eq. 2.6-2.8); kink surfaces (SW_CONTINUOUS) always cross. Arriving with the own field
     tangent (hdot = 0) while the other one points back is a graze: no event. Returns
     ``(dkind, didx, mode, log_kind, graze)``."""
-    k = stab[s, 0]
-    a_m = stab[s, 1]
-    b_m = stab[s, 2]
+    k = stab[s].surface
+    a_m = stab[s].above
+    b_m = stab[s].below
     ev(W_HD, k * nm + a_m, t, y, p, buf)
     sa = buf[0]
     ev(W_HD, k * nm + b_m, t, y, p, buf)
     sb = buf[0]
-    filippov = stab.shape[1] <= 3 or stab[s, 3] == SW_FILIPPOV
+    filippov = stab[s].kind == SW_FILIPPOV
     graze = filippov and ((old_mode == a_m and sa >= 0.0 and sb > 0.0)
                           or (old_mode == b_m and sb <= 0.0 and sa < 0.0))
     if graze:
@@ -616,7 +611,7 @@ def _act_switch(ev, p, s, old_kind, old_idx, old_mode, nm, t, y, n, stab, buf, h
 def _act_slide_exit(s, above, stab):
     """End of sliding on switch ``s`` into the mode above (``alpha -> 0``) or below
     (``alpha -> 1``). Returns ``(dkind, didx, mode, log_kind)``."""
-    return REGULAR, -1, (stab[s, 1] if above else stab[s, 2]), K_SLIDE_END
+    return REGULAR, -1, (stab[s].above if above else stab[s].below), K_SLIDE_END
 
 
 @_hot
@@ -634,9 +629,9 @@ def _act_intersection(ev, p, k2, new_sign, log_ref, old_kind, old_idx, old_mode,
     didx = old_idx
     mode = old_mode
     log_kind = -1
-    k1 = stab[old_idx, 0]
-    a2 = _partner(stab, k2, stab[old_idx, 1])
-    b2 = _partner(stab, k2, stab[old_idx, 2])
+    k1 = stab[old_idx].surface
+    a2 = _partner(stab, k2, stab[old_idx].above)
+    b2 = _partner(stab, k2, stab[old_idx].below)
     s_new = _find_switch(stab, k1, a2, b2) if a2 >= 0 and b2 >= 0 else -1
     if s_new >= 0:
         ev(W_HD, k1 * nm + a2, t, y, p, buf)

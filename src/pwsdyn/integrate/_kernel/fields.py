@@ -11,7 +11,7 @@ from numba import njit
 from ...model.codegen import (W_F, W_FU, W_FX, W_GX, W_H, W_HD, W_HDT, W_HDU, W_HDUD, W_HDX, W_HT,
                               W_HX)
 from .._codes import REGULAR, SLIDE, SLIDE_UTKIN, STICK, SW_FILIPPOV
-from ._base import _EPS, _FD_STEP, _dot, _hot
+from ._base import EVENT_TABLE_TYPE, SWITCH_TABLE_TYPE, _EPS, _FD_STEP, _dot, _hot
 
 # --------------------------------------------------------------------------------------
 # vector fields of the discrete states
@@ -47,7 +47,7 @@ def _field(ev, p, dkind, didx, mode, nm, t, x, n, out, etab, stab, slide_c, w1, 
         # constrained motion f - lambda W with lambda from hddot = 0 (slides):
         # lambda = (hdot_t + hdot_x f) / (hdot_x W)
         j = didx
-        k = etab[j, 0]
+        k = etab[j].surface
         ev(W_F, mode, t, x, p, out)
         hw = _impact_direction(ev, p, j, k, mode, nm, t, x, n, w1, gx, hdx)
         ev(W_HDT, k * nm + mode, t, x, p, w2)
@@ -65,17 +65,17 @@ def _field(ev, p, dkind, didx, mode, nm, t, x, n, out, etab, stab, slide_c, w1, 
     # drift obeys hdot = -C h whatever the scale of h (C is a rate, 1/time; default 0: the
     # kernel projects each accepted sliding step back onto h = 0 instead)
     s = didx
-    k = stab[s, 0]
+    k = stab[s].surface
     ev(W_HX, k, t, x, p, hdx)
     ev(W_H, k, t, x, p, out)
     hval = out[0]
-    if stab.shape[1] > 4 and stab[s, 4] == SLIDE_UTKIN:
+    if stab[s].sliding == SLIDE_UTKIN:
         u = _equivalent_control(ev, p, s, t, x, out)
         out[0] = u
         ev(W_FU, s, t, x, p, out)
     else:
-        ev(W_F, stab[s, 1], t, x, p, w1)
-        ev(W_F, stab[s, 2], t, x, p, w2)
+        ev(W_F, stab[s].above, t, x, p, w1)
+        ev(W_F, stab[s].below, t, x, p, w2)
         ev(W_HT, k, t, x, p, out)
         ha = out[0] + _dot(hdx, w1, n)
         den = _dot(hdx, w1, n) - _dot(hdx, w2, n)
@@ -163,11 +163,11 @@ def _project_surface(ev, p, k, t, y, n, hdx, buf):
 def _partner(stab, k, m):
     """The mode across surface ``k`` from mode ``m`` (-1 if no switch joins them)."""
     for s in range(stab.shape[0]):
-        if stab[s, 0] == k:
-            if stab[s, 1] == m:
-                return stab[s, 2]
-            if stab[s, 2] == m:
-                return stab[s, 1]
+        if stab[s].surface == k:
+            if stab[s].above == m:
+                return stab[s].below
+            if stab[s].below == m:
+                return stab[s].above
     return -1
 
 
@@ -175,7 +175,7 @@ def _partner(stab, k, m):
 def _find_switch(stab, k, a, b):
     """The switch on surface ``k`` with mode ``a`` above and ``b`` below (-1 if none)."""
     for s in range(stab.shape[0]):
-        if stab[s, 0] == k and stab[s, 1] == a and stab[s, 2] == b:
+        if stab[s].surface == k and stab[s].above == a and stab[s].below == b:
             return s
     return -1
 
@@ -233,11 +233,11 @@ def _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx):
     for sweep in range(n_sw + 1):
         changed = False
         for s in range(n_sw):
-            a = stab[s, 1]
-            b = stab[s, 2]
+            a = stab[s].above
+            b = stab[s].below
             if mode != a and mode != b:
                 continue
-            hv, tol = _surface_offset(ev, p, stab[s, 0], t, y, n, xmax, buf, hdx)
+            hv, tol = _surface_offset(ev, p, stab[s].surface, t, y, n, xmax, buf, hdx)
             new = mode
             if hv > tol:
                 new = a
@@ -250,11 +250,11 @@ def _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx):
             break
     # 2. on a surface: slide, or take the side the flow leaves to
     for s in range(n_sw):
-        a = stab[s, 1]
-        b = stab[s, 2]
+        a = stab[s].above
+        b = stab[s].below
         if mode != a and mode != b:
             continue
-        k = stab[s, 0]
+        k = stab[s].surface
         hv, tol = _surface_offset(ev, p, k, t, y, n, xmax, buf, hdx)
         if abs(hv) > tol:
             continue
@@ -262,7 +262,7 @@ def _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx):
         sa = buf[0]
         ev(W_HD, k * nm + b, t, y, p, buf)
         sb = buf[0]
-        filippov = stab.shape[1] <= 3 or stab[s, 3] == SW_FILIPPOV
+        filippov = stab[s].kind == SW_FILIPPOV
         if filippov and sa < 0.0 and sb > 0.0:
             _project_surface(ev, p, k, t, y, n, hdx, buf)
             return SLIDE, s, a
@@ -335,9 +335,8 @@ def _state_field_signature():
 
     from ...model.codegen import EVALUATE_TYPE
     f1 = nt.float64[::1]
-    i2 = nt.int64[:, ::1]
-    return nt.void(EVALUATE_TYPE, f1, nt.int64, nt.int64, nt.int64, nt.int64, nt.float64, f1, i2,
-                   i2, nt.float64, f1)
+    return nt.void(EVALUATE_TYPE, f1, nt.int64, nt.int64, nt.int64, nt.int64, nt.float64, f1,
+                   EVENT_TABLE_TYPE, SWITCH_TABLE_TYPE, nt.float64, f1)
 
 
 @njit(_state_field_signature(), cache=True)

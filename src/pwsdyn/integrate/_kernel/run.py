@@ -9,15 +9,13 @@ from numba import njit
 
 from ...model.codegen import W_F, W_GUARD, W_H, W_HD, W_HHD
 from .._codes import (ACT_EVENT, ACT_EXIT_ABOVE, ACT_EXIT_BELOW, ACT_INTERSECTION, ACT_RELEASE,
-                      ACT_SWITCH, EV_IMPACT, FO_ATOL, FO_H0, FO_HMAX, FO_RTOL, FO_SAMPLE_DT,
-                      FO_SAMPLE_T0, FO_SLIDE_C, IO_CHATTER, IO_DIDX0, IO_DKIND0, IO_EXACT,
-                      IO_MAXEVENTS, IO_MAXSTEPS, IO_METHOD, IO_MODE0, IO_NMODES, IO_ORDER, IO_SAVE,
-                      IO_STOP_COUNT, IO_STOP_MASK, IO_STOP_REF, IO_VAR, IV_CHATTER, IV_JUMP,
+                      ACT_SWITCH, EV_IMPACT, IV_CHATTER, IV_JUMP,
                       IV_STEP, K_CHATTER, K_STICK, K_TRANSITION, REGULAR, SAVE_DENSE, SAVE_EVENTS,
                       SLIDE, STICK, ST_MAX_EVENTS, ST_MAX_STEPS, ST_NONFINITE, ST_STEP_TOO_SMALL,
                       ST_SUCCESS, ST_TERMINAL, ST_ZENO, SW_CONTINUOUS, VAR_NONE, VAR_SEGMENTS,
                       WF_HDDOT, WF_HDOT, WF_SURFACE)
-from ._base import (_COINCIDENT_ULPS, _EPS, _EXACT_TERMS, _MAXW, _grow1, _grow2, _grow3,
+from ._base import (EVENT_TABLE_TYPE, OPTIONS_TYPE, SWITCH_TABLE_TYPE, _COINCIDENT_ULPS, _EPS,
+                    _EXACT_TERMS, _MAXW, _grow1, _grow2, _grow3,
                     _log_event, _ulp)
 from .fields import _field, _project_surface, _rate_band, _resolve, _rhs, _start_on_surface
 from .steppers import (_affine_setup, _dense_eval, _error_norm, _exact_stepper, _step_dense,
@@ -31,25 +29,25 @@ from .actions import (_act_impact, _act_intersection, _act_release, _act_slide_e
 # dense output on demand
 # --------------------------------------------------------------------------------------
 
-def _dense_coefficients(ev, p, etab, stab, iopt, fopt, A, C, P, s_fsal, t0, x0, nodes_t,
+def _dense_coefficients(ev, p, etab, stab, options, A, C, P, s_fsal, t0, x0, nodes_t,
                         nodes_y, nodes_s, hstep, which, deg):
     """Power-form dense output (as stored with ``SAVE_DENSE``) of the step intervals
     ``which`` of a run made with ``SAVE_NODES``, rebuilt from their start nodes: the step from
     ``(nodes_t[i], nodes_y[i])`` of length ``hstep[i]`` in the discrete state ``nodes_s[i]``
     is taken again -- the Runge-Kutta stages and the dense-output stages, or the Taylor terms
-    of the exact flow -- with the run's options (``iopt``, ``fopt``, the tableau). The
+    of the exact flow -- with the run's options (``options``, the tableau). The
     stages are computed as in the kernel from the same numbers, so the coefficients are the
     ones it would have stored (to rounding: after a projected sliding step the kernel's first
     stage is the field before the projection). Rows of intervals with ``hstep <= 0`` (jumps,
     chattering gaps) are zero. Not for variational runs, whose nodes are transformed after
     the run (they store their dense output: ``SAVE_DENSE``)."""
     n = x0.shape[0]
-    nm = iopt[IO_NMODES]
-    nvar = 1 if iopt[IO_VAR] != VAR_NONE else 0
+    opts = options[0]
+    nm = opts.n_modes
+    nvar = 1 if opts.variational != VAR_NONE else 0
     nY = nodes_y.shape[1]
-    slide_c = fopt[FO_SLIDE_C]
-    nz, aff_ok, aff_M, aff_h, aff_s, aff_w = _affine_setup(
-        ev, t0, x0, p, n, nm, iopt.shape[0] > IO_EXACT and iopt[IO_EXACT] != 0)
+    slide_c = opts.sliding_gain
+    nz, aff_ok, aff_M, aff_h, aff_s, aff_w = _affine_setup(ev, t0, x0, p, n, nm, opts.exact != 0)
     s_ext = A.shape[0]
     K = np.zeros((s_ext, nY))
     ytmp = np.zeros(nY)
@@ -100,8 +98,9 @@ def _dense_coefficients_signature():
     f2 = nt.float64[:, ::1]
     i1 = nt.int64[::1]
     i2 = nt.int64[:, ::1]
-    return nt.float64[:, :, ::1](EVALUATE_TYPE, f1, i2, i2, i1, f1, f2, f1, f2, nt.int64,
-                                 nt.float64, f1, f1, f2, i2, f1, i1, nt.int64)
+    return nt.float64[:, :, ::1](EVALUATE_TYPE, f1, EVENT_TABLE_TYPE, SWITCH_TABLE_TYPE,
+                                 OPTIONS_TYPE, f2, f1, f2, nt.int64, nt.float64, f1, f1, f2, i2,
+                                 f1, i1, nt.int64)
 
 
 _DENSE_COEFFICIENTS = None
@@ -137,25 +136,25 @@ def _kernel_signature():
     i2 = nt.int64[:, ::1]
     ret = nt.Tuple((nt.int64, nt.float64, f1, i1, f1, f2, i2, nt.float64[:, :, ::1], i1, f1, f1,
                     i2, f2, f2, i1, f2, f1))
-    return ret(EVALUATE_TYPE, nt.float64, nt.float64, f1, f1, i2, i2, i2, i1, f1, f2, f1, f2, f2,
-               nt.int64)
+    return ret(EVALUATE_TYPE, nt.float64, nt.float64, f1, f1, EVENT_TABLE_TYPE, i2,
+               SWITCH_TABLE_TYPE, OPTIONS_TYPE, f2, f1, f2, f2, nt.int64)
 
 
 # nogil: a run holds no Python object, so a Dask worker's event loop (heartbeats, transfers)
 # and other threads go on while it integrates
 @njit(_kernel_signature(), cache=True, nogil=True)
-def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P, s_fsal):
+def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s_fsal):
     """Integrate from ``t0`` to ``t_end``. See the module docstring.
 
     Tables
     ------
-    etab : (n_events, 6 or 7) int64 -- surface, direction, kind, target, terminal, has_reset,
-        and optionally whether the surface depends on t explicitly
-    eactive : (n_events, n_modes) int8
-    stab : (n_switches, 3 to 6) int64 -- surface, above, below, and optionally the kind
-        (SW_FILIPPOV / SW_CONTINUOUS), the sliding method (SLIDE_CONVEX / SLIDE_UTKIN) and
-        whether the surface depends on t explicitly
-    iopt, fopt : options, indexed by the IO_* / FO_* constants
+    etab : (n_events,) records of ``EVENT_TABLE`` -- surface, direction, kind, target,
+        terminal, has_reset, time_dependent (:mod:`pwsdyn._codes`)
+    eactive : (n_events, n_modes) int64, 1 where the event is watched in the mode
+    stab : (n_switches,) records of ``SWITCH_TABLE`` -- surface, above, below, kind
+        (SW_FILIPPOV / SW_CONTINUOUS), sliding (SLIDE_CONVEX / SLIDE_UTKIN), time_dependent
+    options : one record of ``KERNEL_OPTIONS``, the run's options by name
+        (:func:`pwsdyn._codes.kernel_options`)
 
     Returns
     -------
@@ -166,35 +165,33 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     rebuilt from it, :func:`dense_coefficients`)
     """
     n = x0.shape[0]
-    nm = iopt[IO_NMODES]
-    nvar = 1 if iopt[IO_VAR] != VAR_NONE else 0
-    seg_var = iopt[IO_VAR] == VAR_SEGMENTS
-    stop_mask = 0
-    stop_ref = -1
-    stop_count = 0
-    if iopt.shape[0] > IO_STOP_COUNT:
-        stop_mask = iopt[IO_STOP_MASK]
-        stop_ref = iopt[IO_STOP_REF]
-        stop_count = iopt[IO_STOP_COUNT]
+    opts = options[0]
+    nm = opts.n_modes
+    nvar = 1 if opts.variational != VAR_NONE else 0
+    seg_var = opts.variational == VAR_SEGMENTS
+    stop_mask = opts.stop_mask
+    stop_ref = opts.stop_ref
+    stop_count = opts.stop_count
     n_stop = 0
     nY = n + nvar * n * n
-    method = iopt[IO_METHOD]
-    max_steps = iopt[IO_MAXSTEPS]
-    max_events = iopt[IO_MAXEVENTS]
-    chatter_on = iopt[IO_CHATTER]
-    save_all = iopt[IO_SAVE] != SAVE_EVENTS
-    store_q = iopt[IO_SAVE] == SAVE_DENSE
-    rtol = fopt[FO_RTOL]
-    atol = fopt[FO_ATOL]
-    hmax = fopt[FO_HMAX]
-    slide_c = fopt[FO_SLIDE_C]
+    method = opts.method
+    max_steps = opts.max_steps
+    max_events = opts.max_events
+    chatter_on = opts.chatter
+    save_all = opts.save != SAVE_EVENTS
+    store_q = opts.save == SAVE_DENSE
+    rtol = opts.rtol
+    atol = opts.atol
+    hmax = opts.max_step
+    slide_c = opts.sliding_gain
+    chat_rel = opts.chatter_ratio
+    chat_abs = opts.chatter_velocity
     s_ext = A.shape[0]
     deg = P.shape[1]
     n_events = etab.shape[0]
     # exact propagation of affine modes: their augmented matrices, balancing weights and the
     # largest step (see _affine_setup)
-    nz, aff_ok, aff_M, aff_h, aff_s, aff_w = _affine_setup(
-        ev, t0, x0, p, n, nm, iopt.shape[0] > IO_EXACT and iopt[IO_EXACT] != 0)
+    nz, aff_ok, aff_M, aff_h, aff_s, aff_w = _affine_setup(ev, t0, x0, p, n, nm, opts.exact != 0)
     if nz > 0:
         deg = max(deg, _EXACT_TERMS)
     zv = np.zeros(max(nz, 1))
@@ -208,8 +205,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     # the order of the propagated solution: the exponent of the step-size control (Hairer,
     # Norsett & Wanner I, II.4)
     order = 5.0 if method == 0 else 8.0
-    if iopt.shape[0] > IO_ORDER and iopt[IO_ORDER] > 0:
-        order = float(iopt[IO_ORDER])
+    if opts.order > 0:
+        order = float(opts.order)
 
     # work arrays
     K = np.zeros((s_ext, nY))
@@ -266,30 +263,28 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 y[n + i * n + c] = 1.0 if i == c else 0.0
     dkind = REGULAR
     didx = -1
-    mode = iopt[IO_MODE0]
-    if iopt.shape[0] > IO_DIDX0:
-        dkind = iopt[IO_DKIND0]
-        didx = iopt[IO_DIDX0]
+    mode = opts.mode0
+    dkind = opts.dkind0
+    didx = opts.didx0
     status = ST_SUCCESS
     # Non-finite input ends the run at once, before any work: a NaN compares false with
     # everything, so a NaN time or step size would never reach t_end nor fall below the
     # smallest step, and the stepping loop would spin (rejected steps do not count against
     # max_steps). Infinite ones are refused too: t_end = inf never ends, and x0 or
     # first_step = inf make the first step NaN. max_step = inf is fine (no limit).
-    h0 = fopt[FO_H0]
+    h0 = opts.first_step
     if not (np.isfinite(t0) and np.isfinite(t_end) and np.isfinite(h0) and not np.isnan(hmax)
             and np.isfinite(rtol) and np.isfinite(atol)):
         status = ST_NONFINITE
     for i in range(n):
         if not np.isfinite(x0[i]):
             status = ST_NONFINITE
-    if fopt.shape[0] > FO_SAMPLE_DT:
-        # sampling: off for dt <= 0; a NaN or infinite dt (a NaN forcing period or phase of a
-        # sweep) or a non-finite first sample time is non-finite input
-        sdt_in = fopt[FO_SAMPLE_DT]
-        if np.isnan(sdt_in) or (sdt_in > 0.0 and not (np.isfinite(sdt_in)
-                                                       and np.isfinite(fopt[FO_SAMPLE_T0]))):
-            status = ST_NONFINITE
+    # sampling: off for dt <= 0; a NaN or infinite dt (a NaN forcing period or phase of a
+    # sweep) or a non-finite first sample time is non-finite input
+    sdt_in = opts.sample_dt
+    if np.isnan(sdt_in) or (sdt_in > 0.0 and not (np.isfinite(sdt_in)
+                                                   and np.isfinite(opts.sample_t0))):
+        status = ST_NONFINITE
     if status == ST_SUCCESS and dkind == REGULAR and n_sw > 0:
         # the mode on the right side of every switching surface; sliding from a start on one
         dkind, didx, mode = _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx)
@@ -366,9 +361,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
     # instead of looping ~(t_end - t0) / dt times (dt = 1e-300); max_samp caps the sampling
     # loops as a backstop (one more for the rounding of the count)
     max_samp = max_steps + 2
-    if status == ST_SUCCESS and fopt.shape[0] > FO_SAMPLE_DT and fopt[FO_SAMPLE_DT] > 0.0:
-        s0 = fopt[FO_SAMPLE_T0]
-        sdt = fopt[FO_SAMPLE_DT]
+    if status == ST_SUCCESS and opts.sample_dt > 0.0:
+        s0 = opts.sample_t0
+        sdt = opts.sample_dt
         kf = max(0.0, np.ceil((t - s0) / sdt))
         # index of the first sample; beyond 2^53 (an s0 that far before t0) neither it nor
         # s0 + k sdt is exact, and int() of it would overflow
@@ -436,76 +431,77 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 for j in range(n_events):
                     if eactive[j, mode] == 0:
                         continue
-                    if dkind == STICK and etab[j, 0] == etab[didx, 0]:
+                    if dkind == STICK and etab[j].surface == etab[didx].surface:
                         continue
                     if dkind == SLIDE:
                         continue
-                    wtype[nw] = WF_SURFACE; widx[nw] = etab[j, 0]; wmode[nw] = mode
-                    wdir[nw] = etab[j, 1]; wact[nw] = ACT_EVENT; wref[nw] = j
+                    wtype[nw] = WF_SURFACE; widx[nw] = etab[j].surface; wmode[nw] = mode
+                    wdir[nw] = etab[j].direction; wact[nw] = ACT_EVENT; wref[nw] = j
                     nw += 1
                 for s in range(n_sw):
                     if dkind == SLIDE:
                         # another surface bounding the sliding pair's modes: crossing it while
                         # sliding, or reaching the intersection of the two surfaces
-                        if stab[s, 0] == stab[didx, 0]:
+                        if stab[s].surface == stab[didx].surface:
                             continue
-                        if (stab[s, 1] != stab[didx, 1] and stab[s, 2] != stab[didx, 1]
-                                and stab[s, 1] != stab[didx, 2] and stab[s, 2] != stab[didx, 2]):
+                        sa, sb = stab[s].above, stab[s].below
+                        da, db = stab[didx].above, stab[didx].below
+                        if sa != da and sb != da and sa != db and sb != db:
                             continue
                         dup = False
                         for ww in range(nw):
-                            if wact[ww] == ACT_INTERSECTION and widx[ww] == stab[s, 0]:
+                            if wact[ww] == ACT_INTERSECTION and widx[ww] == stab[s].surface:
                                 dup = True
                         if dup:
                             continue
-                        wtype[nw] = WF_SURFACE; widx[nw] = stab[s, 0]; wmode[nw] = mode
+                        wtype[nw] = WF_SURFACE; widx[nw] = stab[s].surface; wmode[nw] = mode
                         wdir[nw] = 0; wact[nw] = ACT_INTERSECTION; wref[nw] = s
                         nw += 1
                         continue
-                    if stab[s, 1] == mode or stab[s, 2] == mode:
-                        if (dkind == STICK and stab.shape[1] > 3 and stab[s, 3] == SW_CONTINUOUS):
+                    if stab[s].above == mode or stab[s].below == mode:
+                        if dkind == STICK and stab[s].kind == SW_CONTINUOUS:
                             # a kink surface that the sticking motion lies in (bilinear damping of
                             # a relative velocity held at zero against a stop): the two variants
                             # agree there, and its sign is round-off
-                            ev(W_H, stab[s, 0], t, y, p, buf)
+                            ev(W_H, stab[s].surface, t, y, p, buf)
                             xmax = 1.0
                             for i in range(n):
                                 xmax = max(xmax, abs(y[i]))
                             if abs(buf[0]) <= 1e3 * _EPS * xmax:
                                 continue
-                        wtype[nw] = WF_SURFACE; widx[nw] = stab[s, 0]; wmode[nw] = mode
-                        wdir[nw] = -1 if stab[s, 1] == mode else 1
+                        wtype[nw] = WF_SURFACE; widx[nw] = stab[s].surface; wmode[nw] = mode
+                        wdir[nw] = -1 if stab[s].above == mode else 1
                         wact[nw] = ACT_SWITCH; wref[nw] = s
                         nw += 1
                 if dkind == STICK:
-                    k = etab[didx, 0]
+                    k = etab[didx].surface
                     wtype[nw] = WF_HDDOT; widx[nw] = k; wmode[nw] = mode
                     wdir[nw] = 1; wact[nw] = ACT_RELEASE; wref[nw] = didx
                     nw += 1
                 if dkind == SLIDE:
-                    k = stab[didx, 0]
+                    k = stab[didx].surface
                     # leave above when hdot of the above field turns positive (alpha -> 0),
                     # below when hdot of the below field turns negative (alpha -> 1)
-                    wtype[nw] = WF_HDOT; widx[nw] = k; wmode[nw] = stab[didx, 1]
+                    wtype[nw] = WF_HDOT; widx[nw] = k; wmode[nw] = stab[didx].above
                     wdir[nw] = 1; wact[nw] = ACT_EXIT_ABOVE; wref[nw] = didx
                     nw += 1
-                    wtype[nw] = WF_HDOT; widx[nw] = k; wmode[nw] = stab[didx, 2]
+                    wtype[nw] = WF_HDOT; widx[nw] = k; wmode[nw] = stab[didx].below
                     wdir[nw] = -1; wact[nw] = ACT_EXIT_BELOW; wref[nw] = didx
                     nw += 1
                     for j in range(n_events):
-                        if eactive[j, stab[didx, 1]] == 0 and eactive[j, stab[didx, 2]] == 0:
+                        if eactive[j, stab[didx].above] == 0 and eactive[j, stab[didx].below] == 0:
                             continue
-                        wtype[nw] = WF_SURFACE; widx[nw] = etab[j, 0]; wmode[nw] = mode
-                        wdir[nw] = etab[j, 1]; wact[nw] = ACT_EVENT; wref[nw] = j
+                        wtype[nw] = WF_SURFACE; widx[nw] = etab[j].surface; wmode[nw] = mode
+                        wdir[nw] = etab[j].direction; wact[nw] = ACT_EVENT; wref[nw] = j
                         nw += 1
                 for w in range(nw):
                     wvalid[w] = 0
                     wtdep[w] = 0
                     if wtype[w] == WF_SURFACE:
-                        if wact[w] == ACT_EVENT and etab.shape[1] > 6:
-                            wtdep[w] = etab[wref[w], 6]
-                        elif wact[w] != ACT_EVENT and stab.shape[1] > 5:
-                            wtdep[w] = stab[wref[w], 5]
+                        if wact[w] == ACT_EVENT:
+                            wtdep[w] = etab[wref[w]].time_dependent
+                        else:
+                            wtdep[w] = stab[wref[w]].time_dependent
                     wforce[w] = 0.0
                     if (t == last_t and wtype[w] == last_type and widx[w] == last_idx
                             and (wtype[w] == WF_SURFACE or wmode[w] == last_mode)):
@@ -928,7 +924,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     # linear h exactly but drifts off a curved or moving one by the local error;
                     # one Newton step along h_x removes that (projection; it leaves the sliding
                     # field non-stiff, unlike a large gain C of the -C h grad h term)
-                    _project_surface(ev, p, stab[didx, 0], t_new, ynew, n, hdx, buf)
+                    _project_surface(ev, p, stab[didx].surface, t_new, ynew, n, hdx, buf)
                 if save_all:
                     if store_q:
                         for i in range(nY):
@@ -1102,7 +1098,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     _field(ev, p, dkind, didx, mode, nm, t, y, n, fbuf, etab, stab, slide_c, w1,
                            w2, gx, hdx)
                     vn = _surface_rate(ev, p, dkind, widx[w], mode, nm, t, y, fbuf, n, buf, hdx)
-                moving_away = etab[j, 1] != 0 and vn * etab[j, 1] < 0.0
+                moving_away = etab[j].direction != 0 and vn * etab[j].direction < 0.0
                 if moving_away and abs(vn) <= _rate_band(ev, p, widx[w], mode, nm, t, y, n, hdx):
                     moving_away = False
                 if not guard_ok or moving_away:
@@ -1124,10 +1120,11 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     restart = True
                     continue
                 j = wref[w]
-                if etab[j, 2] == EV_IMPACT:
+                if etab[j].kind == EV_IMPACT:
                     (dkind, didx, mode, log_kind, t_after, chatter_tail, chain_event, chain_vmax,
                      chattered) = _act_impact(ev, p, j, dkind, didx, mode, nm, t, y, xs, n, etab,
-                                              t_end, fopt, chatter_on, chain_event, chain_vmax,
+                                              t_end, rtol, atol, chat_rel, chat_abs, chatter_on,
+                                              chain_event, chain_vmax,
                                               buf, fbuf, ytmp, wk)
                     stats[4] += chattered
                 else:
@@ -1138,8 +1135,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     ev, p, j, log_kind, chatter_tail, dkind, didx, mode, nm, t, y, n, etab, stab,
                     buf, fbuf, wk)
             elif act == ACT_RELEASE:
-                dkind, didx, mode, log_kind = _act_release(ev, p, etab[old_idx, 0], mode, nm, t,
-                                                           y, n, stab, buf, wk)
+                dkind, didx, mode, log_kind = _act_release(ev, p, etab[old_idx].surface, mode,
+                                                           nm, t, y, n, stab, buf, wk)
             elif act == ACT_SWITCH:
                 dkind, didx, mode, log_kind, graze = _act_switch(ev, p, wref[w], old_kind,
                                                                  old_idx, old_mode, nm, t, y, n,
@@ -1167,7 +1164,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                 if nvar:
                     # the saltation matrix of the action, then Phi+ = S Phi-
                     _action_saltation(ev, p, act, log_kind, chatter_tail, log_ref,
-                                      widx[w] if act != ACT_SWITCH else stab[wref[w], 0],
+                                      widx[w] if act != ACT_SWITCH else stab[wref[w]].surface,
                                       old_kind, old_idx, old_mode, dkind, didx, mode, nm, t, xs,
                                       y, n, S, etab, stab, slide_c, buf, fbuf, ytmp, wk)
                     _apply_saltation(y, S, Phi, n, seg_var)
@@ -1257,7 +1254,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     break
             if status != ST_SUCCESS:
                 break
-            if act == ACT_EVENT and etab[wref[w], 4] == 1:
+            if act == ACT_EVENT and etab[wref[w]].terminal == 1:
                 status = ST_TERMINAL
                 break
             if stats[3] >= max_events:
@@ -1296,7 +1293,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     ev(W_HD, widx[w] * nm + mode, t, y, p, buf)
                     last_sign = 1.0 if buf[0] > 0.0 else -1.0
                     vout = buf[0]
-                    if etab[wref[w], 2] == EV_IMPACT and vout != 0.0:
+                    if etab[wref[w]].kind == EV_IMPACT and vout != 0.0:
                         # hdot after an impact within round-off (a plastic impact that does not
                         # stick: the free motion leaves tangentially): its sign is noise, the
                         # state is on the allowed side
@@ -1305,21 +1302,21 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
                     if vout == 0.0:
                         # tangent after the event: an impact leaves the state on the admissible
                         # side, a transition has crossed into the event direction
-                        if etab[wref[w], 2] == EV_IMPACT or etab[wref[w], 1] == 0:
-                            last_sign = 1.0 if etab[wref[w], 1] <= 0 else -1.0
+                        if etab[wref[w]].kind == EV_IMPACT or etab[wref[w]].direction == 0:
+                            last_sign = 1.0 if etab[wref[w]].direction <= 0 else -1.0
                         else:
-                            last_sign = 1.0 if etab[wref[w], 1] > 0 else -1.0
+                            last_sign = 1.0 if etab[wref[w]].direction > 0 else -1.0
                 else:
                     last_sign = 1.0
             elif act == ACT_RELEASE:
                 last_sign = 1.0
                 last_type = WF_SURFACE
-                last_idx = etab[wref[w], 0]
+                last_idx = etab[wref[w]].surface
             elif act == ACT_SWITCH:
                 if dkind == SLIDE:
                     last_type = -1
                 else:
-                    last_sign = 1.0 if mode == stab[wref[w], 1] else -1.0
+                    last_sign = 1.0 if mode == stab[wref[w]].above else -1.0
             elif act == ACT_INTERSECTION:
                 # crossed surface widx[w] while sliding: we are on the new side of it
                 last_type = WF_SURFACE
@@ -1327,7 +1324,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, iopt, fopt, A, C, E, P
             else:
                 # sliding exit: we leave into the mode's side of the surface
                 last_type = WF_SURFACE
-                last_idx = stab[wref[w], 0]
+                last_idx = stab[wref[w]].surface
                 last_sign = 1.0 if act == ACT_EXIT_ABOVE else -1.0
             restart = True
 
