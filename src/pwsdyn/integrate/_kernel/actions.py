@@ -12,7 +12,7 @@ from ...model.codegen import W_F, W_G, W_GX, W_GT, W_HD, W_HDT, W_HDX, W_HT, W_H
 from .._codes import (ACT_EVENT, ACT_INTERSECTION, ACT_SWITCH, K_CHATTER, K_CROSSING, K_IMPACT,
                       K_RELEASE, K_SLIDE_END, K_SLIDE_START, REGULAR, SLIDE, STICK,
                       ST_INTERSECTION, ST_SUCCESS, SW_FILIPPOV)
-from ._base import EVENT_TABLE_TYPE, SWITCH_TABLE_TYPE, _FD_STEP, _dot, _hot
+from ._base import EVENT_TABLE_TYPE, SWITCH_TABLE_TYPE, _FD_STEP, _dot, _hot, _hot_inline
 from .fields import _field, _find_switch, _impact_direction, _partner, _project_surface, _resolve
 from .watch import _free_normal_acc, _grazing, _project_stick, _stays_in_contact, _surface_rate
 
@@ -408,7 +408,7 @@ def chatter_saltation(ev, p, j, mode, nm, t, x, etab, stab, slide_c, S):
 # numba's reference counting, which the actions (like every other per-step or per-event
 # helper) are compiled without (with it, measured 5-10% of an event-dominated run).
 
-@_hot
+@_hot_inline
 def _act_impact(ev, p, j, dkind, didx, mode, nm, t, y, xs, n, etab, t_end, rtol, atol, chat_rel,
                 chat_abs, chatter_on, chain_event, chain_vmax, buf, fbuf, ytmp, wk):
     """Impact on event ``j``: the reset ``g``, or the complete-chattering map where the
@@ -530,7 +530,7 @@ def _act_transition(ev, p, j, mode, t, y, xs, n, etab, ytmp):
     return mode
 
 
-@_hot
+@_hot_inline
 def _after_reset(ev, p, j, log_kind, chatter_tail, dkind, didx, mode, nm, t, y, n, etab, stab,
                  buf, fbuf, wk):
     """After an impact or a transition: the switching variant the new state lies in (a reset

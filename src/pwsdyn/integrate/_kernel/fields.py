@@ -11,7 +11,7 @@ from numba import njit
 from ...model.codegen import (W_F, W_FU, W_FX, W_GX, W_H, W_HD, W_HDT, W_HDU, W_HDUD, W_HDX, W_HT,
                               W_HX)
 from .._codes import REGULAR, SLIDE, SLIDE_UTKIN, STICK, SW_FILIPPOV
-from ._base import EVENT_TABLE_TYPE, SWITCH_TABLE_TYPE, _EPS, _FD_STEP, _dot, _hot
+from ._base import EVENT_TABLE_TYPE, SWITCH_TABLE_TYPE, _EPS, _FD_STEP, _dot, _hot, _hot_inline
 
 # --------------------------------------------------------------------------------------
 # vector fields of the discrete states
@@ -193,7 +193,7 @@ def _surface_offset(ev, p, k, t, y, n, xmax, buf, hdx):
     return hv, 64.0 * _EPS * xmax * gmax
 
 
-@_hot
+@_hot_inline
 def _start_on_surface(ev, p, k, dkind, mode, nm, t, y, n, v0, r0, buf, hdx):
     """``(h, hdot)`` of surface ``k`` at the start of the first step after a restart, with
     round-off taken as zero: a surface within its band (:func:`_surface_offset`) is ON it,

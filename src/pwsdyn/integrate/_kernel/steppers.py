@@ -16,7 +16,7 @@ from .fields import _rhs
 # Runge-Kutta step and dense output
 # --------------------------------------------------------------------------------------
 
-@_hot
+@_hot_inline
 def _error_norm(K, E, method, s, y, ynew, h, i0, i1, rtol, atol):
     """Scaled RMS error of the components ``y[i0:i1]``.
 
@@ -392,7 +392,7 @@ def _step_stages(ev, p, exact, dkind, didx, mode, nm, t, y, h, h_full, K, A, C, 
     return s_fsal
 
 
-@_hot
+@_hot_inline
 def _step_dense(ev, p, exact, dkind, didx, mode, nm, t, y, h, h_full, K, A, C, s_fsal, P, Q, ytmp,
                 etab, stab, slide_c, wk, nz, aff):
     """The dense output ``Q`` (power form) of the step of length ``h`` just taken from
