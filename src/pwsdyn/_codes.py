@@ -35,7 +35,7 @@ EVENT_LOG_KINDS = ("impact", "transition", "chatter", "stick", "release", "cross
 (K_IMPACT, K_TRANSITION, K_CHATTER, K_STICK, K_RELEASE, K_CROSSING, K_SLIDE_START,
  K_SLIDE_END) = range(len(EVENT_LOG_KINDS))
 
-#: Kinds of events in the model tables (``etab`` column 2; ``model.spec.EVENT_KINDS``).
+#: Kinds of events in the model tables (``etab[j].kind``; ``model.spec.EVENT_KINDS``).
 MODEL_EVENT_KINDS = ("impact", "transition")
 EV_IMPACT, EV_TRANSITION = range(2)
 
