@@ -373,3 +373,43 @@ def test_the_kernel_cache_is_located_where_numba_writes_it():
     run = Path(kernel().run_kernel._cache._cache_path)
     assert run == numba_cache_dir(PACKAGE / "integrate/_kernel/run.py")
     assert any(run.glob("run.run_kernel-*.nbi"))
+
+
+def test_function_addresses_are_resolved_once_and_right():
+    """The model's evaluate, an argument of every kernel call, has its addresses memoized per
+    dispatcher and signature: the memo gives what numba's own lookup gives, keeps two entries
+    per model whatever the number of calls, and runs of two models interleaved give each
+    model's own results bit for bit (a mixed-up address would run the other model's field)."""
+    import numpy as np
+    from numba.experimental import function_type as ft
+
+    from pwsdyn.integrate._load import kernel
+    from pwsdyn.model.codegen import EVALUATE_TYPE
+    from pwsdyn.stability._context import ModelContext
+
+    kernel()
+    assert hasattr(ft._get_wrapper_address, "__wrapped__")
+    models = {name: pwsdyn.load_model(name) for name in ("impact-oscillator", "bouncing-ball")}
+    x0 = {"impact-oscillator": [-0.5, 0.1], "bouncing-ball": [1.0, 0.0]}
+
+    def run(name):
+        tr = pwsdyn.simulate(models[name], x0[name], (0.0, 3.0), dense=False)
+        return tr.y[-1].tobytes(), len(tr.events)
+
+    first = {name: run(name) for name in models}
+    assert first["impact-oscillator"] != first["bouncing-ball"]
+    for _ in range(5):
+        for name in models:
+            assert run(name) == first[name]
+    sig = EVALUATE_TYPE.signature
+    for name in models:
+        ev = ModelContext(name).cm.evaluate
+        for get in (ft._get_wrapper_address, ft._get_jit_address):
+            assert get(ev, sig) == get.__wrapped__(ev, sig) > 0
+    # one entry per call site's signature object and lookup: more calls add none
+    memo = next(c.cell_contents for c in ft._get_wrapper_address.__closure__
+                if type(c.cell_contents).__name__ == "WeakKeyDictionary")
+    sizes = {id(f): len(entries) for f, entries in memo.items()}
+    for name in models:
+        run(name)
+    assert {id(f): len(entries) for f, entries in memo.items()} == sizes

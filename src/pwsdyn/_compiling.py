@@ -221,3 +221,69 @@ def check_cache(compiled, depends=()) -> bool:
         if where is not None:
             removed |= refresh_cache(where, py_file.stem, digest)
     return removed
+
+
+# --------------------------------------------------------------------------------------
+# the addresses of a first-class function argument, resolved once
+# --------------------------------------------------------------------------------------
+
+_ADDRESSES_LOCK = threading.Lock()
+_ADDRESSES_MEMOIZED = False
+
+
+def memoize_function_addresses() -> bool:
+    """Resolve the machine-code addresses of a first-class function argument once per
+    function and signature instead of on every call. Returns whether it is in effect.
+
+    The integrator takes the model's compiled ``evaluate`` as a first-class function (one
+    kernel for every model). When a compiled function is called with such an argument,
+    numba's unboxing calls ``numba.experimental.function_type._get_wrapper_address`` and
+    ``_get_jit_address`` (looked up by name on every call): each looks up the dispatcher's
+    compile result for the signature and asks LLVM for the symbol's address, ~12 us each --
+    about 7 periods of an exact run of the impact oscillator, paid by every short run
+    (shooting, Poincare maps, sweeps, basins). A dispatcher's compiled code for a signature
+    never moves once it exists, so the two lookups are memoized per dispatcher (held weakly:
+    a collected model's entry goes with it) and signature. Only numba ``Dispatcher`` objects
+    are memoized; anything else (a ``cfunc``, an object with ``__wrapper_address__``) goes to
+    numba's own function each time. If a numba release no longer has these functions, nothing
+    is changed and the calls cost what they did.
+    """
+    global _ADDRESSES_MEMOIZED
+    with _ADDRESSES_LOCK:
+        if _ADDRESSES_MEMOIZED:
+            return True
+        try:
+            from numba.core.dispatcher import Dispatcher
+            from numba.experimental import function_type as ft
+
+            originals = (ft._get_wrapper_address, ft._get_jit_address)
+        except (ImportError, AttributeError):
+            return False
+        import weakref
+
+        memo: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+        def memoized(original, slot):
+            def get_address(func, sig):
+                if not isinstance(func, Dispatcher):
+                    return original(func, sig)
+                per_func = memo.get(func)
+                if per_func is None:
+                    per_func = memo.setdefault(func, {})
+                # keyed on the signature object's identity (numba passes the one object it
+                # unpickled for the call site each time; hashing a Signature costs ~1.6 us),
+                # which the entry keeps alive so that the identity cannot be reused
+                entry = per_func.get((slot, id(sig)))
+                if entry is None:
+                    entry = (sig, original(func, sig))
+                    per_func[(slot, id(sig))] = entry
+                return entry[1]
+
+            get_address.__wrapped__ = original
+            get_address.__doc__ = original.__doc__
+            return get_address
+
+        ft._get_wrapper_address = memoized(originals[0], "wrapper")
+        ft._get_jit_address = memoized(originals[1], "jit")
+        _ADDRESSES_MEMOIZED = True
+        return True

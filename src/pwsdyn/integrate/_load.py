@@ -40,9 +40,11 @@ def kernel():
     if _KERNEL is None:
         with _LOCK:
             if _KERNEL is None:
-                from .._compiling import check_cache, compile_notice
+                from .._compiling import check_cache, compile_notice, memoize_function_addresses
 
                 check_cache(KERNEL_PARTS, KERNEL_DEPENDS)
+                # the model's evaluate is an argument of every kernel call
+                memoize_function_addresses()
                 with compile_notice("the integrator", __package__ + "._kernel"):
                     from . import _kernel
                 _KERNEL = _kernel

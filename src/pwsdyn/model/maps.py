@@ -345,9 +345,11 @@ def _map_kernel(name: str):
     if _LOADED is None:
         with _KERNELS_LOCK:
             if _LOADED is None:
-                from .._compiling import check_cache, compile_notice
+                from .._compiling import check_cache, compile_notice, memoize_function_addresses
 
                 check_cache(("model/_map_kernels.py",), ("model/_map_step.py",))
+                # the map's step function is an argument of every loop's call
+                memoize_function_addresses()
                 with compile_notice("the map iteration", __package__ + "._map_kernels",
                                     expected="a few seconds"):
                     from . import _map_kernels
