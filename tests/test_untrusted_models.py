@@ -331,6 +331,26 @@ def test_non_finite_complex_and_huge_constants_are_refused_naming_the_field(text
         pwsdyn.load_model(spec)
 
 
+def test_a_complex_derivative_is_refused_for_flows_and_maps(private_cache):
+    """A negative number to a symbolic power is finite where the power is an integer, but its
+    derivative has log(-a) = log(a) + I pi: complex at every point. Flows and maps are refused
+    at code generation, naming the field (a map once put I into its generated code)."""
+    from pwsdyn.model import maps
+
+    flow = {"name": "cf", "states": ["x", "v"], "modes": {"m": {"x": "v", "v": "(-0.5)**x"}}}
+    with pytest.raises(ModelError, match="complex"):
+        codegen.generate_source(pwsdyn.load_model(flow))
+    pieces = {"name": "cm", "kind": "map", "states": ["a", "b"],
+              "pieces": [{"name": "P", "condition": "b > 0",
+                          "map": {"a": "(-0.01)**(b + 10.0)", "b": "b"}},
+                         {"name": "N", "condition": "b <= 0", "map": {"a": "a", "b": "-b"}}]}
+    with pytest.raises(ModelError, match=r"pieces\[0\]\.map\.a.*Jacobian of piece 'P'"):
+        maps.generate_map_source(pwsdyn.load_model(pieces))
+    single = {"name": "cs", "kind": "map", "states": ["a"], "map": {"a": "(-2)**a"}}
+    with pytest.raises(ModelError, match=r"map\.a.*complex"):
+        maps.iterate(single, [1.0], 3)
+
+
 def test_non_finite_numbers_in_toml_and_guards_are_refused(tmp_path):
     f = tmp_path / "nan.toml"
     f.write_text("name = 'n'\nstates = ['x']\n[modes.m]\nx = nan\n")

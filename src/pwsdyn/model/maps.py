@@ -256,6 +256,31 @@ def generate_map_source(model: MapModel) -> str:
     return header("map", _MAP_CODEGEN_VERSION, model.digest, body) + "\n" + body
 
 
+def _check_closed_form(model: MapModel, k: int, values: list, jacobian: list) -> None:
+    """Refuse a piece whose value or Jacobian has a term that is not a finite real expression:
+    a complex constant (the derivative of a negative number to a symbolic power has
+    ``log(-a) = log(a) + I pi``), a non-finite one, or a derivative SymPy leaves unevaluated.
+    The generated code computes in real doubles, where such a term would be NaN at every point
+    or not compile (flows are refused alike, :func:`pwsdyn.model.codegen.derivatives`)."""
+    pc = model.pieces[k]
+    for what, exprs in (("value", values), ("Jacobian", jacobian)):
+        for i, e in enumerate(exprs):
+            if not isinstance(e, sp.Basic):
+                continue
+            state = model.states[i if what == "value" else i // model.n_states]
+            fieldname = (f"pieces[{k}].map.{state}" if "pieces" in (model.spec or {})
+                         else f"map.{state}")
+            if e.has(sp.Derivative, sp.Subs):
+                raise _fail(f"the {what} of piece {pc.name!r} of map {model.name!r} has a term "
+                            f"SymPy cannot differentiate in closed form ({str(e)[:200]}); "
+                            "simplify the expression", model.origin, fieldname)
+            if e.has(sp.I, sp.nan, sp.zoo, sp.oo, -sp.oo):
+                raise _fail(f"the {what} of piece {pc.name!r} of map {model.name!r} has the "
+                            f"non-finite or complex value {str(e)[:200]}; a map that is complex "
+                            "(a negative number to a non-integer power, ...) cannot be iterated",
+                            model.origin, fieldname)
+
+
 def _generate_map_body(model: MapModel) -> str:
     """The module's text after its header line: only identifiers and numbers (the map's name
     and other text never reach it)."""
@@ -283,6 +308,7 @@ def _generate_map_body(model: MapModel) -> str:
         lines.append(f"    if {cond}:")
         F = sp.Matrix(pc.exprs)
         J = F.jacobian(X)
+        _check_closed_form(model, k, list(F), list(J))
         exprs = [e.xreplace(rename) for e in list(F) + list(J)]
         subs, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("_c"))
         for sym, val in subs:
