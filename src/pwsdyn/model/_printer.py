@@ -11,6 +11,20 @@ import sympy as sp
 from sympy.printing.pycode import PythonCodePrinter
 
 
+def unprintable(expr) -> str | None:
+    """Why the generated code, which computes in real doubles, cannot hold ``expr``:
+    ``"derivative"`` (a derivative SymPy left unevaluated), ``"complex"`` (a complex or
+    non-finite term: NaN at every point, or code that does not compile), or None. Flows and
+    maps refuse such a model at code generation."""
+    if not isinstance(expr, sp.Basic):
+        return None
+    if expr.has(sp.Derivative, sp.Subs):
+        return "derivative"
+    if expr.has(sp.I, sp.nan, sp.zoo, sp.oo, -sp.oo):
+        return "complex"
+    return None
+
+
 class NumbaPrinter(PythonCodePrinter):
     """SymPy expressions as Python source that numba compiles to what the model means."""
 

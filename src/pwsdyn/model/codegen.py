@@ -36,7 +36,7 @@ from .._codes import MODEL_EVENT_KINDS
 from ..errors import ModelError
 from .affine import affine_structure
 from .cache import cache_dir as cache_dir, load_module
-from ._printer import NumbaPrinter
+from ._printer import NumbaPrinter, unprintable
 from .discontinuities import U_SYMBOL
 from .spec import Model, check_identifiers
 
@@ -141,12 +141,13 @@ def derivatives(model: Model) -> Derivatives:
     # is not (it would be NaN at every point, or not compile)
     for (which, idx), exprs in cases.items():
         for e in exprs:
-            if isinstance(e, sp.Basic) and e.has(sp.Derivative, sp.Subs):
+            why = unprintable(e)
+            if why == "derivative":
                 raise ModelError(f"the {_QUANTITIES.get(which, 'derivative')} (case {idx}) "
                                  f"of model {model.name!r} has a term SymPy cannot differentiate "
                                  f"in closed form ({str(e)[:200]}); simplify the expression",
                                  source=model.origin)
-            if isinstance(e, sp.Basic) and e.has(sp.I, sp.nan, sp.zoo, sp.oo, -sp.oo):
+            if why == "complex":
                 raise ModelError(f"the {_QUANTITIES.get(which, 'derivative')} (case {idx}) "
                                  f"of model {model.name!r} has the non-finite or complex value "
                                  f"{str(e)[:200]}; a field that is complex (a negative number to "
