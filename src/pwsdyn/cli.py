@@ -491,7 +491,7 @@ def models_cmd():
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
               help="Write a figure of the trajectory to this file (PNG; PDF, SVG... by "
                    "suffix).")
-@click.option("--force", is_flag=True, help=_FORCE_HELP)
+@click.option("--force", is_flag=True, default=False, help=_FORCE_HELP)
 def simulate_cmd(model, params, sets, x0, t0, t_end, rtol, atol, method, exact, mode, sliding,
                  out, plot, force):
     """Simulate MODEL (a built-in name, see `pwsdyn models`, or a TOML file).
@@ -628,12 +628,13 @@ _EXPLORE_OPTIONS = [
                       "exactly (matrix exponential), or integrate every mode with the "
                       "Runge-Kutta pair; unset: exactly wherever a mode allows it (default auto)."),
     _sliding_option,
-    click.option("--no-progress", "no_progress", is_flag=True, help="No progress bar."),
+    click.option("--no-progress", "no_progress", is_flag=True, default=False,
+                 help="No progress bar."),
     click.option("--out", type=click.Path(dir_okay=False), default=None,
                  help="Write the dataset to this NetCDF file (.nc)."),
     click.option("--plot", type=click.Path(dir_okay=False), default=None,
                  help="Write the figure to this file (PNG; PDF, SVG... by suffix)."),
-    click.option("--force", is_flag=True, help=_FORCE_HELP),
+    click.option("--force", is_flag=True, default=False, help=_FORCE_HELP),
 ]
 
 
@@ -687,7 +688,8 @@ def _explore_errors():
 @click.option("--num", type=int, required=True, help="Number of values (evenly spaced).")
 @click.option("--direction", type=click.Choice(["up", "down", "both"]), default="both",
               show_default=True, help="Sweep up, down or both (hysteresis).")
-@click.option("--lyapunov", is_flag=True, help="Also compute Lyapunov exponents (slower).")
+@click.option("--lyapunov", is_flag=True, default=False,
+              help="Also compute Lyapunov exponents (slower).")
 @click.option("--state", default=None, help="State plotted (default: first, or last for an "
               "event section).")
 @click.option("--samples", type=int, default=None,
@@ -880,7 +882,7 @@ def basins_cmd(model, params, sets, xname, x_from, x_to, x_num, yname, y_from, y
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
               help="Write a figure of the orbit with its events and multipliers (PNG; PDF, "
                    "SVG... by suffix).")
-@click.option("--force", is_flag=True, help=_FORCE_HELP)
+@click.option("--force", is_flag=True, default=False, help=_FORCE_HELP)
 def orbit_cmd(model, params, sets, x0, t0, period, periods, transient, mode, nodes, tol, rtol,
               atol, method, sliding, out, plot, force):
     """Find a periodic orbit of MODEL by Newton shooting and print its Floquet multipliers.
@@ -984,7 +986,7 @@ def orbit_cmd(model, params, sets, x0, t0, period, periods, transient, mode, nod
 @click.option("--transient", type=float, default=None,
               help="Simulate this long before shooting (default: the model's t_end without "
                    "--x0).")
-@click.option("--equilibrium", is_flag=True,
+@click.option("--equilibrium", is_flag=True, default=False,
               help="Continue an equilibrium of the initial mode instead of a periodic orbit.")
 @click.option("--ds", type=float, default=None,
               help="First step in arclength (default min(0.02, abs(to - from) / 100)).")
@@ -993,7 +995,8 @@ def orbit_cmd(model, params, sets, x0, t0, period, periods, transient, mode, nod
 @click.option("--rtol", type=float, default=None, help="Relative tolerance (default 1e-12).")
 @click.option("--atol", type=float, default=None, help="Absolute tolerance (default 1e-12).")
 @_method_option("DOP853")
-@click.option("--no-progress", "no_progress", is_flag=True, help="No progress bar.")
+@click.option("--no-progress", "no_progress", is_flag=True, default=False,
+              help="No progress bar.")
 @click.option("--out", "out", type=click.Path(dir_okay=False), default=None,
               help="Write the branch to this NetCDF file.")
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None,
@@ -1004,7 +1007,7 @@ def orbit_cmd(model, params, sets, x0, t0, period, periods, transient, mode, nod
               default="switch", show_default=True,
               help="At a graze: go on with the orbit's new event sequence, stop there, or keep "
                    "the old one (its points past the graze are not admissible).")
-@click.option("--force", is_flag=True, help=_FORCE_HELP)
+@click.option("--force", is_flag=True, default=False, help=_FORCE_HELP)
 def continue_cmd(model, params, sets, start, stop, x0, t0, periods, period, transient,
                  equilibrium, ds, max_points, rtol, atol, method, no_progress, out, plot, state,
                  on_dib, force):
