@@ -8,12 +8,14 @@ What is loaded is checked in a fresh interpreter (``sys.modules``), never by tim
 from __future__ import annotations
 
 import ast
+import io
 import json
 import os
 import subprocess
 import sys
 import textwrap
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -239,10 +241,56 @@ def test_compile_message_only_when_numba_really_compiles(tmp_path):
     the second loads from numba's cache: nothing. (NUMBA_CACHE_DIR empty: numba's default,
     the cache next to the module, whatever the calling environment sets.)"""
     first = _notice(tmp_path, "a", PWSDYN_QUIET="", NUMBA_CACHE_DIR="")
-    assert "pwsdyn: compiling the test function (first run only, about a minute)..." in first
+    assert ("pwsdyn: compiling the test function (first run only, 1-2 minutes on 2 cores)..."
+            in first)
     assert "pwsdyn: compiled the test function in " in first
     assert list((tmp_path / "__pycache__").glob("jitmod_a.twice-*.nbi"))
     assert _notice(tmp_path, "a", PWSDYN_QUIET="", NUMBA_CACHE_DIR="") == ""
+
+
+class _Stream(io.StringIO):
+    def __init__(self, tty: bool):
+        super().__init__()
+        self.tty = tty
+
+    def isatty(self):
+        return self.tty
+
+
+@pytest.mark.parametrize("tty", [False, True])
+def test_a_long_compile_shows_progress(tty):
+    """Into a log or a pipe, a line every `every` seconds while numba compiles, so that a long
+    compile never looks like a hang; on a terminal the count in place on the first line."""
+    from pwsdyn._compiling import KERNEL_COMPILE_TIME, PROGRESS_EVERY, _Notice
+
+    # what the README promises: the measured range, and a line every 15 s
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    assert PROGRESS_EVERY == 15.0 and "a line every 15 s" in readme
+    assert KERNEL_COMPILE_TIME == "1-2 minutes on 2 cores" and "1-2 minutes on two" in readme
+
+    stream = _Stream(tty)
+    notice = _Notice("the integrator", "1-2 minutes on 2 cores", ("pwsdyn.",), stream,
+                     every=0.05)
+    notice.compiling("numpy.core")                 # not one of the modules watched: nothing
+    assert stream.getvalue() == ""
+    notice.compiling("pwsdyn.integrate._kernel.run")
+    deadline = time.monotonic() + 30.0             # a loaded machine may delay the thread
+    while stream.getvalue().count("\r" if tty else "\n") < (2 if tty else 3) and \
+            time.monotonic() < deadline:
+        time.sleep(0.05 if not tty else 0.5)
+    notice.finish(failed=False)
+    text = stream.getvalue()
+    head = "pwsdyn: compiling the integrator (first run only, 1-2 minutes on 2 cores)..."
+    assert text.startswith(head)
+    assert "pwsdyn: compiled the integrator in " in text.splitlines()[-1]
+    if tty:
+        assert "still compiling" not in text and "\r" + head in text
+    else:
+        progress = [ln for ln in text.splitlines() if ln.startswith("pwsdyn: still")]
+        assert len(progress) >= 2
+        seconds = [float(ln.split(", ")[1].split(" s ")[0]) for ln in progress]
+        assert seconds == sorted(seconds)
+        assert all(ln.endswith(" s so far") for ln in progress)
 
 
 def test_compile_message_can_be_silenced_and_is_scoped(tmp_path):

@@ -1,16 +1,21 @@
 """A message on stderr while numba compiles pwsdyn's integrator.
 
 The integrator is compiled by numba with ``cache=True``: the first use on a machine (or after
-an upgrade of pwsdyn, numba or Python) compiles it, about a minute; every later process loads
-the machine code from numba's cache next to the module in a fraction of a second. Numba
-announces a real compilation -- a cache miss, never a load from the cache -- with its
-``numba:compile`` event, so :func:`compile_notice` listens for that event and prints
+an upgrade of pwsdyn, numba or Python) compiles it, one to two minutes on two cores
+(:data:`KERNEL_COMPILE_TIME`); every later process loads the machine code from numba's cache
+next to the module in a fraction of a second. Numba announces a real compilation -- a cache
+miss, never a load from the cache -- with its ``numba:compile`` event, so
+:func:`compile_notice` listens for that event and prints
 
-    pwsdyn: compiling the integrator (first run only, about a minute)...
-    pwsdyn: compiled the integrator in 57 s (cached for later runs)
+    pwsdyn: compiling the integrator (first run only, 1-2 minutes on 2 cores)...
+    pwsdyn: still compiling the integrator, 15 s so far
+    pwsdyn: still compiling the integrator, 30 s so far
+    ...
+    pwsdyn: compiled the integrator in 97 s (cached for later runs)
 
-to stderr only when compiling really happens (on a terminal the first line counts the
-seconds as they pass). ``PWSDYN_QUIET=1`` in the environment silences it.
+to stderr only when compiling really happens: a line every :data:`PROGRESS_EVERY` seconds
+into a log or a pipe, so that a long silence never looks like a hang; on a terminal the first
+line counts the seconds in place instead. ``PWSDYN_QUIET=1`` in the environment silences it.
 
 Numba keys each cached function on its own source file only; :func:`check_cache` removes a
 compiled module's cached entries when any file it depends on at compile time has changed
@@ -32,6 +37,14 @@ from pathlib import Path
 #: Environment variable that silences the message (any value but "", "0", "false", "no").
 QUIET_ENV = "PWSDYN_QUIET"
 
+#: How long the first compilation of the integrator takes, measured from fresh checkouts on a
+#: 2-core x86-64 virtual machine: 51-60 s of CPU; 51 s of wall time when the machine is idle,
+#: up to 102 s when other work shares it.
+KERNEL_COMPILE_TIME = "1-2 minutes on 2 cores"
+
+#: Seconds between two progress lines when stderr is not a terminal.
+PROGRESS_EVERY = 15.0
+
 
 def quiet() -> bool:
     """Whether ``PWSDYN_QUIET`` asks for no compile message."""
@@ -41,8 +54,10 @@ def quiet() -> bool:
 class _Notice:
     """The state of one :func:`compile_notice` block: prints on the first compilation."""
 
-    def __init__(self, what: str, expected: str, modules: tuple, stream):
+    def __init__(self, what: str, expected: str, modules: tuple, stream,
+                 every: float = PROGRESS_EVERY):
         self.what, self.expected, self.modules = what, expected, modules
+        self.every = every
         self.stream = stream
         self.started: float | None = None
         self.tty = False
@@ -71,17 +86,20 @@ class _Notice:
             self.tty = bool(self.stream.isatty())
         except (AttributeError, ValueError, OSError):
             self.tty = False
-        if self.tty:
-            self._write(self.head)
-            self._ticker = threading.Thread(target=self._tick, name="pwsdyn-compile-notice",
-                                            daemon=True)
-            self._ticker.start()
-        else:
-            self._write(self.head + "\n")
+        self._write(self.head if self.tty else self.head + "\n")
+        self._ticker = threading.Thread(target=self._tick, name="pwsdyn-compile-notice",
+                                        daemon=True)
+        self._ticker.start()
 
     def _tick(self) -> None:
-        while not self._stop.wait(1.0):
-            self._write(f"\r{self.head} {time.perf_counter() - self.started:.0f} s")
+        # a terminal: the count in place, every second; a log or a pipe: a line every `every`
+        # seconds (one line each second would flood a CI log)
+        while not self._stop.wait(1.0 if self.tty else self.every):
+            elapsed = time.perf_counter() - self.started
+            if self.tty:
+                self._write(f"\r{self.head} {elapsed:.0f} s")
+            else:
+                self._write(f"pwsdyn: still compiling {self.what}, {elapsed:.0f} s so far\n")
 
     def finish(self, failed: bool) -> None:
         if self.started is None:
@@ -99,7 +117,8 @@ class _Notice:
 
 
 @contextlib.contextmanager
-def compile_notice(what: str, modules, *, expected: str = "about a minute", stream=None):
+def compile_notice(what: str, modules, *, expected: str = KERNEL_COMPILE_TIME, stream=None,
+                   every: float = PROGRESS_EVERY):
     """Within this block, announce on ``stream`` (default stderr) the first compilation numba
     really does of a function defined in one of ``modules`` (module names or prefixes), and
     at the end of the block how long it took. Nothing is printed when numba loads everything
@@ -112,7 +131,8 @@ def compile_notice(what: str, modules, *, expected: str = "about a minute", stre
     modules = (modules,) if isinstance(modules, str) else tuple(modules)
     stream = stream if stream is not None else sys.stderr
     # no stderr at all (pythonw, some services): nothing to say it on
-    notice = None if quiet() or stream is None else _Notice(what, expected, modules, stream)
+    notice = (None if quiet() or stream is None
+              else _Notice(what, expected, modules, stream, every))
     from numba.core import event
     from numba.core.errors import NumbaExperimentalFeatureWarning
 
