@@ -187,10 +187,16 @@ def test_jacobian_through_chattering_matches_fd_slow(t0, H, e):
 def _check_period_shift(N, H, e):
     """The damper model is 1-periodic in t: the run started N periods later has the same
     Jacobian through chattering (to 1e-6; the start differs by the rounding of the table's
-    phase at N, which shifts the impact by up to ~1e-9 here)."""
+    phase at N, which shifts the impact by up to ~1e-9 here). Near H = 1e-3 and e = 0.9 a few
+    bounces come before the chattering map takes over (H = 1e-3, e = 0.8984375: two); the
+    shifted run must have the same ones, N periods later."""
     _, _, a = _damper_run(0.25, H, e, variational=True)
     _, _, b = _damper_run(0.25 + N, H, e, variational=True)
-    assert [ev.kind for ev in b.events] == ["chatter", "stick"]
+    kinds = [ev.kind for ev in a.events]
+    assert kinds[-2:] == ["chatter", "stick"] and set(kinds[:-2]) <= {"impact"}
+    assert [ev.kind for ev in b.events] == kinds
+    np.testing.assert_allclose([ev.t - N for ev in b.events], [ev.t for ev in a.events],
+                               rtol=0, atol=1e-8)
     assert np.max(np.abs(b.jacobian - a.jacobian)) <= 1e-6 * np.max(np.abs(a.jacobian))
 
 

@@ -675,7 +675,7 @@ def _check_cylinder_start(c):
     elif u > 0.0:
         assert not first
     else:
-        require(abs(margin) > 1e-3 * G * R)
+        assume(abs(margin) > 1e-3 * G * R)
         if margin > 0.0:
             _check_contact_then_release(traj, R, 0.0, th, w)
         else:

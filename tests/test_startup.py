@@ -226,7 +226,11 @@ assert jitmod_{tag}.twice(2.0) == 4.0
 
 
 def _notice(tmp_path, tag: str, watched: str | None = None, **env):
-    (tmp_path / f"jitmod_{tag}.py").write_text(_JIT_MODULE)
+    module = tmp_path / f"jitmod_{tag}.py"
+    if not module.exists():
+        # written once: numba's cache index is stamped with the source file's modification
+        # time, which a rewrite changes (numba 0.59 then compiled again)
+        module.write_text(_JIT_MODULE)
     script = tmp_path / f"notice_{tag}.py"
     script.write_text(_NOTICE_SCRIPT.format(tag=tag))
     proc = subprocess.run([sys.executable, str(script), str(tmp_path),
@@ -427,7 +431,9 @@ def test_function_addresses_are_resolved_once_and_right():
     """The model's evaluate, an argument of every kernel call, has its addresses memoized per
     dispatcher and signature: the memo gives what numba's own lookup gives, keeps two entries
     per model whatever the number of calls, and runs of two models interleaved give each
-    model's own results bit for bit (a mixed-up address would run the other model's field)."""
+    model's own results bit for bit (a mixed-up address would run the other model's field).
+    A numba without both lookups (0.59 has no ``_get_jit_address``) is left as it is: the runs
+    must still give each model's own results."""
     import numpy as np
     from numba.experimental import function_type as ft
 
@@ -436,7 +442,8 @@ def test_function_addresses_are_resolved_once_and_right():
     from pwsdyn.stability._context import ModelContext
 
     kernel()
-    assert hasattr(ft._get_wrapper_address, "__wrapped__")
+    in_effect = hasattr(ft, "_get_wrapper_address") and hasattr(ft, "_get_jit_address")
+    assert hasattr(getattr(ft, "_get_wrapper_address", None), "__wrapped__") == in_effect
     models = {name: pwsdyn.load_model(name) for name in ("impact-oscillator", "bouncing-ball")}
     x0 = {"impact-oscillator": [-0.5, 0.1], "bouncing-ball": [1.0, 0.0]}
 
@@ -449,6 +456,8 @@ def test_function_addresses_are_resolved_once_and_right():
     for _ in range(5):
         for name in models:
             assert run(name) == first[name]
+    if not in_effect:
+        return
     sig = EVALUATE_TYPE.signature
     for name in models:
         ev = ModelContext(name).cm.evaluate
