@@ -427,7 +427,7 @@ def _field(output: str, label: str) -> str:
 def test_grazing_writes_the_branch_and_the_map(tmp_path):
     """`grazing --out` is the branch up to the graze (load_branch reads it) with the map
     printed: the graze at sigma = R = 1/|1 - omega^2 + i eps omega| (the forced response's
-    amplitude), a*, x* and the persistence sequence as printed; `--plot` its figure."""
+    amplitude), a*, x* and the persistence sequence as printed; `--plot` the grazing orbit."""
     import json
     import math
 
@@ -439,7 +439,7 @@ def test_grazing_writes_the_branch_and_the_map(tmp_path):
     assert res.exit_code == 0, res.output
     listed = [ln.split()[1] for ln in res.stdout.splitlines() if ln.startswith("wrote")]
     assert listed == [str(out), str(png)]
-    assert png.read_bytes()[:8] == PNG_MAGIC
+    _assert_png(png)
     ds = open_dataset(out)
     R = 1.0 / math.hypot(1 - 2.8**2, 0.1 * 2.8)
     assert abs(ds.attrs["graze_value"] - R) < 1e-7

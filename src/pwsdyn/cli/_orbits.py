@@ -276,7 +276,8 @@ def _print_special_points(branch, param):
                 "pwsdyn.load_branch) with the discontinuity map at the graze (its x*, a*, "
                 "beta, P, h_x, the persistence sequence and the scenario) to this NetCDF "
                 "file.",
-                "Write the branch up to the graze with the located graze marked (PNG; PDF, "
+                "Write a figure of the grazing orbit, as `orbit --plot` draws an orbit: "
+                "the impact surface it touches, its events and multipliers (PNG; PDF, "
                 "SVG... by suffix).")
 def grazing_cmd(model, params, sets, start, stop, x0, t0, periods, period, transient, rtol,
                 atol, method, sliding, no_progress, terms, out, plot, force):
@@ -339,9 +340,9 @@ def grazing_cmd(model, params, sets, start, stop, x0, t0, periods, period, trans
              " of the local attractor (a jump to a distant one, hysteresis)"))
 
     def draw():
-        from ..plot import plot_branch
+        from ..plot import plot_orbit
 
-        plot_branch(branch, path=plot, overwrite=force)
+        plot_orbit(gr.orbit, path=plot, overwrite=force)
 
     with reported():
         problem = _write_outputs(out, plot, lambda: _grazing_dataset(branch, gr, dm, seq),
