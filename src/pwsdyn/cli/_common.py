@@ -158,7 +158,6 @@ def _run_defaults(model, x0, t0, t_end):
     return run.x0, run.t0, run.t_end
 
 
-
 def _method_name(method: str) -> str:
     """The library's spelling of a --method choice (case-insensitive on the command line)."""
     return "auto" if method.lower() == "auto" else method.upper()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from ._common import (exact_option, method_option, model_argument, output_options,
+from ._common import (_stack, exact_option, method_option, model_argument, output_options,
                       parallel_options, param_options, prepare, progress_option, reported,
                       sliding_option, tolerance_options, x0_option)
 from ._main import main
@@ -22,8 +22,9 @@ def _run_store(out, store):
     return None, False
 
 
-#: The options sweep and basins share besides the shared options of every command.
-_explore_options = [
+#: The options of sweep and basins after their own: the start, the parallel and resumable
+#: run, the shared options.
+explore_options = _stack(
     x0_option("Initial state (as for `simulate`); default: the model's [defaults]."),
     click.option("--transient", type=int, default=200, show_default=True,
                  help="Forcing periods (maps: iterations) discarded."),
@@ -41,13 +42,7 @@ _explore_options = [
     progress_option,
     output_options("Write the dataset to this NetCDF file (.nc).",
                    "Write the figure to this file (PNG; PDF, SVG... by suffix)."),
-]
-
-
-def explore_options(fn):
-    for opt in reversed(_explore_options):
-        fn = opt(fn)
-    return fn
+)
 
 
 def _finish_explore(ds, out, store_path, remove_store, figures, force):

@@ -12,7 +12,7 @@ import json
 
 import click
 
-from ._common import (_run_defaults, method_option, model_argument, output_options,
+from ._common import (_run_defaults, _stack, method_option, model_argument, output_options,
                       param_options, prepare, progress_option, reported, sliding_option,
                       tolerance_options, x0_option)
 from ._main import main
@@ -114,10 +114,10 @@ def orbit_cmd(model, params, sets, x0, t0, period, periods, transient, mode, nod
         _fail(problem)
 
 
-#: The options ``continue`` and ``grazing`` share: the continued parameter and its span, the
-#: starting orbit, the integrator, the files.
 def _branch_options(what: str, to_help: str):
-    opts = [
+    """The options ``continue`` and ``grazing`` share: the continued parameter and its span,
+    the starting orbit, the integrator, the progress bar (``what`` starts at --from)."""
+    return _stack(
         model_argument,
         param_options("continued"),
         click.option("--from", "start", type=float, required=True,
@@ -139,13 +139,7 @@ def _branch_options(what: str, to_help: str):
         method_option(shooting=True),
         sliding_option(" The starting orbit's, which the branch keeps."),
         progress_option,
-    ]
-
-    def deco(fn):
-        for opt in reversed(opts):
-            fn = opt(fn)
-        return fn
-    return deco
+    )
 
 
 def _span(start, stop):
