@@ -495,3 +495,17 @@ def test_continue_equilibrium_refuses_integrator_options():
                 "--equilibrium", "--rtol", "1e-8", "--sliding", "utkin"])
     assert res.exit_code == 2
     assert "--rtol, --sliding" in res.stderr and "without integrating" in res.stderr
+
+
+def test_continue_sliding_reaches_the_branch(tmp_path):
+    """--sliding chooses the starting orbit's sliding field, which the branch keeps (the
+    relay's orbit slides on x1 = 0)."""
+    import json
+
+    from pwsdyn.io import open_dataset
+
+    out = tmp_path / "r.nc"
+    res = _run(["continue", "relay-feedback", "--param", "sigma", "--from", "1", "--to", "1.02",
+                "--max-points", "2", "--sliding", "UTKIN", "--no-progress", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert json.loads(open_dataset(out).attrs["options"])["sliding"] == "utkin"
