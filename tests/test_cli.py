@@ -106,6 +106,57 @@ def test_models_lists_the_zoo():
     assert ball.description.splitlines()[0][:40] in res.output
 
 
+def _models_listing() -> dict:
+    """``pwsdyn models`` by model: the lines under each name."""
+    res = _run(["models"])
+    assert res.exit_code == 0, res.output
+    blocks, name = {}, None
+    for line in res.stdout.splitlines():
+        if line and not line.startswith(" "):
+            name = line.strip()
+            blocks[name] = []
+        elif line.strip():
+            blocks[name].append(line.strip())
+    return blocks
+
+
+def test_models_summaries_end_at_a_clause_and_keep_the_equation():
+    """Each model's summary is its description's first clauses, whole: it ends where a
+    clause of the description ends (":", ";" or the sentence's full stop), and it keeps the
+    equation where it fits (the impact oscillator's, the square-root map's)."""
+    from pwsdyn.cli._main import SUMMARY_WIDTH
+
+    blocks = _models_listing()
+    assert set(blocks) == set(pwsdyn.zoo_names())
+    for name, lines in blocks.items():
+        text = " ".join(pwsdyn.load_model(name).description.split())
+        summary = lines[0]
+        assert text.startswith(summary), (name, summary)
+        rest = text[len(summary):]
+        assert rest == "" or rest[0] in ":;" or summary.endswith("."), (name, summary, rest)
+        # the first clause always, more only within the width
+        assert len(summary) <= SUMMARY_WIDTH or ":" not in summary, (name, summary)
+        assert lines[1].startswith("states:")
+    assert blocks["impact-oscillator"][0].endswith(
+        ": x'' + eps x' + x = sin(omega t) while x < sigma")
+    assert "mu - sqrt(x) for x > 0" in blocks["sqrt-map"][0]
+
+
+@pytest.mark.parametrize("description, summary", [
+    ("Title (a: b; c): x' = f(x; p); more. Second sentence.",
+     "Title (a: b; c): x' = f(x; p); more."),
+    ("A model: " + "y" * 200 + "; tail.", "A model"),
+    ("One sentence with e.g. lower case after a stop. Next.",
+     "One sentence with e.g. lower case after a stop."),
+    ("A long first clause " + "z" * 200 + ": eq.", "A long first clause " + "z" * 200),
+    ("", ""),
+])
+def test_model_summary_rule(description, summary):
+    from pwsdyn.cli._main import summary as summarise
+
+    assert summarise(description) == summary
+
+
 def test_simulate_writes_data_and_plot(tmp_path):
     out, png = tmp_path / "run.nc", tmp_path / "run.png"
     res = _run(["simulate", "bouncing-ball", "--x0", "y=0.5", "--x0", "v=0", *VIB_ARGS,
@@ -358,3 +409,103 @@ def test_plot_arguments_are_checked():
         plot_trajectory(traj, phase=("y", "y"))
     with pytest.raises(ValueError, match="out of range"):
         plot_trajectory(traj, phase=(0, 5))
+
+
+# --------------------------------------------------------------------------------------
+# grazing and continue: the shared options
+# --------------------------------------------------------------------------------------
+
+GRAZING = ["grazing", "impact-oscillator", "--param", "sigma", "--from", "0.45", "--to", "0.0",
+           "-p", "omega=2.8", "-p", "eps=0.1", "--x0", "x=-0.006,v=-0.41", "--t0", "0",
+           "--no-progress"]
+
+
+def _field(output: str, label: str) -> str:
+    return next(ln[len(label):].strip() for ln in output.splitlines() if ln.startswith(label))
+
+
+def test_grazing_writes_the_branch_and_the_map(tmp_path):
+    """`grazing --out` is the branch up to the graze (load_branch reads it) with the map
+    printed: the graze at sigma = R = 1/|1 - omega^2 + i eps omega| (the forced response's
+    amplitude), a*, x* and the persistence sequence as printed; `--plot` the grazing orbit."""
+    import json
+    import math
+
+    from pwsdyn.io import open_dataset
+    from pwsdyn.orbits._base import SHOOTING_DEFAULTS
+
+    out, png = tmp_path / "g.nc", tmp_path / "g.png"
+    res = _run(GRAZING + ["--terms", "6", "--out", str(out), "--plot", str(png)])
+    assert res.exit_code == 0, res.output
+    listed = [ln.split()[1] for ln in res.stdout.splitlines() if ln.startswith("wrote")]
+    assert listed == [str(out), str(png)]
+    _assert_png(png)
+    ds = open_dataset(out)
+    R = 1.0 / math.hypot(1 - 2.8**2, 0.1 * 2.8)
+    assert abs(ds.attrs["graze_value"] - R) < 1e-7
+    assert ds.attrs["graze_kind"] == "GR" and ds.attrs["graze_scenario"] == "loss"
+    assert f"{ds.attrs['graze_a_star']:.10g}" == _field(res.stdout, "a*")
+    names = json.loads(ds.attrs["graze_coordinates"])
+    assert names == ["x", "v", "t"]
+    assert ", ".join(f"{n}={v:.10g}" for n, v in zip(names, ds["graze_x_star"].values)) == \
+        _field(res.stdout, "x*")
+    seq = ds["graze_persistence"].values
+    assert seq.shape == (6,) and " ".join(f"{v:.3e}" for v in seq) == \
+        _field(res.stdout, "h_x P^n beta")
+    # h_x P^n beta from the matrices in the file
+    P, beta, h_x = ds["graze_P"].values, ds["graze_beta"].values, ds["graze_h_x"].values
+    np.testing.assert_allclose(h_x @ np.linalg.matrix_power(P, 3) @ beta, seq[2], rtol=1e-12)
+    # the shooting's own defaults, as pwsdyn.find_periodic_orbit has them
+    options = json.loads(ds.attrs["options"])
+    assert {k: options[k] for k in SHOOTING_DEFAULTS} == SHOOTING_DEFAULTS
+    br = pwsdyn.load_branch(out)
+    assert br.special("GR")[0].value == pytest.approx(ds.attrs["graze_value"], abs=1e-12)
+    # an existing file is refused before any work, and replaced with --force
+    again = _run(GRAZING + ["--out", str(out)])
+    assert again.exit_code == 1 and "--force" in again.stderr
+
+
+def test_grazing_integrator_options_reach_the_branch(tmp_path):
+    out = tmp_path / "g.nc"
+    res = _run(GRAZING + ["--rtol", "1e-11", "--method", "rk45", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    import json
+
+    from pwsdyn.io import open_dataset
+
+    options = json.loads(open_dataset(out).attrs["options"])
+    assert options["rtol"] == 1e-11 and options["method"] == "RK45"
+
+
+@pytest.mark.parametrize("command", ["continue", "grazing"])
+def test_continue_and_grazing_refuse_an_existing_file_before_any_work(command, tmp_path):
+    out = tmp_path / "b.nc"
+    out.write_bytes(b"old")
+    res = _run([command, "no-such-model", "--param", "A", "--from", "0", "--to", "1",
+                "--out", str(out)])
+    assert res.exit_code == 1 and "b.nc" in res.stderr and "--force" in res.stderr
+    assert out.read_bytes() == b"old"
+    res = _run([command, "bouncing-ball", "--param", "A", "--from", "0", "--to", "1",
+                "--plot", str(tmp_path / "b.xyz")])
+    assert res.exit_code == 2 and "unknown figure format" in res.stderr
+
+
+def test_continue_equilibrium_refuses_integrator_options():
+    res = _run(["continue", "bouncing-ball", "--param", "A", "--from", "0", "--to", "1",
+                "--equilibrium", "--rtol", "1e-8", "--sliding", "utkin"])
+    assert res.exit_code == 2
+    assert "--rtol, --sliding" in res.stderr and "without integrating" in res.stderr
+
+
+def test_continue_sliding_reaches_the_branch(tmp_path):
+    """--sliding chooses the starting orbit's sliding field, which the branch keeps (the
+    relay's orbit slides on x1 = 0)."""
+    import json
+
+    from pwsdyn.io import open_dataset
+
+    out = tmp_path / "r.nc"
+    res = _run(["continue", "relay-feedback", "--param", "sigma", "--from", "1", "--to", "1.02",
+                "--max-points", "2", "--sliding", "UTKIN", "--no-progress", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert json.loads(open_dataset(out).attrs["options"])["sliding"] == "utkin"

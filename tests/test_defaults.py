@@ -14,6 +14,7 @@ from __future__ import annotations
 import inspect
 import json
 import math
+import re
 import warnings
 
 import numpy as np
@@ -25,7 +26,7 @@ import pwsdyn
 from pwsdyn import OutputExistsError
 from pwsdyn.cli import FALLBACK_T_END, main
 from pwsdyn.integrate.simulate import DEFAULTS
-from pwsdyn.io import load_trajectory, open_dataset
+from pwsdyn.io import load_trajectory, open_dataset, save_dataset
 from pwsdyn.model.spec import FALLBACK_T_END as LIBRARY_FALLBACK_T_END
 from pwsdyn.orbits._shooting import SHOOTING_DEFAULTS
 
@@ -188,6 +189,20 @@ SAME_DEFAULT = [
     ("orbit", "--mode", pwsdyn.find_periodic_orbit, "mode"),
     ("orbit", "--period", pwsdyn.find_periodic_orbit, "period"),
     ("simulate", "--mode", pwsdyn.simulate, None),         # integrator option: DEFAULTS
+    ("simulate", "--force", pwsdyn.Trajectory.save, "overwrite"),
+    ("orbit", "--force", pwsdyn.PeriodicOrbit.save, "overwrite"),
+    ("continue", "--max-points", pwsdyn.continue_orbit, "max_points"),
+    ("continue", "--ds", pwsdyn.continue_orbit, "ds"),
+    ("continue", "--on-dib", pwsdyn.continue_orbit, "on_dib"),
+    ("continue", "--t0", pwsdyn.find_periodic_orbit, "t0"),
+    ("continue", "--period", pwsdyn.find_periodic_orbit, "period"),
+    ("continue", "--force", pwsdyn.Branch.save, "overwrite"),
+    ("grazing", "--t0", pwsdyn.find_periodic_orbit, "t0"),
+    ("grazing", "--period", pwsdyn.find_periodic_orbit, "period"),
+    ("grazing", "--force", save_dataset, "overwrite"),
+    # the flag is the negation of the API's `progress` (see test_option_default_is_the_api's)
+    ("sweep", "--no-progress", pwsdyn.sweep, "progress"),
+    ("basins", "--no-progress", pwsdyn.basins, "progress"),
 ]
 
 
@@ -196,6 +211,8 @@ SAME_DEFAULT = [
 def test_option_default_is_the_api_default(command, flag, fn, name):
     got = _received(command)[_option(command, flag).name]
     api = DEFAULTS[flag.lstrip("-")] if name is None else _api_default(fn, name)
+    if flag.startswith("--no-"):       # --no-progress: progress=False
+        api = not api
     # the type too: a flag must give False, not 0 or None, where the API's default is False
     assert (type(got), got) == (type(api), api), (command, flag, got, api)
 
@@ -214,10 +231,12 @@ def test_every_option_gives_a_plain_value_when_not_given(command):
 
 #: Options whose click default is None, standing for the library's integrator default; the
 #: help text names that value.
+#: Shooting (orbit, continue, grazing) has its own integrator defaults, over a simulation's.
+SHOOTING = {**DEFAULTS, **SHOOTING_DEFAULTS}
 LIBRARY_DEFAULT = [(cmd, flag, DEFAULTS) for cmd in ("simulate", "sweep", "basins")
-                   for flag in ("--rtol", "--atol", "--method", "--exact")] + \
-                  [("orbit", flag, SHOOTING_DEFAULTS) for flag in ("--rtol", "--atol",
-                                                                    "--method")]
+                   for flag in ("--rtol", "--atol", "--method", "--exact", "--sliding")] + \
+                  [(cmd, flag, SHOOTING) for cmd in ("orbit", "continue", "grazing")
+                   for flag in ("--rtol", "--atol", "--method", "--sliding")]
 
 
 @pytest.mark.parametrize("command, flag, table", LIBRARY_DEFAULT,
@@ -227,17 +246,31 @@ def test_integrator_option_help_names_the_library_default(command, flag, table):
     assert _received(command)[opt.name] is None
     value = table[flag.lstrip("-")]
     shown = f"{value:g}" if isinstance(value, float) else str(value)
-    assert f"(default {shown})" in opt.help, (opt.help, shown)
+    # "(default 1e-12)", or "(default 1e-12, tighter ...: why)" where it differs
+    assert re.search(rf"\(default {re.escape(shown)}[),:;]", opt.help), (opt.help, shown)
+
+
+def test_shooting_defaults_are_the_apis(tmp_path):
+    """The commands that shoot pass no tolerance or method unless given, so the API's
+    shooting defaults apply (tests/test_cli.py checks the same of `grazing`'s file)."""
+    out = tmp_path / "o.nc"
+    res = _run(["orbit", "impact-oscillator", "--x0", "0,-0.5", "--out", out])
+    assert res.exit_code == 0, res.output
+    options = json.loads(open_dataset(out).attrs["options"])
+    assert {k: options[k] for k in SHOOTING_DEFAULTS} == SHOOTING_DEFAULTS
+    api = pwsdyn.find_periodic_orbit("impact-oscillator", [0.0, -0.5])
+    assert {k: api.options[k] for k in SHOOTING_DEFAULTS} == SHOOTING_DEFAULTS
 
 
 def test_every_model_running_command_has_the_same_shared_options():
-    for command in ("simulate", "orbit", "sweep", "basins"):
+    for command in ("simulate", "orbit", "sweep", "basins", "continue", "grazing"):
         for flag in ("-p", "--param", "-s", "--set", "--x0", "--rtol", "--atol", "--method",
                      "--sliding", "--out", "--plot", "--force"):
             _option(command, flag)
         assert _option(command, "--set").hidden and not _option(command, "--param").hidden
-    assert _option("simulate", "--sliding").type.choices == \
-        _option("orbit", "--sliding").type.choices
+    for command in ("orbit", "sweep", "basins", "continue", "grazing"):
+        assert _option("simulate", "--sliding").type.choices == \
+            _option(command, "--sliding").type.choices
 
 
 # ======================================================================================

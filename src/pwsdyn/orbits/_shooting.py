@@ -274,8 +274,11 @@ def find_periodic_orbit(model: ModelLike, x0: StateLike, *,
         grazing: the result then has ``admissible = False`` and the ``reason``. ``nodes``,
         ``lock_tol`` and ``max_nodes`` do not apply.
     **options
-        Integrator options of :func:`pwsdyn.simulate`; defaults here are ``method='DOP853'``,
-        ``rtol=1e-12``, ``atol=1e-12``.
+        Integrator options of :func:`pwsdyn.simulate`; defaults here are ``method='DOP853'``
+        (whatever ``rtol``), ``rtol=1e-12``, ``atol=1e-12``: tighter than a simulation's
+        (``rtol=1e-10``), because Newton's method on the shooting residual and the Floquet
+        multipliers need the flow and its derivatives to more digits (the command line's
+        ``orbit``, ``continue`` and ``grazing`` have the same defaults).
 
     Returns
     -------

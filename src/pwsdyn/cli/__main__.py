@@ -1,0 +1,5 @@
+"""``python -m pwsdyn.cli``: the ``pwsdyn`` command."""
+
+from . import main
+
+main()
