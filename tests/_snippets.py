@@ -55,6 +55,16 @@ def stated_lines(code: str) -> list[str]:
     return out
 
 
+#: A line that is only attributes or items, or a tuple of them, with a comment after it
+#: (``orbit.multipliers, orbit.stable   # ...``): run as a script it shows nothing.
+_BARE_VALUE = re.compile(r"^[A-Za-z_][\w.]*(\[[^]]*\])?(, *[A-Za-z_][\w.]*(\[[^]]*\])?)*\s+#")
+
+
+def bare_values(code: str) -> list[str]:
+    """The lines of ``code`` whose value is shown only in a comment (not printed)."""
+    return [line for line in code.splitlines() if _BARE_VALUE.match(line)]
+
+
 def _pattern(expected: str) -> tuple[re.Pattern, list[str]]:
     """A regular expression for the printed line and the comment's numbers, in order."""
     parts, numbers, pos = [], [], 0

@@ -26,7 +26,7 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _snippets import check_printed, run_script, stated_lines  # noqa: E402
+from _snippets import bare_values, check_printed, run_script, stated_lines  # noqa: E402
 
 README = Path(__file__).resolve().parent.parent / "README.md"
 _BLOCK = re.compile(r"^```python[ \t]*\n(.*?)^```[ \t]*$", re.S | re.M)
@@ -55,9 +55,11 @@ def test_readme_has_python_blocks():
 
 
 def test_readme_blocks_state_what_they_print():
-    # the blocks that compute show their values (a block that only writes files need not)
+    # the blocks that compute print their values (a block that only writes files need not)
     stated = [len(stated_lines(code)) for _, code in readme_blocks()]
     assert sum(n > 0 for n in stated) >= 5 and sum(stated) >= 20
+    bare = [line for _, code in readme_blocks() for line in bare_values(code)]
+    assert not bare, f"values shown only in a comment: {bare}"
 
 
 @pytest.mark.parametrize("code", _params())

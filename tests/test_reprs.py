@@ -25,7 +25,7 @@ from pwsdyn.integrate.trajectory import Trajectory
 from pwsdyn.orbits import Signature
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _snippets import check_printed, line_matches, stated_lines  # noqa: E402
+from _snippets import bare_values, check_printed, line_matches, stated_lines  # noqa: E402
 
 #: A model whose name is HTML (names of states, modes and events are identifiers; a model's
 #: name and a result's message are free text): a summary must show it as text.
@@ -183,6 +183,11 @@ def test_the_snippet_convention_on_known_lines():
     assert len(check_printed(code, "2.243995\nSUCCESS\n")) == 1       # a line missing
     assert check_printed(code, "2.25\nSUCCESS\n[0 0 -2.37871]\n")[0].startswith("line 1")
     assert re.search("4 printed", check_printed("print(1)  # -> 1\n", "1\n2\n3\n4\n")[0])
+    # a value left in a comment is found; a call with an effect, or a printed value, is not
+    assert bare_values("orbit.multipliers, orbit.stable   # [...], True\n"
+                       "traj.events[:3]  # impacts\ntraj.save('a.nc')  # writes\n"
+                       "print(orbit.stable)  # -> True\n") == [
+        "orbit.multipliers, orbit.stable   # [...], True", "traj.events[:3]  # impacts"]
 
 
 # ---- the grazing and Lyapunov results -------------------------------------------------------
