@@ -20,6 +20,9 @@ import pytest
 
 import pwsdyn
 
+sys.path.insert(0, str(Path(__file__).parent))
+from _snippets import bare_values, check_printed, run_script, stated_lines  # noqa: E402
+
 ROOT = Path(__file__).resolve().parent.parent
 SRC = ROOT / "src" / "pwsdyn"
 DOCS = ROOT / "docs"
@@ -201,17 +204,32 @@ def test_the_pages_code_blocks_are_found():
     assert "continue_orbit" in page_code(DOCS / "getting_started.rst")
 
 
+def test_the_guides_state_what_their_code_prints():
+    """Getting started and every guide with code show their values as printed lines with the
+    value in a ``# ->`` comment (the convention of tests/_snippets.py), not as bare expressions
+    a script never shows."""
+    pages = [p for p in _pages_with_code()
+             if p.name == "getting_started.rst" or p.parent.name == "guide"]
+    assert len(pages) >= 6
+    for page in pages:
+        code = page_code(page)
+        bare = bare_values(code)
+        assert not bare, f"{page.name}: a value shown only in a comment: {bare}"
+        assert stated_lines(code), f"{page.name} prints no value for its comments"
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("page", _pages_with_code(), ids=lambda p: p.name)
 def test_the_pages_python_runs(page, tmp_path):
     """Each page's Python, run as a script in a fresh process in a temporary directory
-    (files it writes land there), like the README's blocks (tests/test_readme.py)."""
-    script = tmp_path / "page.py"
-    script.write_text(page_code(page), encoding="utf-8")
-    env = {**os.environ, "MPLBACKEND": "Agg", "PWSDYN_QUIET": "1"}
-    res = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env,
-                         capture_output=True, text=True)
+    (files it writes land there), like the README's blocks (tests/test_readme.py), prints what
+    its ``# ->`` comments state (tests/_snippets.py)."""
+    code = page_code(page)
+    res = run_script(code, tmp_path)
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    problems = check_printed(code, res.stdout)
+    assert not problems, (f"{page.name} printed other values than its comments state:\n"
+                          + "\n".join(problems))
 
 
 # ---- the gallery -----------------------------------------------------------------------------

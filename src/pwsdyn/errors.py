@@ -79,6 +79,22 @@ class Status(enum.IntEnum):
     NEWTON_DIVERGED = -16
     SIMULATION_FAILED = -17
 
+    # An IntEnum prints as its value (``0``) since Python 3.11; a status is read by people
+    # far more often than it is parsed, so it prints by name. The value is still the int
+    # (``int(status)``, comparisons and arithmetic with ints, NumPy arrays, JSON).
+    def __repr__(self):
+        return f"Status.{self.name}"
+
+    def __str__(self):
+        return self.name
+
+    def __format__(self, spec):
+        # f"{status}" and f"{status:>12}" give the name; a numeric format ("d", "3d", "x")
+        # the value, as for the int it is
+        if spec and spec[-1] in "bcdoxXneEfFgG%":
+            return int.__format__(int(self), spec)
+        return format(self.name, spec)
+
     @property
     def message(self) -> str:
         return _STATUS_MESSAGES[self]

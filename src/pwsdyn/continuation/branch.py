@@ -157,12 +157,34 @@ class Branch:
         sp = ", ".join(f"{p.kind} {p.value:.6g}" for p in self.special_points
                        if p.kind != "EP")
         lam = self.values
-        what = (f"{self.curve} curve of {self.model.name!r} in ({self.parameter}, "
-                f"{self.parameter2})" if self.curve else
-                f"{self.kind} of {self.model.name!r} in {self.parameter}")
-        return (f"Branch({what}: {len(self)} points, {self.parameter} in "
-                f"[{lam.min():.6g}, {lam.max():.6g}]{'; ' + sp if sp else ''}; "
-                f"{self.stop_reason})")
+        span = f"[{lam.min():.6g}, {lam.max():.6g}]" if lam.size else "[]"
+        return (f"Branch({self._what()}: {len(self)} points, {self.parameter} in "
+                f"{span}{'; ' + sp if sp else ''}; {self.stop_reason})")
+
+    def _what(self) -> str:
+        name = getattr(self.model, "name", "?")
+        return (f"{self.curve} curve of {name!r} in ({self.parameter}, {self.parameter2})"
+                if self.curve else f"{self.kind} of {name!r} in {self.parameter}")
+
+    def _repr_html_(self):
+        from .._display import html_table, num
+
+        lam = self.values
+        rows = [("branch", self._what()),
+                ("points", len(self)),
+                (self.parameter, f"{num(lam.min())} to {num(lam.max())}" if lam.size else "?")]
+        if lam.size and self.kind == "orbit":
+            rows.append(("stable", f"{int(self.stable.sum())} of {len(self)} points"))
+            if not self.admissible.all():
+                rows.append(("admissible", f"{int(self.admissible.sum())} of {len(self)} "
+                                           "points"))
+            sigs = self.signatures
+            if len(sigs) > 1 or (sigs and sigs[0]):
+                rows.append(("signatures", "  ->  ".join(str(s) for s in sigs)))
+        for p in self.special_points:
+            rows.append((p.kind, f"{self.parameter} = {num(p.value, 10)} (point {p.index})"))
+        rows.append(("stopped", self.stop_reason or "?"))
+        return html_table("Branch", rows)
 
     # ---- the points as arrays --------------------------------------------------------
     @property

@@ -128,10 +128,29 @@ class LyapunovSpectrum:
     def __post_init__(self):
         # an int code (an older pickle, a caller) is read as the member it is
         self.status = Status(int(self.status))
-
-    def __post_init__(self):
         if self.span is None:
             self.span = self.time
+
+    def __repr__(self):
+        from .._display import num
+
+        exps = ", ".join(num(v) for v in np.atleast_1d(self.exponents))
+        return (f"LyapunovSpectrum(model={getattr(self.model, 'name', '?')!r}, "
+                f"exponents=[{exps}], time={num(self.time)}, status={self.status.name})")
+
+    def _repr_html_(self):
+        from .._display import counts_text, html_table, num
+
+        rows = [("model", getattr(self.model, "name", "?")),
+                ("exponents", ", ".join(num(v) for v in np.atleast_1d(self.exponents))),
+                ("averaged over", f"{num(self.time)} of {num(self.span)}"),
+                ("events", counts_text(self.events or {})),
+                ("status", f"{self.status.name}: {self.status.message}")]
+        if self.contact_episodes:
+            rows.append(("contact", f"{self.contact_episodes} episode(s), "
+                                    f"{num(self.contact_time)} sticking"
+                                    + (", ends stuck" if self.ends_stuck else "")))
+        return html_table("LyapunovSpectrum", rows)
 
     @property
     def sum(self) -> float:

@@ -67,6 +67,33 @@ class DiscontinuityMap:
     event: str
     f_star: np.ndarray = field(repr=False, default=None)
 
+    def __repr__(self):
+        from .._display import num, state_text
+
+        return (f"DiscontinuityMap(event={self.event!r}, a_star={num(self.a_star)}, "
+                f"beta=[{state_text(self.names, self.beta)}], scenario={self._scenario()!r})")
+
+    def _repr_html_(self):
+        from .._display import html_table, num, state_text
+
+        seq = self._sequence(6)
+        return html_table("DiscontinuityMap", [
+            ("event", self.event), ("x_star", state_text(self.names, self.x_star)),
+            ("a_star", num(self.a_star)), ("beta", state_text(self.names, self.beta)),
+            ("persistence", "?" if seq is None else
+             ", ".join(num(v, 4) for v in seq) + ", ..."),
+            ("scenario", self._scenario())])
+
+    def _sequence(self, n):
+        # a summary shows a map whose matrices are malformed too
+        try:
+            return self.persistence(n)
+        except (ValueError, TypeError):
+            return None
+
+    def _scenario(self) -> str:
+        return "?" if self._sequence(1) is None else self.scenario
+
     def __call__(self, x) -> np.ndarray:
         """The map at ``x`` (a point of the section, same coordinates as ``x_star``)."""
         x = np.asarray(x, dtype=float)

@@ -481,10 +481,32 @@ class Trajectory:
         return len(self.t)
 
     def __repr__(self):
-        counts = self.event_counts()
-        c = ", ".join(f"{k}={v}" for k, v in counts.items()) or "none"
-        return (f"Trajectory(model={self.model.name!r}, t=[{self.t0:.6g}, {self.t_final:.6g}], "
-                f"nodes={len(self.t)}, events: {c}, status={self.status.name})")
+        from .._display import num
+
+        c = ", ".join(f"{k}={v}" for k, v in self.event_counts().items()) or "none"
+        t_last = self.t_final if np.size(self.t) else self.t0
+        return (f"Trajectory(model={getattr(self.model, 'name', '?')!r}, "
+                f"t=[{num(self.t0)}, {num(t_last)}], nodes={np.size(self.t)}, events: {c}, "
+                f"status={getattr(self.status, 'name', self.status)})")
+
+    def _repr_html_(self):
+        from .._display import counts_text, html_table, num, state_text
+
+        status = self.status
+        rows = [("model", getattr(self.model, "name", "?")),
+                ("time", f"{num(self.t0)} to {num(self.t_final) if np.size(self.t) else '?'}"
+                         f" (asked: {num(self.t_end)})"),
+                ("nodes", np.size(self.t)),
+                ("events", counts_text(self.event_counts())),
+                ("status", f"{getattr(status, 'name', status)}: {self.message}")]
+        if np.size(self.t):
+            rows.append(("final state", state_text(getattr(self.model, "states", ()),
+                                                   self.x_final)
+                         + f" in {self.state[-1] if len(self.state) else '?'}"))
+        if self.params:
+            rows.append(("parameters", ", ".join(f"{k}={num(v)}"
+                                                 for k, v in self.params.items())))
+        return html_table("Trajectory", rows)
 
     def event_counts(self) -> dict:
         out: dict = {}

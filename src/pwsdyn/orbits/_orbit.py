@@ -270,14 +270,41 @@ class PeriodicOrbit:
         return max(len(self.history) - 1, 0)
 
     def __repr__(self):
-        mult = ("?" if self.multipliers is None else
-                ", ".join(_fmt_complex(m) for m in np.atleast_1d(self.multipliers)))
+        from .._display import moduli, num
+
         status = ("stable" if self.stable else "unstable") if self.stable is not None else "?"
         conv = "" if self.converged else ", NOT converged"
         if not self.admissible:
             conv += ", NOT admissible"
-        return (f"PeriodicOrbit(model={self.model.name!r}, period={self.period:.12g}, "
-                f"events={len(self.events)}, multipliers=[{mult}], {status}{conv})")
+        mods = "?" if self.multipliers is None else moduli(self.multipliers)
+        return (f"PeriodicOrbit(model={getattr(self.model, 'name', '?')!r}, "
+                f"period={num(self.period, 10)}, events={len(self.events or ())}, "
+                f"|multipliers|={mods}, {status}{conv})")
+
+    def _repr_html_(self):
+        from .._display import html_table, moduli, num, state_text
+
+        mult = self.multipliers
+        rows = [("model", getattr(self.model, "name", "?")),
+                ("period", num(self.period, 12)
+                 + ("" if self.autonomous or self.periods is None
+                    else f" ({self.periods} forcing period(s))")),
+                ("start", f"t0 = {num(self.t0)}: "
+                          f"{state_text(getattr(self.model, 'states', ()), self.x0)} "
+                          f"in {self.state0}"),
+                ("signature", f"{self.signature}" if self.events else "no events"),
+                ("multipliers", "?" if mult is None else
+                 ", ".join(_fmt_complex(m, 6) for m in np.atleast_1d(mult))),
+                ("|multipliers|", "?" if mult is None else moduli(mult)),
+                ("stable", "?" if self.stable is None else self.stable),
+                ("converged", f"{self.converged} (residual {num(self.residual, 3)}, "
+                              f"{self.iterations} Newton step(s))"),
+                ("admissible", self.admissible if self.admissible else
+                 f"False: {self.reason}")]
+        if self.params:
+            rows.append(("parameters", ", ".join(f"{k}={num(v)}"
+                                                 for k, v in self.params.items())))
+        return html_table("PeriodicOrbit", rows)
 
     def summary(self) -> str:
         """A multi-line human-readable report (period, signature, multipliers, Newton)."""
@@ -478,11 +505,11 @@ class PeriodicOrbit:
         return save_dataset(self.to_dataset(), path, overwrite=overwrite)
 
 
-def _fmt_complex(m) -> str:
+def _fmt_complex(m, digits: int = 12) -> str:
     m = complex(m)
     if m.imag == 0:
-        return f"{m.real:.12g}"
-    return f"{m.real:.12g}{m.imag:+.12g}j"
+        return f"{m.real:.{digits}g}"
+    return f"{m.real:.{digits}g}{m.imag:+.{digits}g}j"
 
 
 def merge_intervals(trajs: list, *, t0: float, t_end: float) -> Trajectory:

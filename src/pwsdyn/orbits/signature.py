@@ -51,13 +51,19 @@ class Signature(tuple):
 
     Create one from events (``Signature.from_events(orbit.events)``), from tuples
     (``Signature([("impact", "impact", "free", "free")])``) or from its string
-    (``Signature.parse(str(sig))``); ``PeriodicOrbit.signature`` returns one.
+    (``Signature("(free) impact:impact (free)")``, the same as :meth:`parse`);
+    ``PeriodicOrbit.signature`` returns one. It prints as that string, and its ``repr`` is the
+    call that makes it again.
 
     Examples
     --------
     >>> sig = Signature([("impact", "impact", "free", "free")])
     >>> str(sig)
     '(free) impact:impact (free)'
+    >>> sig
+    Signature('(free) impact:impact (free)')
+    >>> Signature(str(sig)) == sig
+    True
     >>> sig == (("impact", "impact", "free", "free"),)
     True
     >>> len(sig.doubled())
@@ -67,6 +73,9 @@ class Signature(tuple):
     __slots__ = ()
 
     def __new__(cls, events=()):
+        if isinstance(events, str):
+            # the text str() writes: iterating it would give its characters
+            return cls.parse(events)
         items = []
         for e in events:
             if isinstance(e, SignatureEvent):
@@ -135,7 +144,7 @@ class Signature(tuple):
         return " ".join(parts)
 
     def __repr__(self):
-        return f"Signature.parse({str(self)!r})"
+        return f"Signature({str(self)!r})" if self else "Signature()"
 
     def __add__(self, other):
         return Signature(tuple(self) + tuple(other))
