@@ -81,7 +81,9 @@ def no_new_figure(monkeypatch):
     def forbidden(*args, **kwargs):
         raise AssertionError("pwsdyn.plot created a figure although ax= was given")
 
-    monkeypatch.setattr(plot, "Figure", forbidden)
+    # every module of the package that makes figures
+    for module in (plot._trajectories, plot._orbits, plot._sweeps, plot._branches):
+        monkeypatch.setattr(module, "Figure", forbidden)
 
 
 def _user_figure(*args, **kwargs) -> Figure:
