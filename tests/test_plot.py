@@ -274,11 +274,11 @@ def test_up_and_down_sweeps_differ_in_marker_and_colour(sweep_both):
 
 def test_titles_give_the_fixed_parameters(sweep_both, map_basins, ball):
     bif = plot.plot_bifurcation(sweep_both).axes[0].get_title()
-    assert "$lam = 0.1$" in bif and "\\mu =" not in bif          # mu is swept
+    assert "$\\lambda = 0.1$" in bif and "\\mu =" not in bif      # mu is swept
     ly = plot.plot_lyapunov(sweep_both).axes[0].get_title()
-    assert "$lam = 0.1$" in ly and "\\mu =" not in ly
+    assert "$\\lambda = 0.1$" in ly and "\\mu =" not in ly
     bas = plot.plot_basins(map_basins).axes[0].get_title()
-    assert "$\\mu = 0.1$" in bas and "$lam = 0.1$" in bas
+    assert "$\\mu = 0.1$" in bas and "$\\lambda = 0.1$" in bas
     traj = plot.plot_trajectory(ball)._suptitle.get_text()
     for name, value in [("g", "9.81"), ("e", "0.8"), ("A", "0.1"), ("\\omega", "6.283")]:
         assert f"${name} = {value}$" in traj

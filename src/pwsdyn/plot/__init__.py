@@ -25,6 +25,7 @@ from ._branches import BRANCH_STYLES as BRANCH_STYLES
 from ._branches import SPECIAL_MARKERS as SPECIAL_MARKERS
 from ._branches import _branch_y as _branch_y
 from ._branches import plot_branch as plot_branch
+from ._common import GREEK_SPELLINGS as GREEK_SPELLINGS
 from ._common import _latex_name as _latex_name
 from ._common import _number as _number
 from ._common import _tex as _tex
@@ -48,7 +49,7 @@ from ._trajectories import TRAJECTORY_COLOR as TRAJECTORY_COLOR
 from ._trajectories import plot_trajectory as plot_trajectory
 
 __all__ = ["BASIN_COLORS", "BASIN_SPECIAL_COLORS", "BRANCH_STYLES", "CONSTRAINED_STYLES",
-           "DEFAULT_METRICS", "EVENT_STYLES", "SPECIAL_MARKERS", "SURFACE_COLOR",
-           "SWEEP_COLORS", "SWEEP_MARKERS", "TRAJECTORY_COLOR", "VARIANT_COLORS",
-           "figure_formats", "plot_basins", "plot_bifurcation", "plot_branch", "plot_lyapunov",
-           "plot_metrics", "plot_orbit", "plot_trajectory"]
+           "DEFAULT_METRICS", "EVENT_STYLES", "GREEK_SPELLINGS", "SPECIAL_MARKERS",
+           "SURFACE_COLOR", "SWEEP_COLORS", "SWEEP_MARKERS", "TRAJECTORY_COLOR",
+           "VARIANT_COLORS", "figure_formats", "plot_basins", "plot_bifurcation", "plot_branch",
+           "plot_lyapunov", "plot_metrics", "plot_orbit", "plot_trajectory"]

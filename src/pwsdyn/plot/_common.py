@@ -3,6 +3,7 @@ mathtext, the user's axes checked, legends merged, figure files checked and writ
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -11,11 +12,48 @@ from matplotlib.figure import Figure
 
 from ..errors import ArgumentError
 
+#: Short spellings of Greek letters that models use for parameter and state names, and the
+#: letter each stands for (the full names, ``omega``, ``sigma``, ``mu``, ... need none).
+GREEK_SPELLINGS = {"eps": "epsilon", "lam": "lambda", "lamda": "lambda", "Lam": "Lambda",
+                   "Lamda": "Lambda"}
+#: The letters typeset in another form than SymPy's: the curly epsilon of the literature
+#: (and of Unicode's Greek block), not the lunate one.
+_LETTER_FORMS = {r"\epsilon": r"\varepsilon"}
+
+
 def _latex_name(name: str) -> str:
+    """A parameter or state name as mathtext (without the dollar signs): Greek letters as
+    letters, however they are spelt (``eps``, ``epsilon`` -> ``\\varepsilon``; ``lam``,
+    ``lambda`` -> ``\\lambda``; ``omega`` -> ``\\omega``), the rest of the name as
+    subscripts (``mu_s`` -> ``\\mu_{s}``, ``x1`` -> ``x_{1}``).
+
+    Every name a figure shows (titles, axis labels, legends, surface labels) goes through this
+    one function, so that a name reads the same everywhere."""
+    import sympy as sp
+    from sympy.printing.conventions import split_super_sub
+
+    base, sups, subs = split_super_sub(str(name))
+    if base in GREEK_SPELLINGS:
+        name = (GREEK_SPELLINGS[base] + "".join(f"^{s}" for s in sups)
+                + "".join(f"_{s}" for s in subs))
+    out = sp.latex(sp.Symbol(name))
+    for letter, form in _LETTER_FORMS.items():
+        # whole commands only: \epsilon but not a longer command that begins with it
+        out = re.sub(re.escape(letter) + r"(?![A-Za-z])", lambda m: form, out)
+    return out
+
+
+def _tex(name: str) -> str:
+    """A name as mathtext, dollar signs included (see :func:`_latex_name`)."""
+    return f"${_latex_name(name)}$"
+
+
+def _latex_expr(expr) -> str:
+    """A SymPy expression as mathtext (without dollar signs), its symbols named as
+    :func:`_latex_name` names them."""
     import sympy as sp
 
-    # Greek letters and subscripts as a reader expects them (omega -> \omega, mu_s -> \mu_{s})
-    return sp.latex(sp.Symbol(name))
+    return sp.latex(expr, symbol_names={s: _latex_name(str(s)) for s in expr.free_symbols})
 
 
 def _number(v) -> str:
@@ -131,6 +169,48 @@ def _save_figure(fig: Figure, path, overwrite: bool = False) -> Path:
                         overwrite=overwrite)
 
 
-def _tex(name: str) -> str:
-    return f"${_latex_name(name)}$"
+# ======================================================================================
+# labels next to markers, legends
+# ======================================================================================
 
+def _marker_radius(marker, size: float, edge: float = 0.0) -> float:
+    """Half the extent of a marker in points: its path at ``size`` plus half its edge."""
+    from matplotlib.markers import MarkerStyle
+
+    style = MarkerStyle(marker)
+    ext = style.get_path().transformed(style.get_transform()).get_extents()
+    return size * float(np.max(np.abs([ext.x0, ext.x1, ext.y0, ext.y1]))) + 0.5 * edge
+
+
+def _label_beside(ax, text: str, xy, *, marker, size: float, edge: float = 0.0,
+                  gap: float = 2.0, **kw):
+    """Write ``text`` up and to the right of a marker at ``xy``, clear of it: the label's
+    lower left corner is offset (in points, so at any zoom) by the marker's half extent and a
+    gap, so that the label's box and the marker's never overlap."""
+    d = _marker_radius(marker, size, edge) + gap
+    return ax.annotate(text, xy, textcoords="offset points", xytext=(d, d), ha="left",
+                       va="bottom", **kw)
+
+
+def _legend_entry(ax, label: str, **style) -> None:
+    """An entry of the axes' legend, added once per axes: an empty line with ``style`` that
+    carries ``label``. Figures drawn one after another into one axes (several branches, a
+    branch over a sweep) share their entries so, and ``ax.legend()`` called by the user
+    later still finds every one of them."""
+    if any(line.get_label() == label for line in ax.get_lines()):
+        return
+    ax.plot([], [], label=label, **style)
+
+
+def _legend(ax, **kw):
+    """The axes' legend, drawn again with every labelled line of the axes, each label once:
+    an entry its legend already has keeps its handle (a sweep's markers drawn large enough
+    to read), the others are the lines themselves."""
+    entries: dict = {}
+    old = ax.get_legend()
+    if old is not None:
+        for handle, text in zip(old.legend_handles, old.get_texts()):
+            entries.setdefault(text.get_text(), handle)
+    for handle, label in zip(*ax.get_legend_handles_labels()):
+        entries.setdefault(label, handle)
+    return ax.legend(list(entries.values()), list(entries), **kw)

@@ -14,8 +14,8 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from ..errors import ArgumentError
-from ._common import (_check_figure_path, _latex_name, _root_figure, _save_figure, _user_axes,
-                      _values_text)
+from ._common import (_check_figure_path, _latex_expr, _latex_name, _root_figure, _save_figure,
+                      _user_axes, _values_text)
 
 if TYPE_CHECKING:
     from ..integrate.trajectory import Trajectory
@@ -96,8 +96,8 @@ def _analyse_surfaces(model, params: dict, phase: tuple | None):
                     position = -expr.subs(s, 0) / coeff
                     f = sp.lambdify((t,) + psyms, position, modules="numpy")
                     vals = [pvals[p] for p in psyms]
-                    label = (f"{surf.name} surface: ${sp.latex(s)} = "
-                             f"{sp.latex(position)}$")
+                    label = (f"{surf.name} surface: ${_latex_name(str(s))} = "
+                             f"{_latex_expr(position)}$")
                     curves.append(_SurfaceCurve(
                         surf.name, k,
                         lambda tt, f=f, vals=vals: np.broadcast_to(
@@ -113,7 +113,7 @@ def _analyse_surfaces(model, params: dict, phase: tuple | None):
                     surf.name, tuple(involved),
                     lambda a, b, f2=f2: np.broadcast_to(
                         np.asarray(f2(a, b), dtype=float), np.shape(a)),
-                    f"{surf.name} surface: ${sp.latex(expr)} = 0$"))
+                    f"{surf.name} surface: ${_latex_expr(expr)} = 0$"))
         except Exception as exc:  # a surface we cannot draw must not cost the whole figure
             warnings.warn(f"surface {surf.name!r} is not drawn: {exc}", stacklevel=3)
     return curves, contours
