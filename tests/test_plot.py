@@ -295,7 +295,7 @@ def test_parameter_titles_wrap_and_write_powers_of_ten():
 # ======================================================================================
 
 def _attractor_markers(ax) -> dict:
-    return {ln.get_label(): ln for ln in ax.lines if ln.get_label().startswith("attractor")}
+    return {ln.get_gid(): ln for ln in ax.lines if (ln.get_gid() or "").startswith("attractor")}
 
 
 def test_map_basins_mark_the_period_two_cycle(map_basins):

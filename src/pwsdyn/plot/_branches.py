@@ -11,7 +11,8 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from ..errors import ArgumentError
-from ._common import _check_figure_path, _save_figure, _tex, _user_axes
+from ._common import (_check_figure_path, _label_beside, _legend, _legend_entry, _save_figure,
+                      _tex, _user_axes)
 from ._sweeps import plot_bifurcation
 
 if TYPE_CHECKING:
@@ -21,6 +22,68 @@ if TYPE_CHECKING:
 BRANCH_STYLES = {"stable": "-", "unstable": "--", "not admissible": ":"}
 #: Markers of special points.
 SPECIAL_MARKERS = {"LP": "s", "BP": "D", "PD": "o", "NS": "^", "HB": "*", "EP": "|"}
+_SPECIAL_SIZE = 7.0
+_SPECIAL_EDGE = 1.5
+_SPECIAL_COLOR = "#D55E00"
+
+
+def _point_styles(branch) -> list:
+    """The style of each point: ``"not admissible"``, ``"stable"`` or ``"unstable"``."""
+    return ["not admissible" if not a else "stable" if s else "unstable"
+            for s, a in zip(branch.stable, branch.admissible)]
+
+
+def _runs(style: list, special: list, sig: list) -> list:
+    """The polylines of a branch, ``(first, last, style)`` with ``last`` included.
+
+    Each segment between two neighbouring points takes a style: where stability or
+    admissibility changes at a located special point (a point of its own, whose multiplier
+    lies on the unit circle to the tolerance, so its own flag says nothing), the segment on
+    either side takes the style of its other end, and the style changes exactly at that
+    point. Between two regular points of different styles the segment keeps the first's (the
+    change is somewhere inside, and no point says where). No segment joins points of two
+    signatures: past a graze the section state is another point of the orbit, and the curve
+    restarts there."""
+    n = len(style)
+    if n == 1:
+        return [(0, 0, style[0])]
+    seg: list = []
+    for k in range(n - 1):
+        if sig[k] != sig[k + 1]:
+            seg.append(None)
+        elif special[k] and not special[k + 1]:
+            seg.append(style[k + 1])
+        else:
+            seg.append(style[k])
+    runs: list = []
+    for k, st in enumerate(seg):
+        if st is None:
+            continue
+        if runs and runs[-1][1] == k and runs[-1][2] == st:
+            runs[-1][1] = k + 1
+        else:
+            runs.append([k, k + 1, st])
+    return [tuple(r) for r in runs]
+
+
+def _branch_name(branch) -> str:
+    """A branch's name in the legend: what its points are."""
+    if getattr(branch, "curve", ""):
+        return f"{branch.curve} curve"
+    if branch.kind != "orbit":
+        return "equilibria"
+    periods = getattr(getattr(branch.problem, "orbit_problem", None), "periods", 1)
+    return f"period-{periods} orbits"
+
+
+def _marked(ax, kind: str, xy) -> bool:
+    """Whether a special point of this kind is already marked at ``xy`` in ``ax``."""
+    for line in ax.get_lines():
+        if line.get_gid() == f"special {kind}":
+            x, y = np.asarray(line.get_xdata(), float), np.asarray(line.get_ydata(), float)
+            if np.allclose([x[0], y[0]], xy, rtol=1e-9, atol=1e-12):
+                return True
+    return False
 
 
 def _branch_y(branch, y):
@@ -69,7 +132,7 @@ def _branch_y(branch, y):
 
 def plot_branch(branch, y=None, path: str | Path | None = None, *, ax: Axes | None = None,
                 labels: bool = True, sweep: xr.Dataset | None = None, color: str = "k",
-                overwrite: bool = False) -> Figure:
+                overwrite: bool = False, label: str | None = None) -> Figure:
     """Bifurcation diagram of a continued branch (:func:`pwsdyn.continue_orbit`,
     :func:`pwsdyn.continue_equilibrium`), drawn as AUTO and COCO draw them: stable parts
     solid, unstable dashed, parts that are not orbits of the hybrid model (past a grazing)
@@ -96,6 +159,11 @@ def plot_branch(branch, y=None, path: str | Path | None = None, *, ax: Axes | No
         section is its own: a stroboscopic or an event section).
     color : str
         Colour of the branch.
+    label : str, optional
+        The branch's name in the legend (default: ``"period-k orbits"``, ``"equilibria"``
+        or the bifurcation curve's kind). Branches drawn into one axes share one legend:
+        each line style once (stable, unstable, not admissible) and each branch's name
+        with its colour.
     overwrite : bool
         Replace an existing file at ``path``.
 
@@ -115,35 +183,43 @@ def plot_branch(branch, y=None, path: str | Path | None = None, *, ax: Axes | No
         plot_bifurcation(sweep, ax=ax, markersize=1.0)
     lam = branch.values
     yv, ylabel = _branch_y(branch, y)
-    stab = branch.stable
-    adm = branch.admissible
-    style = np.where(~adm, "not admissible", np.where(stab, "stable", "unstable"))
-    sig = np.array([getattr(p, "signature_index", 0) for p in branch.points])
-    seen = set()
-    start = 0
-    for i in range(1, len(lam) + 1):
-        if i == len(lam) or style[i] != style[start] or sig[i] != sig[start]:
-            # each run of one style, joined to the next point so that the curve is unbroken;
-            # not across a change of signature (past a graze the section state is another
-            # point of the orbit: the curve restarts there)
-            j = min(i + 1, len(lam)) if i < len(lam) and sig[i] == sig[start] else i
-            st = str(style[start])
-            ax.plot(lam[start:j], yv[start:j], ls=BRANCH_STYLES[st], color=color, lw=1.4,
-                    label=st if st not in seen else None)
-            seen.add(st)
-            start = i
+    style = _point_styles(branch)
+    special = [p.special not in ("", "EP") for p in branch.points]
+    sig = [getattr(p, "signature_index", 0) for p in branch.points]
+    runs = _runs(style, special, sig)
+    for a, b, st in runs:
+        ax.plot(lam[a:b + 1], yv[a:b + 1], ls=BRANCH_STYLES[st], color=color, lw=1.4)
+    origin = getattr(branch, "origin", "")
     for sp in branch.special_points:
-        mk = SPECIAL_MARKERS.get(sp.kind, "o")
-        ax.plot([sp.value], [yv[sp.index]], marker=mk, ls="none", ms=7, mfc="white",
-                mec="#D55E00", mew=1.5, zorder=5)
-        if labels and sp.kind != "EP":
-            ax.annotate(sp.kind, (sp.value, yv[sp.index]), textcoords="offset points",
-                        xytext=(5, 5), fontsize=8, color="#D55E00")
+        # a switched branch's first point is the special point of the branch it left (a
+        # period-doubled branch starts at a branch point of the doubled problem, born at the
+        # PD): it is labelled by that, and drawn once when both branches share the axes
+        kind = origin if sp.index == 0 and origin else sp.kind
+        xy = (float(sp.value), float(yv[sp.index]))
+        if _marked(ax, kind, xy):
+            continue
+        mk = SPECIAL_MARKERS.get(kind, "o")
+        ax.plot(*xy, marker=mk, ls="none", ms=_SPECIAL_SIZE, mfc="white", mec=_SPECIAL_COLOR,
+                mew=_SPECIAL_EDGE, zorder=5, gid=f"special {kind}")
+        if labels and kind != "EP":
+            # on a white ground, so that another branch passing by does not strike it out
+            _label_beside(ax, kind, xy, marker=mk, size=_SPECIAL_SIZE, edge=_SPECIAL_EDGE,
+                          gap=3.0, fontsize=8, color=_SPECIAL_COLOR, zorder=6,
+                          bbox=dict(boxstyle="square,pad=0.1", fc="white", ec="none",
+                                    alpha=0.8))
+    # the legend: each style once, and each branch by name (its colour), across every branch
+    # drawn into these axes
+    drawn = {st for _, _, st in runs}
+    for st in BRANCH_STYLES:
+        if st in drawn:
+            _legend_entry(ax, st, ls=BRANCH_STYLES[st], color="k", lw=1.4)
+    _legend_entry(ax, label if label is not None else _branch_name(branch), ls="none",
+                  marker="s", ms=7, color=color)
+    _legend(ax, fontsize=8, loc="best")
     ax.set_xlabel(_tex(branch.parameter))
     ax.set_ylabel(ylabel)
     ax.set_title(f"{branch.model.name}: {branch.kind} branch in {_tex(branch.parameter)}",
                  fontsize="medium")
-    ax.legend(fontsize=8, loc="best")
     ax.grid(True, lw=0.3)
     if path is not None:
         _save_figure(fig, path, overwrite)

@@ -13,7 +13,8 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from ..errors import ArgumentError
-from ._common import _check_figure_path, _save_figure, _tex, _user_axes, _values_text
+from ._common import (_check_figure_path, _label_beside, _save_figure, _tex, _user_axes,
+                      _values_text)
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -69,7 +70,8 @@ def _sweep_handle(d: str) -> Line2D:
 
 
 def plot_bifurcation(ds: xr.Dataset, state: str | int | None = None,
-                     path: str | Path | None = None, *, markersize: float = 1.5, overwrite: bool = False,
+                     path: str | Path | None = None, *, markersize: float = 1.5,
+                     overwrite: bool = False,
                      ax: Axes | Sequence[Axes] | None = None) -> Figure:
     """Bifurcation diagram of a :func:`pwsdyn.sweep` result.
 
@@ -159,8 +161,8 @@ def plot_bifurcation(ds: xr.Dataset, state: str | int | None = None,
                        else "events / period")
         ax2.set_xlabel(_tex(pname))
         ax2.grid(True, lw=0.3)
-        if ax is not None:
-            ax2.legend(fontsize=8, loc="best")
+        # its lines are steps, not the markers of the diagram: a legend of their own
+        ax2.legend(fontsize=7 if ax is None else 8, loc="best")
     if ax2 is None or ax is not None:
         ax1.set_xlabel(_tex(pname))
     if path is not None:
@@ -235,10 +237,11 @@ def _tag_attractors(ax, tags: list) -> None:
         else:
             groups.append([[b], u, v])
     for members, u, v in groups:
-        ax.annotate(", ".join(map(str, members)), (u, v), xycoords="axes fraction",
-                    xytext=(6, 6), textcoords="offset points", fontsize=9, fontweight="bold",
-                    color="k", zorder=5,
-                    bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.85))
+        # clear of the largest attractor marker, and of it by the white box's pad too
+        _label_beside(ax, ", ".join(map(str, members)), (u, v), marker="o", size=8.0,
+                      edge=1.3, gap=2.0 + 0.15 * 9, xycoords="axes fraction", fontsize=9,
+                      fontweight="bold", color="k", zorder=5,
+                      bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.85))
 
 
 def plot_basins(ds: xr.Dataset, path: str | Path | None = None, *, overwrite: bool = False,
@@ -310,7 +313,7 @@ def plot_basins(ds: xr.Dataset, path: str | Path | None = None, *, overwrite: bo
                           & (py <= max(ylim)))
                 style = dict(marker="o", ms=8) if k else dict(marker="D", ms=4.5)
                 marker, = ax.plot(px, py, ls="none", mfc=c, mec="k", mew=1.3, zorder=4,
-                                  label=f"attractor {b}", **style)
+                                  gid=f"attractor {b}", **style)
                 if inside.any():
                     tags.append((b, px[inside][0], py[inside][0]))
                 else:
@@ -320,8 +323,10 @@ def plot_basins(ds: xr.Dataset, path: str | Path | None = None, *, overwrite: bo
         else:
             text = "diverged" if b == -1 else "failed (budget)"
         patch = Patch(color=c)
-        handles.append(((patch, marker) if marker is not None else patch,
-                        f"{text} ({100 * f:.1f}%)"))
+        text = f"{text} ({100 * f:.1f}%)"
+        if marker is not None:
+            marker.set_label(text)      # the markers are named by their legend entry
+        handles.append(((patch, marker) if marker is not None else patch, text))
     ax.set_xlim(xlim)
     ax.set_ylim(ylim)
     _tag_attractors(ax, tags)
