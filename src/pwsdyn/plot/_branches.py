@@ -11,8 +11,8 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from ..errors import ArgumentError
-from ._common import (_check_figure_path, _label_beside, _legend, _legend_entry, _save_figure,
-                      _tex, _user_axes)
+from ._common import (_check_figure_path, _free_side, _label_beside, _legend, _legend_entry,
+                      _save_figure, _tex, _user_axes)
 from ._sweeps import plot_bifurcation
 
 if TYPE_CHECKING:
@@ -202,9 +202,12 @@ def plot_branch(branch, y=None, path: str | Path | None = None, *, ax: Axes | No
         ax.plot(*xy, marker=mk, ls="none", ms=_SPECIAL_SIZE, mfc="white", mec=_SPECIAL_COLOR,
                 mew=_SPECIAL_EDGE, zorder=5, gid=f"special {kind}")
         if labels and kind != "EP":
-            # on a white ground, so that another branch passing by does not strike it out
+            # on the side the branch does not run to, on a white ground, so that another
+            # branch passing by does not strike it out
+            k = sp.index
+            near = [(lam[j], yv[j]) for j in (k - 1, k + 1) if 0 <= j < len(lam)]
             _label_beside(ax, kind, xy, marker=mk, size=_SPECIAL_SIZE, edge=_SPECIAL_EDGE,
-                          gap=3.0, fontsize=8, color=_SPECIAL_COLOR, zorder=6,
+                          gap=3.0, side=_free_side(xy, near), fontsize=8, color=_SPECIAL_COLOR, zorder=6,
                           bbox=dict(boxstyle="square,pad=0.1", fc="white", ec="none",
                                     alpha=0.8))
     # the legend: each style once, and each branch by name (its colour), across every branch

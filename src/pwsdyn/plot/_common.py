@@ -183,13 +183,32 @@ def _marker_radius(marker, size: float, edge: float = 0.0) -> float:
 
 
 def _label_beside(ax, text: str, xy, *, marker, size: float, edge: float = 0.0,
-                  gap: float = 2.0, **kw):
-    """Write ``text`` up and to the right of a marker at ``xy``, clear of it: the label's
-    lower left corner is offset (in points, so at any zoom) by the marker's half extent and a
-    gap, so that the label's box and the marker's never overlap."""
+                  gap: float = 2.0, side=(1, 1), **kw):
+    """Write ``text`` beside a marker at ``xy``, clear of it: the label's near corner is
+    offset (in points, so at any zoom) by the marker's half extent and a gap, diagonally to
+    ``side`` (``(1, 1)``: up and to the right), so that the label's box and the marker's
+    never overlap."""
     d = _marker_radius(marker, size, edge) + gap
-    return ax.annotate(text, xy, textcoords="offset points", xytext=(d, d), ha="left",
-                       va="bottom", **kw)
+    sx, sy = (1 if side[0] >= 0 else -1), (1 if side[1] >= 0 else -1)
+    return ax.annotate(text, xy, textcoords="offset points", xytext=(sx * d, sy * d),
+                       ha="left" if sx > 0 else "right", va="bottom" if sy > 0 else "top",
+                       **kw)
+
+
+def _free_side(xy, neighbours) -> tuple:
+    """The diagonal side of ``xy`` that none of the curve's ``neighbours`` lies towards
+    (up-right first, then up-left, down-right, down-left). The side of a point in data
+    coordinates is its side on the page at any zoom, so the choice holds however the axes
+    are rescaled later."""
+    taken = set()
+    for q in neighbours:
+        dx, dy = q[0] - xy[0], q[1] - xy[1]
+        if np.isfinite(dx) and np.isfinite(dy) and (dx or dy):
+            taken.add((1 if dx >= 0 else -1, 1 if dy >= 0 else -1))
+    for side in ((1, 1), (-1, 1), (1, -1), (-1, -1)):
+        if side not in taken:
+            return side
+    return (1, 1)
 
 
 def _legend_entry(ax, label: str, **style) -> None:
