@@ -68,7 +68,8 @@ def panel(ax, gamma, a_lo, a_hi, title):
                                     "omega": omega_for(gamma)})
     sweep_points(ax, s, np.linspace(a_lo, a_hi, 61))
     # the stick solutions: a resting mass the constraint never reaches
-    ax.plot([a_lo, s.a_star], [0, 0], "k-", lw=1.5)
+    ax.plot([a_lo, s.a_star], [0, 0], color="C2", lw=2.0,
+            label="stick solutions")
     # the period-one impacting orbit at the top of the range, continued down to its graze
     x_star, _ = s.fixed_point(exact=True)
     orbit = pwsdyn.find_periodic_orbit(MODEL, [x_star * s.scale, 0.0], t0=0.0,
@@ -76,7 +77,8 @@ def panel(ax, gamma, a_lo, a_hi, title):
     branch = pwsdyn.continue_orbit(MODEL, orbit, "a", span=(a_lo, a_hi), ds=-0.005)
     branch.plot(y=velocity_after_the_impact, ax=ax)
     ax.plot(s.a_star, 0, "ko", ms=5)
-    ax.annotate("NSF", (s.a_star, 0), textcoords="offset points", xytext=(4, 6))
+    # below the point: the branch labels its graze (GR) above it
+    ax.annotate("NSF", (s.a_star, 0), textcoords="offset points", xytext=(6, -6), va="top")
     ax.set_title(f"{title}: $\\gamma$ = {s.gamma:.2g}")
     ax.set_xlabel("amplitude $a$")
 

@@ -66,7 +66,8 @@ def panel(ax, gamma, a_lo, a_hi, title):
     # steps well below (a** - a)/(gamma - 1): each step's impact lifts the rest by about
     # (gamma - 1) times the step, which would knock it out of the stick set before a**
     sweep_points(ax, s, np.linspace(a_lo, a_hi, 161))
-    ax.plot([a_lo, s.a_star_star], [0, 0], "k-", lw=1.5)    # the stick solutions
+    ax.plot([a_lo, s.a_star_star], [0, 0], color="C2", lw=2.0,
+            label="stick solutions")
     x_star, _ = s.fixed_point(exact=True)
     orbit = pwsdyn.find_periodic_orbit(MODEL, [x_star * s.scale, 0.0], t0=0.0,
                                        params=s.params(), mode="stick")
