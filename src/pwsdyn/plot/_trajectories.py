@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -210,7 +211,10 @@ def _span_states(traj, a, b, num):
 def _title(traj) -> str:
     model = traj.model
     lines = _values_text(dict(traj.params), width=90)
-    if len(lines) == 1 and len(lines[0]) < 60:
+    # short enough for one line as printed: a mathtext command (\omega) is one letter
+    shown = re.sub(r"\\[A-Za-z]+", "x", lines[0]).translate({ord(c): None for c in "${}"}) \
+        if lines else ""
+    if len(lines) == 1 and len(shown) < 60:
         title = f"{model.name}   ({lines[0]})"
     else:
         title = "\n".join([f"{model.name}"] + lines)
