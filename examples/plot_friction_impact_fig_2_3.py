@@ -9,14 +9,15 @@ For ``a < a* = b + Fd/k`` the mass can rest at the edge of the stick set, out of
 constraint; at ``a*`` the constraint's top grazes that rest. The figure shows, against the
 amplitude ``a``, the velocity of the mass just after the impact (its largest velocity over the
 orbit; 0 for the stick solutions): the branch of period-one impacting orbits continued by
-pseudo-arclength (stable solid, unstable dashed, past its graze dotted), the stick solutions,
-and over them the points of brute-force sweeps up (blue) and down (orange) in ``a``.
+pseudo-arclength (stable solid, unstable dashed, past its graze dotted), the stick solutions
+(green), and over them the points of brute-force sweeps up (blue) and down (orange) in ``a``.
 
 Condition 5.1 of the thesis decides the scenario: with
 ``gamma = m a* omega^2 (1 + e)^2 / (2 F_f)``, the stick-position map has the multiplier
 ``gamma - 1``. (a) ``gamma = 2.5 > 2``: loss of the local attractor. The unstable impacting
 branch leaves the graze at the non-smooth fold NSF towards smaller ``a``, turns at a saddle-node
-SN (labelled LP, a fold of the branch, at ``a^2 = (8 K (b + 1) - 16)/K^2``, ``K = (1 + e)^2 omega^2``, from the closed-form map) and
+SN (labelled LP, a fold of the branch, at ``a^2 = (8 K (b + 1) - 16)/K^2``,
+``K = (1 + e)^2 omega^2``, from the closed-form map) and
 comes back as the stable upper branch: sweeping up, the mass sticks up to ``a*`` and jumps to the
 upper branch; sweeping down it stays there down to SN -- hysteresis, as the thesis describes for
 Fig. 2.3 (a). (b) ``gamma = 1.5 < 2``: persistence. A stable branch of impacting orbits grows

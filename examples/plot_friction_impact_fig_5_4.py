@@ -11,7 +11,7 @@ mass just after the impact (0 at rest): the branch of period-one impacting orbit
 above ``Fs/k`` and come to rest below ``Fd/k`` (the thesis's Phi_2 type), continued by
 pseudo-arclength (stable solid, unstable dashed; dotted where it is not an orbit of the model
 because its reversal point has fallen into the static stick set, where the mass would stay),
-the stick solutions, and the points of brute-force sweeps up (blue) and down (orange).
+the stick solutions (green), and the points of brute-force sweeps up (blue) and down (orange).
 
 (a) ``gamma > 2`` (the opposite of inequality 5.1): as in Fig. 2.3 (a) a saddle-node (LP) ends the
 upper branch, but the unstable branch does not exist for an interval of ``a`` near ``a*``, and

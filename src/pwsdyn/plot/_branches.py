@@ -207,7 +207,8 @@ def plot_branch(branch, y=None, path: str | Path | None = None, *, ax: Axes | No
             k = sp.index
             near = [(lam[j], yv[j]) for j in (k - 1, k + 1) if 0 <= j < len(lam)]
             _label_beside(ax, kind, xy, marker=mk, size=_SPECIAL_SIZE, edge=_SPECIAL_EDGE,
-                          gap=3.0, side=_free_side(xy, near), fontsize=8, color=_SPECIAL_COLOR, zorder=6,
+                          gap=3.0, side=_free_side(xy, near), fontsize=8,
+                          color=_SPECIAL_COLOR, zorder=6,
                           bbox=dict(boxstyle="square,pad=0.1", fc="white", ec="none",
                                     alpha=0.8))
     # the legend: each style once, and each branch by name (its colour), across every branch
