@@ -9,14 +9,15 @@ For ``a < a* = b + Fd/k`` the mass can rest at the edge of the stick set, out of
 constraint; at ``a*`` the constraint's top grazes that rest. The figure shows, against the
 amplitude ``a``, the velocity of the mass just after the impact (its largest velocity over the
 orbit; 0 for the stick solutions): the branch of period-one impacting orbits continued by
-pseudo-arclength (stable solid, unstable dashed, past its graze dotted), the stick solutions,
-and over them the points of brute-force sweeps up (blue) and down (orange) in ``a``.
+pseudo-arclength (stable solid, unstable dashed, past its graze dotted), the stick solutions
+(green), and over them the points of brute-force sweeps up (blue) and down (orange) in ``a``.
 
 Condition 5.1 of the thesis decides the scenario: with
 ``gamma = m a* omega^2 (1 + e)^2 / (2 F_f)``, the stick-position map has the multiplier
 ``gamma - 1``. (a) ``gamma = 2.5 > 2``: loss of the local attractor. The unstable impacting
 branch leaves the graze at the non-smooth fold NSF towards smaller ``a``, turns at a saddle-node
-SN (labelled LP, a fold of the branch, at ``a^2 = (8 K (b + 1) - 16)/K^2``, ``K = (1 + e)^2 omega^2``, from the closed-form map) and
+SN (labelled LP, a fold of the branch, at ``a^2 = (8 K (b + 1) - 16)/K^2``,
+``K = (1 + e)^2 omega^2``, from the closed-form map) and
 comes back as the stable upper branch: sweeping up, the mass sticks up to ``a*`` and jumps to the
 upper branch; sweeping down it stays there down to SN -- hysteresis, as the thesis describes for
 Fig. 2.3 (a). (b) ``gamma = 1.5 < 2``: persistence. A stable branch of impacting orbits grows
@@ -68,7 +69,8 @@ def panel(ax, gamma, a_lo, a_hi, title):
                                     "omega": omega_for(gamma)})
     sweep_points(ax, s, np.linspace(a_lo, a_hi, 61))
     # the stick solutions: a resting mass the constraint never reaches
-    ax.plot([a_lo, s.a_star], [0, 0], "k-", lw=1.5)
+    ax.plot([a_lo, s.a_star], [0, 0], color="C2", lw=2.0,
+            label="stick solutions")
     # the period-one impacting orbit at the top of the range, continued down to its graze
     x_star, _ = s.fixed_point(exact=True)
     orbit = pwsdyn.find_periodic_orbit(MODEL, [x_star * s.scale, 0.0], t0=0.0,
@@ -76,7 +78,8 @@ def panel(ax, gamma, a_lo, a_hi, title):
     branch = pwsdyn.continue_orbit(MODEL, orbit, "a", span=(a_lo, a_hi), ds=-0.005)
     branch.plot(y=velocity_after_the_impact, ax=ax)
     ax.plot(s.a_star, 0, "ko", ms=5)
-    ax.annotate("NSF", (s.a_star, 0), textcoords="offset points", xytext=(4, 6))
+    # below the point: the branch labels its graze (GR) above it
+    ax.annotate("NSF", (s.a_star, 0), textcoords="offset points", xytext=(6, -6), va="top")
     ax.set_title(f"{title}: $\\gamma$ = {s.gamma:.2g}")
     ax.set_xlabel("amplitude $a$")
 

@@ -11,7 +11,7 @@ mass just after the impact (0 at rest): the branch of period-one impacting orbit
 above ``Fs/k`` and come to rest below ``Fd/k`` (the thesis's Phi_2 type), continued by
 pseudo-arclength (stable solid, unstable dashed; dotted where it is not an orbit of the model
 because its reversal point has fallen into the static stick set, where the mass would stay),
-the stick solutions, and the points of brute-force sweeps up (blue) and down (orange).
+the stick solutions (green), and the points of brute-force sweeps up (blue) and down (orange).
 
 (a) ``gamma > 2`` (the opposite of inequality 5.1): as in Fig. 2.3 (a) a saddle-node (LP) ends the
 upper branch, but the unstable branch does not exist for an interval of ``a`` near ``a*``, and
@@ -66,7 +66,8 @@ def panel(ax, gamma, a_lo, a_hi, title):
     # steps well below (a** - a)/(gamma - 1): each step's impact lifts the rest by about
     # (gamma - 1) times the step, which would knock it out of the stick set before a**
     sweep_points(ax, s, np.linspace(a_lo, a_hi, 161))
-    ax.plot([a_lo, s.a_star_star], [0, 0], "k-", lw=1.5)    # the stick solutions
+    ax.plot([a_lo, s.a_star_star], [0, 0], color="C2", lw=2.0,
+            label="stick solutions")
     x_star, _ = s.fixed_point(exact=True)
     orbit = pwsdyn.find_periodic_orbit(MODEL, [x_star * s.scale, 0.0], t0=0.0,
                                        params=s.params(), mode="stick")

@@ -57,12 +57,8 @@ after["section"] = sweep["section"].where(sweep["state"] != "v", -params["r"] * 
 fig = up.plot(y="v", sweep=after)
 ax = fig.axes[0]
 down.plot(y="v", ax=ax)
-doubled.plot(y="v", ax=ax, color="C3", labels=False)   # its BP is the PD point
-# one legend entry per style: the three branches share them (period two in red)
-handles = {}
-for handle, label in zip(*ax.get_legend_handles_labels()):
-    handles.setdefault(label, handle)
-ax.legend(handles.values(), handles.keys(), fontsize=8, loc="lower right")
+# the branches share one legend: each line style once, each branch by name and colour
+doubled.plot(y="v", ax=ax, color="C3")
 ax.set_ylabel("velocity $v$ just after an impact")
 ax.set_title("impact oscillator: sweep in $\\omega$ and the period-one and period-two branches",
              fontsize="medium")

@@ -1,6 +1,7 @@
 """Figures (pwsdyn.plot): drawing into the user's axes (``ax=``), the orbit figure's
 multiplier panel clear of the other panels, up and down sweeps told apart, the fixed
-parameters in the titles, the attractors marked on basin figures.
+parameters in the titles, the attractors marked on basin figures, every name of the package
+importable from ``pwsdyn.plot``.
 
 Every figure is drawn on the Agg canvas; files go to pytest's ``tmp_path`` only.
 """
@@ -81,7 +82,9 @@ def no_new_figure(monkeypatch):
     def forbidden(*args, **kwargs):
         raise AssertionError("pwsdyn.plot created a figure although ax= was given")
 
-    monkeypatch.setattr(plot, "Figure", forbidden)
+    # every module of the package that makes figures
+    for module in (plot._trajectories, plot._orbits, plot._sweeps, plot._branches):
+        monkeypatch.setattr(module, "Figure", forbidden)
 
 
 def _user_figure(*args, **kwargs) -> Figure:
@@ -272,11 +275,11 @@ def test_up_and_down_sweeps_differ_in_marker_and_colour(sweep_both):
 
 def test_titles_give_the_fixed_parameters(sweep_both, map_basins, ball):
     bif = plot.plot_bifurcation(sweep_both).axes[0].get_title()
-    assert "$lam = 0.1$" in bif and "\\mu =" not in bif          # mu is swept
+    assert "$\\lambda = 0.1$" in bif and "\\mu =" not in bif      # mu is swept
     ly = plot.plot_lyapunov(sweep_both).axes[0].get_title()
-    assert "$lam = 0.1$" in ly and "\\mu =" not in ly
+    assert "$\\lambda = 0.1$" in ly and "\\mu =" not in ly
     bas = plot.plot_basins(map_basins).axes[0].get_title()
-    assert "$\\mu = 0.1$" in bas and "$lam = 0.1$" in bas
+    assert "$\\mu = 0.1$" in bas and "$\\lambda = 0.1$" in bas
     traj = plot.plot_trajectory(ball)._suptitle.get_text()
     for name, value in [("g", "9.81"), ("e", "0.8"), ("A", "0.1"), ("\\omega", "6.283")]:
         assert f"${name} = {value}$" in traj
@@ -293,7 +296,7 @@ def test_parameter_titles_wrap_and_write_powers_of_ten():
 # ======================================================================================
 
 def _attractor_markers(ax) -> dict:
-    return {ln.get_label(): ln for ln in ax.lines if ln.get_label().startswith("attractor")}
+    return {ln.get_gid(): ln for ln in ax.lines if (ln.get_gid() or "").startswith("attractor")}
 
 
 def test_map_basins_mark_the_period_two_cycle(map_basins):
@@ -338,3 +341,45 @@ def test_basins_of_a_non_periodic_attractor_store_and_mark_its_points():
     assert np.isfinite(pts).all(axis=1).sum() >= 2
     ax = plot.plot_basins(ds).axes[0]
     assert f"attractor {nonper[0]}" in _attractor_markers(ax)
+
+
+# ======================================================================================
+# the package: every name importable where it was
+# ======================================================================================
+
+#: The names ``pwsdyn.plot`` has offered since it was one module (private ones that tests and
+#: other modules import included): a contract, whatever module of the package defines them.
+PUBLIC_NAMES = ["BASIN_COLORS", "BASIN_SPECIAL_COLORS", "BRANCH_STYLES", "CONSTRAINED_STYLES",
+                "DEFAULT_METRICS", "EVENT_STYLES", "SPECIAL_MARKERS", "SURFACE_COLOR",
+                "SWEEP_COLORS", "SWEEP_MARKERS", "TRAJECTORY_COLOR", "VARIANT_COLORS",
+                "figure_formats", "plot_basins", "plot_bifurcation", "plot_branch",
+                "plot_lyapunov", "plot_metrics", "plot_orbit", "plot_trajectory"]
+
+
+@pytest.mark.parametrize("name", PUBLIC_NAMES + ["_branch_y", "_values_text", "Figure"])
+def test_every_name_of_the_module_is_importable_from_the_package(name):
+    import importlib
+
+    # what ``from pwsdyn.plot import name`` does, in a fresh import of the package
+    module = importlib.reload(importlib.import_module("pwsdyn.plot"))
+    assert hasattr(module, name)
+
+
+def test_the_package_exports_each_public_name_of_its_modules_once():
+    """``__all__`` lists the public names each module of the package defines (functions,
+    constants) and nothing else, and each is defined in one module only."""
+    import ast
+
+    defined: list = []
+    for path in sorted(Path(plot.__file__).parent.glob("_*.py")):
+        if path.name == "__init__.py":
+            continue
+        for node in ast.parse(path.read_text(encoding="utf-8")).body:
+            if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+                defined.append(node.name)
+            elif isinstance(node, ast.Assign):
+                defined += [t.id for t in node.targets if isinstance(t, ast.Name)]
+    public = [k for k in defined if not k.startswith("_")]
+    assert len(public) == len(set(public))
+    assert sorted(public) == sorted(plot.__all__)
+    assert set(PUBLIC_NAMES) <= set(plot.__all__)

@@ -55,7 +55,7 @@ ON_DIB = ("switch", "stop", "continue")
 
 
 def _run(problem, u0, lam0, settings, *, tangent=None, correct_start=True, progress=False,
-         model=None, start_kind="", on_dib="continue", options=None):
+         model=None, start_kind="", on_dib="continue", options=None, origin=""):
     """Follow a branch; on an orbit branch with ``on_dib="switch"`` go on past each graze
     with the orbit's new signature, ``"stop"`` end there, ``"continue"`` keep the signature
     (points past the graze are not admissible)."""
@@ -89,7 +89,7 @@ def _run(problem, u0, lam0, settings, *, tangent=None, correct_start=True, progr
         points += cont.points
         reason = cont.stop_reason
     return Branch(problem, points, stop_reason=reason, settings=settings, model=model,
-                  problems=problems)
+                  problems=problems, origin=origin)
 
 
 def _after_graze(bp, pt, settings, options, points=()):
@@ -274,14 +274,15 @@ def _from_special(sp: SpecialPoint, model, param, settings, progress, params, op
             raise ContinuationError(nxt)
         prob1, u1, lam1, ds1 = nxt
         return _run(prob1, u1, lam1, dataclasses.replace(settings, ds=ds1),
-                    progress=progress, model=model, on_dib=on_dib, options=options)
+                    progress=progress, model=model, on_dib=on_dib, options=options,
+                    origin=sp.kind)
     if sp.kind == "BP":
         J = np.column_stack(base.evaluate(pt.u, pt.lam)[1:])
         return _switch_branch_point(base, pt, J, model, settings, progress, on_dib)
     return _run(base, pt.u, pt.lam, dataclasses.replace(settings, ds=abs(settings.ds)),
                 tangent=pt.tangent * np.sign(settings.ds), correct_start=False,
                 progress=progress, model=model, start_kind=sp.kind, on_dib=on_dib,
-                options=options)
+                options=options, origin=sp.kind)
 
 
 def _switch_period_doubling(sp, model, settings, progress, options, on_dib="switch"):
@@ -317,7 +318,7 @@ def _switch_period_doubling(sp, model, settings, progress, options, on_dib="swit
     v /= np.linalg.norm(v)
     return _run(bp2, u2, pt.lam, dataclasses.replace(settings, ds=abs(settings.ds)),
                 tangent=v, correct_start=False, progress=progress, model=model,
-                start_kind="BP", on_dib=on_dib, options=options)
+                start_kind="BP", on_dib=on_dib, options=options, origin="PD")
 
 
 def _switch_branch_point(problem, pt, J, model, settings, progress, on_dib="continue"):
@@ -333,7 +334,7 @@ def _switch_branch_point(problem, pt, J, model, settings, progress, on_dib="cont
         w = -w
     return _run(problem, pt.u, pt.lam, dataclasses.replace(settings, ds=abs(settings.ds)),
                 tangent=w, correct_start=False, progress=progress, model=model,
-                start_kind="BP", on_dib=on_dib)
+                start_kind="BP", on_dib=on_dib, origin="BP")
 
 
 def _resume(branch: Branch, model, param, settings, progress):
@@ -351,7 +352,7 @@ def _resume(branch: Branch, model, param, settings, progress):
         q.signature_index = last.signature_index
     return Branch(branch.problem, branch.points[:-1] + cont.points,
                   stop_reason=cont.stop_reason, settings=st, model=model,
-                  problems=branch.problems)
+                  problems=branch.problems, origin=branch.origin)
 
 
 def continue_equilibrium(model, x0, param: str, *, span=None, ds: float | None = None,
@@ -483,7 +484,8 @@ def load_branch(path) -> Branch:
                             tests=tests, special=str(ds["special"].values[i]),
                             signature_index=k))
     return Branch(problem, points, stop_reason=ds.attrs.get("stop_reason", ""),
-                  settings=settings, model=model, problems=problems)
+                  settings=settings, model=model, problems=problems,
+                  origin=str(ds.attrs.get("origin", "")))
 
 
 def continue_bifurcation(model, special_point: SpecialPoint, params, *, span=None, span2=None,

@@ -136,10 +136,15 @@ class Branch:
     stop_reason : str
         Why the branch ended.
     settings : ContinuationSettings
+    origin : str
+        For a branch switched from a special point of another branch, that point's kind
+        (``"PD"`` for the period-doubled branch, whose first point is a branch point ``BP``
+        of the doubled problem; ``"BP"``, ``"GR"``, ...); ``""`` for a branch started from a
+        solution.
     """
 
     def __init__(self, problem, points, *, stop_reason="", settings=None, model=None,
-                 problems=None):
+                 problems=None, origin: str = ""):
         self.problem = problem
         self.problems = list(problems) if problems else [problem]
         self.points = list(points)
@@ -147,6 +152,7 @@ class Branch:
         self.kind = problem.kind
         self.stop_reason = stop_reason
         self.settings = settings
+        self.origin = str(origin)
         self.model = model if model is not None else getattr(
             getattr(problem, "orbit_problem", problem), "model", None)
 
@@ -318,6 +324,7 @@ class Branch:
             "kind": self.kind,
             "parameter": self.parameter,
             "stop_reason": self.stop_reason,
+            "origin": self.origin,
             "params": json.dumps(getattr(self.problem, "params", None) or
                                  getattr(self.problem.orbit_problem, "params", {})),
         }
