@@ -40,6 +40,7 @@ extensions = [
     "sphinxcontrib.bibtex",
     "sphinx_click",
     "_ext.zoo_table",
+    "_ext.summaries",
 ]
 
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}

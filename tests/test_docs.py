@@ -177,6 +177,81 @@ def test_the_api_reference_lists_every_public_name():
     assert modules <= listed, f"public modules missing from docs/api.rst: {sorted(modules - listed)}"
 
 
+def _api_names() -> list[str]:
+    """The names the API reference's autosummary tables list, relative to ``pwsdyn``."""
+    api = (DOCS / "api.rst").read_text(encoding="utf-8")
+    return re.findall(r"^   ([A-Za-z_][\w.]*)\s*$", api, re.M)
+
+
+def _summaries_checker():
+    """docs/_ext/summaries.py, the build's check of the API tables' summaries."""
+    sys.path.insert(0, str(DOCS))
+    try:
+        from _ext.summaries import summary_problem
+    finally:
+        sys.path.remove(str(DOCS))
+    return summary_problem
+
+
+def test_the_summary_check_sees_a_cut_sentence():
+    pytest.importorskip("sphinx")
+    problem = _summaries_checker()
+    # what autosummary showed for poincare_map before its first sentence was made whole
+    assert "(" in problem("Evaluate a Poincaré map and its Jacobian (thesis eq.")
+    assert problem("A stray ) bracket.") and problem("Ends [inside a bracket.")
+    assert problem("") is None                  # an attribute without a docstring of its own
+    assert problem("Evaluate a Poincaré map and its Jacobian (thesis eq. 2.25).") is None
+    assert problem("The map ``x -> f(x)`` of a piece [a, b].") is None
+
+
+def _summarised_objects():
+    """Every object whose summary the API reference shows: the names of its tables and the
+    public methods of the classes among them (the class pages' tables)."""
+    import importlib
+    import inspect
+
+    out = []
+    for name in _api_names():
+        if hasattr(pwsdyn, name) and "." not in name:
+            obj = getattr(pwsdyn, name)
+        else:
+            obj = importlib.import_module(f"pwsdyn.{name}")
+        out.append((name, obj))
+        if inspect.isclass(obj):
+            for key, member in vars(obj).items():
+                if not key.startswith("_") and inspect.isfunction(member):
+                    out.append((f"{name}.{key}", member))
+    return out
+
+
+def test_every_api_summary_is_a_whole_sentence():
+    """autosummary shows a docstring's first sentence, split at the first period followed by a
+    space: "(thesis eq. 2.25)" in it leaves "(thesis eq." in the table. The build warns about
+    such a summary (docs/_ext/summaries.py); this finds it without a build."""
+    pytest.importorskip("sphinx")
+    import inspect
+
+    from docutils.frontend import get_default_settings
+    from docutils.parsers.rst import Parser
+    from sphinx.ext.autosummary import extract_summary
+
+    problem = _summaries_checker()
+    settings = get_default_settings(Parser)
+    settings.report_level = 5                   # a summary's parse errors are not ours to show
+    objects = _summarised_objects()
+    assert len(objects) > 60                    # the tables' names and the classes' methods
+    cut = {}
+    for name, obj in objects:
+        doc = inspect.getdoc(obj)
+        if doc is None:
+            continue                            # an undocumented method has no table row
+        summary = extract_summary(doc.splitlines(), settings)
+        why = problem(summary)
+        if why:
+            cut[name] = f"{summary!r}: {why}"
+    assert not cut, f"summaries cut in the API tables: {cut}"
+
+
 # ---- the pages' code ------------------------------------------------------------------------
 
 _CODE_BLOCK = re.compile(r"^\.\. code-block:: python\n\n((?:(?:    .*)?\n)+)", re.M)
