@@ -91,12 +91,17 @@ sphinx_gallery_conf = {
     "image_scrapers": ("matplotlib", "_ext.gallery_scrapers.pwsdyn_figures"),
     # an example that ends a block with its figure shows the figure, not the figure's repr
     "ignore_repr_types": r"matplotlib\.(text|axes|figure)",
+    # thumbnails up to 360 px wide on the page (docs/_static/pwsdyn.css; sphinx-gallery's own
+    # 160 px are too small to read), rendered larger to stay sharp on high-density screens
+    "thumbnail_size": (560, 392),
 }
 
 # -- HTML -----------------------------------------------------------------------------------
 html_theme = "furo"
 html_title = f"pwsdyn {release}"
-html_static_path: list[str] = []
+html_static_path = ["_static"]
+# code and output that scroll or wrap inside the page, larger gallery thumbnails
+html_css_files = ["pwsdyn.css"]
 
 # -- Each object documented once, at its shortest public path ------------------------------
 # The top-level names (``pwsdyn.simulate``) first, then a subpackage's re-exports
