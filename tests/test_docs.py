@@ -340,6 +340,58 @@ def test_gallery_script_begins_with_a_title_and_a_paragraph(script):
     assert lines[2].strip() == "" and lines[3].strip(), f"{script.name}: a paragraph after it"
 
 
+def _module_constants(script: Path) -> dict:
+    """The literal module-level assignments of a script (``NAME = <literal>``)."""
+    out = {}
+    for node in ast.parse(script.read_text(encoding="utf-8")).body:
+        if isinstance(node, ast.Assign):
+            try:
+                value = ast.literal_eval(node.value)
+            except ValueError:
+                continue
+            for target in node.targets:
+                names = target.elts if isinstance(target, ast.Tuple) else [target]
+                values = value if isinstance(target, ast.Tuple) else [value]
+                for name, v in zip(names, values):
+                    if isinstance(name, ast.Name):
+                        out[name.id] = v
+    return out
+
+
+def test_the_basins_example_shows_coexisting_attractors():
+    """The basins example is about coexisting attractors: at its parameters, on a coarser grid
+    over the same window, at least two attractors each draw a substantial share of the starts
+    (a single basin would be a plain square)."""
+    import numpy as np
+
+    c = _module_constants(EXAMPLES / "plot_basins.py")
+    grid = {"x": np.linspace(*c["X_RANGE"], 12), "v": np.linspace(*c["V_RANGE"], 12)}
+    ds = pwsdyn.basins(c["MODEL"], grid, params=c["PARAMS"], transient=200, samples=32,
+                       progress=False)
+    shares = {int(k): float(ds.fraction.sel(basin=k)) for k in ds["attractor"].values}
+    assert sum(s >= 0.15 for s in shares.values()) >= 2, f"basin fractions: {shares}"
+    labels = ds["label"].values
+    assert len({int(v) for v in np.unique(labels) if v >= 0}) >= 2
+
+
+@pytest.mark.parametrize("script", gallery_scripts(), ids=lambda p: p.name)
+def test_gallery_thumbnail_title_is_the_page_title(script):
+    """sphinx-gallery writes a thumbnail's title from the RST source with a few regular
+    expressions, which take a pair of asterisks for emphasis markers: a title with "a**" in
+    it lost the "**" on its thumbnail while the page showed it. The thumbnail must read as
+    the page's title does (docutils' rendering of it)."""
+    pytest.importorskip("sphinx_gallery")
+    from docutils.core import publish_doctree
+    from sphinx_gallery.gen_rst import _sanitize_rst
+
+    doc = ast.get_docstring(ast.parse(script.read_text(encoding="utf-8")), clean=False)
+    title = doc.strip("\n").splitlines()[0].strip()
+    rendered = publish_doctree(title, settings_overrides={"report_level": 5}).astext()
+    assert " ".join(_sanitize_rst(title).split()) == " ".join(rendered.split()), (
+        f"{script.name}: the thumbnail would read {_sanitize_rst(title)!r}, "
+        f"the page {rendered!r}")
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("script", gallery_scripts(), ids=lambda p: p.name)
 def test_gallery_script_runs_on_its_own_and_writes_nothing(script, tmp_path):
