@@ -10,6 +10,7 @@ as a user would.
 from __future__ import annotations
 
 import ast
+import io
 import os
 import re
 import subprocess
@@ -202,6 +203,36 @@ def test_the_summary_check_sees_a_cut_sentence():
     assert problem("") is None                  # an attribute without a docstring of its own
     assert problem("Evaluate a Poincaré map and its Jacobian (thesis eq. 2.25).") is None
     assert problem("The map ``x -> f(x)`` of a piece [a, b].") is None
+
+
+def test_a_cut_summary_fails_the_build(tmp_path):
+    """The extension in a build: a module whose function's first sentence is cut at "eq."
+    gets a warning from the autosummary table, which -W turns into a failed build."""
+    pytest.importorskip("sphinx")
+    from sphinx.application import Sphinx
+
+    (tmp_path / "cutmod.py").write_text(
+        'def f():\n    """Evaluate a map (thesis eq. 2.25).\n\n    More.\n    """\n',
+        encoding="utf-8")
+    src = tmp_path / "src"
+    src.mkdir()
+    (src / "conf.py").write_text(
+        "import sys\n"
+        f"sys.path[:0] = [{str(tmp_path)!r}, {str(DOCS)!r}]\n"
+        "extensions = ['sphinx.ext.autosummary', '_ext.summaries']\n", encoding="utf-8")
+    (src / "index.rst").write_text(
+        "Index\n=====\n\n.. currentmodule:: cutmod\n\n.. autosummary::\n\n   f\n",
+        encoding="utf-8")
+    warnings = io.StringIO()
+    path = list(sys.path)
+    try:
+        Sphinx(str(src), str(src), str(tmp_path / "out"), str(tmp_path / "doctrees"), "html",
+               status=None, warning=warnings, freshenv=True).build()
+    finally:
+        sys.path[:] = path                      # the project's conf.py prepends to it
+        sys.modules.pop("cutmod", None)
+    assert "autosummary of f" in warnings.getvalue()
+    assert "(thesis eq." in warnings.getvalue()
 
 
 def _summarised_objects():
