@@ -6,6 +6,14 @@ Build (from the repository root; warnings are errors, as in CI)::
 
 The gallery scripts in ``examples/plot_*.py`` are run during the build (sphinx-gallery); a
 script that raises fails the build.
+
+References to pwsdyn objects that resolve to nothing (rendered as plain text, not links) are
+listed by a build with ``PWSDYN_DOCS_NITPICKY=1``; the gallery need not run for it::
+
+    PWSDYN_DOCS_NITPICKY=1 python -m sphinx -W --keep-going -b html \
+        -D sphinx_gallery_conf.plot_gallery=0 docs /tmp/pwsdyn-nitpicky
+
+Pages and labels (``:doc:``, ``:ref:``) are checked by every build.
 """
 
 from __future__ import annotations
@@ -40,6 +48,7 @@ extensions = [
     "sphinxcontrib.bibtex",
     "sphinx_click",
     "_ext.zoo_table",
+    "_ext.summaries",
 ]
 
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
@@ -60,6 +69,22 @@ napoleon_google_docstring = False
 napoleon_numpy_docstring = True
 napoleon_use_rtype = False
 napoleon_use_ivar = True
+
+# -- Cross-references -----------------------------------------------------------------------
+# PWSDYN_DOCS_NITPICKY=1 (with -W, the build then fails on one) reports every reference to a
+# pwsdyn object, module or page that resolves to nothing and so renders as plain text. Not
+# references to check: the words of a parameter's type description ("array_like, optional",
+# "{'full', 'projected'}") and the classes of other libraries, which would need intersphinx
+# and so the network.
+if os.environ.get("PWSDYN_DOCS_NITPICKY", "") not in ("", "0"):
+    nitpicky = True
+    nitpick_ignore_regex = [
+        (r"py:class", r"(?!pwsdyn\.)[a-z_].*|.*[\s'{}\[\]:,].*|[A-Z]"),   # type words
+        (r"py:class", r"(numpy|xarray|matplotlib|pathlib|sympy|dask|distributed|click|"
+                      r"collections|typing|os)\b.*"),
+        (r"py:class", r"Path|Axes|Figure|Dataset|DataArray|Client|Enum|IntEnum|Expr|Symbol|"
+                      r"Basic|The|N"),
+    ]
 
 # -- Markdown pages (the user guide's continuation and extending pages) ---------------------
 myst_enable_extensions = ["dollarmath"]
@@ -90,12 +115,17 @@ sphinx_gallery_conf = {
     "image_scrapers": ("matplotlib", "_ext.gallery_scrapers.pwsdyn_figures"),
     # an example that ends a block with its figure shows the figure, not the figure's repr
     "ignore_repr_types": r"matplotlib\.(text|axes|figure)",
+    # thumbnails up to 360 px wide on the page (docs/_static/pwsdyn.css; sphinx-gallery's own
+    # 160 px are too small to read), rendered larger to stay sharp on high-density screens
+    "thumbnail_size": (560, 392),
 }
 
 # -- HTML -----------------------------------------------------------------------------------
 html_theme = "furo"
 html_title = f"pwsdyn {release}"
-html_static_path: list[str] = []
+html_static_path = ["_static"]
+# code and output that scroll or wrap inside the page, larger gallery thumbnails
+html_css_files = ["pwsdyn.css"]
 
 # -- Each object documented once, at its shortest public path ------------------------------
 # The top-level names (``pwsdyn.simulate``) first, then a subpackage's re-exports

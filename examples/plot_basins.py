@@ -16,9 +16,12 @@ import numpy as np
 import pwsdyn
 from pwsdyn.plot import plot_basins
 
-grid = {"x": np.linspace(-1.5, 0.0, 50), "v": np.linspace(-1.5, 1.5, 50)}
-ds = pwsdyn.basins("impact-oscillator", grid, params={"omega": 3.05}, transient=200,
-                   samples=32, progress=False)
+MODEL = "impact-oscillator"
+PARAMS = {"omega": 3.05}          # where the two period-two orbits coexist
+X_RANGE, V_RANGE = (-1.5, 0.0), (-1.5, 1.5)
+
+grid = {"x": np.linspace(*X_RANGE, 50), "v": np.linspace(*V_RANGE, 50)}
+ds = pwsdyn.basins(MODEL, grid, params=PARAMS, transient=200, samples=32, progress=False)
 
 # %%
 # The attractor table and the basin fractions (``-2``: failed runs, ``-1``: divergence).

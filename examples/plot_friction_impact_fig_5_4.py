@@ -1,24 +1,26 @@
-"""
-Static friction above dynamic friction: stick solutions up to a** (thesis Fig. 5.4)
+r"""
+Static friction above dynamic friction: stick solutions up to a∗∗ (thesis Fig. 5.4)
 ===================================================================================
 
 The friction impact oscillator (zoo model ``friction-impact-oscillator``) with the friction law
 5.4 of the thesis: a resting mass sticks while the spring force is at most the static friction
-``Fs``, larger than the dynamic friction ``Fd`` (here ``Fs = 1.2 Fd``). Stick solutions then
-exist up to ``a** = b + Fs/k``, beyond the grazing amplitude ``a* = b + Fd/k`` of Papers D and
-E (thesis section 5.3.1). The figure shows, against the amplitude ``a``, the velocity of the
-mass just after the impact (0 at rest): the branch of period-one impacting orbits that reverse
-above ``Fs/k`` and come to rest below ``Fd/k`` (the thesis's Phi_2 type), continued by
-pseudo-arclength (stable solid, unstable dashed; dotted where it is not an orbit of the model
-because its reversal point has fallen into the static stick set, where the mass would stay),
-the stick solutions (green), and the points of brute-force sweeps up (blue) and down (orange).
+:math:`F_s`, larger than the dynamic friction :math:`F_d` (here :math:`F_s = 1.2 F_d`). Stick
+solutions then exist up to :math:`a^{\ast\ast} = b + F_s/k`, beyond the grazing amplitude
+:math:`a^\ast = b + F_d/k` of Papers D and E (thesis section 5.3.1). The figure shows, against
+the amplitude :math:`a`, the velocity of the mass just after the impact (0 at rest): the branch
+of period-one impacting orbits that reverse above :math:`F_s/k` and come to rest below
+:math:`F_d/k` (the thesis's :math:`\Phi_2` type), continued by pseudo-arclength (stable solid,
+unstable dashed; dotted where it is not an orbit of the model because its reversal point has
+fallen into the static stick set, where the mass would stay), the stick solutions (green),
+and the points of brute-force sweeps up (blue) and down (orange).
 
-(a) ``gamma > 2`` (the opposite of inequality 5.1): as in Fig. 2.3 (a) a saddle-node (LP) ends the
-upper branch, but the unstable branch does not exist for an interval of ``a`` near ``a*``, and
-the stick solutions last up to ``a**``. (b) ``gamma < 2`` (5.1 holds): the stick solutions again
-last up to ``a**``, and the stable impacting branch has lost the interval where its reversal
-point lies below ``Fs/k``. As the thesis notes, with ``Fs > Fd`` the scenario shows a jump and
-hysteresis even when 5.1 is satisfied, over a smaller interval than without it.
+(a) :math:`\gamma > 2` (the opposite of inequality 5.1): as in Fig. 2.3 (a) a saddle-node (LP)
+ends the upper branch, but the unstable branch does not exist for an interval of :math:`a` near
+:math:`a^*`, and the stick solutions last up to :math:`a^{**}`. (b) :math:`\gamma < 2` (5.1
+holds): the stick solutions again last up to :math:`a^{**}`, and the stable impacting branch
+has lost the interval where its reversal point lies below :math:`F_s/k`. As the thesis notes,
+with :math:`F_s > F_d` the scenario shows a jump and hysteresis even when 5.1 is satisfied, over
+a smaller interval than without it.
 """
 
 import math

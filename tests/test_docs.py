@@ -10,6 +10,7 @@ as a user would.
 from __future__ import annotations
 
 import ast
+import io
 import os
 import re
 import subprocess
@@ -180,6 +181,111 @@ def test_the_api_reference_lists_every_public_name():
     assert modules <= listed, f"public modules missing from docs/api.rst: {sorted(modules - listed)}"
 
 
+def _api_names() -> list[str]:
+    """The names the API reference's autosummary tables list, relative to ``pwsdyn``."""
+    api = (DOCS / "api.rst").read_text(encoding="utf-8")
+    return re.findall(r"^   ([A-Za-z_][\w.]*)\s*$", api, re.M)
+
+
+def _summaries_checker():
+    """docs/_ext/summaries.py, the build's check of the API tables' summaries."""
+    sys.path.insert(0, str(DOCS))
+    try:
+        from _ext.summaries import summary_problem
+    finally:
+        sys.path.remove(str(DOCS))
+    return summary_problem
+
+
+def test_the_summary_check_sees_a_cut_sentence():
+    pytest.importorskip("sphinx")
+    problem = _summaries_checker()
+    # what autosummary showed for poincare_map before its first sentence was made whole
+    assert "(" in problem("Evaluate a Poincaré map and its Jacobian (thesis eq.")
+    assert problem("A stray ) bracket.") and problem("Ends [inside a bracket.")
+    assert problem("") is None                  # an attribute without a docstring of its own
+    assert problem("Evaluate a Poincaré map and its Jacobian (thesis eq. 2.25).") is None
+    assert problem("The map ``x -> f(x)`` of a piece [a, b].") is None
+
+
+def test_a_cut_summary_fails_the_build(tmp_path):
+    """The extension in a build: a module whose function's first sentence is cut at "eq."
+    gets a warning from the autosummary table, which -W turns into a failed build."""
+    pytest.importorskip("sphinx")
+    from sphinx.application import Sphinx
+
+    (tmp_path / "cutmod.py").write_text(
+        'def f():\n    """Evaluate a map (thesis eq. 2.25).\n\n    More.\n    """\n',
+        encoding="utf-8")
+    src = tmp_path / "src"
+    src.mkdir()
+    (src / "conf.py").write_text(
+        "import sys\n"
+        f"sys.path[:0] = [{str(tmp_path)!r}, {str(DOCS)!r}]\n"
+        "extensions = ['sphinx.ext.autosummary', '_ext.summaries']\n", encoding="utf-8")
+    (src / "index.rst").write_text(
+        "Index\n=====\n\n.. currentmodule:: cutmod\n\n.. autosummary::\n\n   f\n",
+        encoding="utf-8")
+    warnings = io.StringIO()
+    path = list(sys.path)
+    try:
+        Sphinx(str(src), str(src), str(tmp_path / "out"), str(tmp_path / "doctrees"), "html",
+               status=None, warning=warnings, freshenv=True).build()
+    finally:
+        sys.path[:] = path                      # the project's conf.py prepends to it
+        sys.modules.pop("cutmod", None)
+    assert "autosummary of f" in warnings.getvalue()
+    assert "(thesis eq." in warnings.getvalue()
+
+
+def _summarised_objects():
+    """Every object whose summary the API reference shows: the names of its tables and the
+    public methods of the classes among them (the class pages' tables)."""
+    import importlib
+    import inspect
+
+    out = []
+    for name in _api_names():
+        if hasattr(pwsdyn, name) and "." not in name:
+            obj = getattr(pwsdyn, name)
+        else:
+            obj = importlib.import_module(f"pwsdyn.{name}")
+        out.append((name, obj))
+        if inspect.isclass(obj):
+            for key, member in vars(obj).items():
+                if not key.startswith("_") and inspect.isfunction(member):
+                    out.append((f"{name}.{key}", member))
+    return out
+
+
+def test_every_api_summary_is_a_whole_sentence():
+    """autosummary shows a docstring's first sentence, split at the first period followed by a
+    space: "(thesis eq. 2.25)" in it leaves "(thesis eq." in the table. The build warns about
+    such a summary (docs/_ext/summaries.py); this finds it without a build."""
+    pytest.importorskip("sphinx")
+    import inspect
+
+    from docutils.frontend import get_default_settings
+    from docutils.parsers.rst import Parser
+    from sphinx.ext.autosummary import extract_summary
+
+    problem = _summaries_checker()
+    settings = get_default_settings(Parser)
+    settings.report_level = 5                   # a summary's parse errors are not ours to show
+    objects = _summarised_objects()
+    assert len(objects) > 60                    # the tables' names and the classes' methods
+    cut = {}
+    for name, obj in objects:
+        doc = inspect.getdoc(obj)
+        if doc is None:
+            continue                            # an undocumented method has no table row
+        summary = extract_summary(doc.splitlines(), settings)
+        why = problem(summary)
+        if why:
+            cut[name] = f"{summary!r}: {why}"
+    assert not cut, f"summaries cut in the API tables: {cut}"
+
+
 # ---- the pages' code ------------------------------------------------------------------------
 
 _CODE_BLOCK = re.compile(r"^\.\. code-block:: python\n\n((?:(?:    .*)?\n)+)", re.M)
@@ -281,6 +387,58 @@ def test_gallery_script_begins_with_a_title_and_a_paragraph(script):
         and len(underline) >= len(title), (
         f"{script.name}: the docstring must begin with an RST title and its underline")
     assert lines[2].strip() == "" and lines[3].strip(), f"{script.name}: a paragraph after it"
+
+
+def _module_constants(script: Path) -> dict:
+    """The literal module-level assignments of a script (``NAME = <literal>``)."""
+    out = {}
+    for node in ast.parse(script.read_text(encoding="utf-8")).body:
+        if isinstance(node, ast.Assign):
+            try:
+                value = ast.literal_eval(node.value)
+            except ValueError:
+                continue
+            for target in node.targets:
+                names = target.elts if isinstance(target, ast.Tuple) else [target]
+                values = value if isinstance(target, ast.Tuple) else [value]
+                for name, v in zip(names, values):
+                    if isinstance(name, ast.Name):
+                        out[name.id] = v
+    return out
+
+
+def test_the_basins_example_shows_coexisting_attractors():
+    """The basins example is about coexisting attractors: at its parameters, on a coarser grid
+    over the same window, at least two attractors each draw a substantial share of the starts
+    (a single basin would be a plain square)."""
+    import numpy as np
+
+    c = _module_constants(EXAMPLES / "plot_basins.py")
+    grid = {"x": np.linspace(*c["X_RANGE"], 12), "v": np.linspace(*c["V_RANGE"], 12)}
+    ds = pwsdyn.basins(c["MODEL"], grid, params=c["PARAMS"], transient=200, samples=32,
+                       progress=False)
+    shares = {int(k): float(ds.fraction.sel(basin=k)) for k in ds["attractor"].values}
+    assert sum(s >= 0.15 for s in shares.values()) >= 2, f"basin fractions: {shares}"
+    labels = ds["label"].values
+    assert len({int(v) for v in np.unique(labels) if v >= 0}) >= 2
+
+
+@pytest.mark.parametrize("script", gallery_scripts(), ids=lambda p: p.name)
+def test_gallery_thumbnail_title_is_the_page_title(script):
+    """sphinx-gallery writes a thumbnail's title from the RST source with a few regular
+    expressions, which take a pair of asterisks for emphasis markers: a title with "a**" in
+    it lost the "**" on its thumbnail while the page showed it. The thumbnail must read as
+    the page's title does (docutils' rendering of it)."""
+    pytest.importorskip("sphinx_gallery")
+    from docutils.core import publish_doctree
+    from sphinx_gallery.gen_rst import _sanitize_rst
+
+    doc = ast.get_docstring(ast.parse(script.read_text(encoding="utf-8")), clean=False)
+    title = doc.strip("\n").splitlines()[0].strip()
+    rendered = publish_doctree(title, settings_overrides={"report_level": 5}).astext()
+    assert " ".join(_sanitize_rst(title).split()) == " ".join(rendered.split()), (
+        f"{script.name}: the thumbnail would read {_sanitize_rst(title)!r}, "
+        f"the page {rendered!r}")
 
 
 @pytest.mark.slow

@@ -1,19 +1,20 @@
-"""What is continued: periodic orbits on a fixed signature, and equilibria of a mode.
+r"""What is continued: periodic orbits on a fixed signature, and equilibria of a mode.
 
-Each problem gives the engine (:mod:`pwsdyn.continuation.engine`) ``F(u, lam)`` with its
+Each problem gives the engine (:mod:`pwsdyn.continuation.engine`) :math:`F(u, \lambda)` with its
 Jacobians, the data of a point and its own test functions:
 
 * periodic orbits (:class:`OrbitBranchProblem`, on :class:`~pwsdyn.orbits.OrbitProblem`):
-  Floquet multipliers ``mu`` (the trivial one of an autonomous orbit left out), stability,
-  admissibility; period doubling ``PD: prod (mu_i + 1)`` (a real multiplier through -1;
-  a complex pair contributes ``|mu + 1|^2 > 0``) and Neimark-Sacker
-  ``NS: prod_{i<j} (mu_i mu_j - 1)`` (a pair with ``mu_i mu_j = 1``: a complex pair on the
-  unit circle, or a real pair ``mu, 1/mu`` -- a neutral saddle, which :meth:`confirm`
-  refuses); Kuznetsov, *Elements of Applied Bifurcation Theory*, 3rd ed., section 10.3.
-* equilibria (:class:`EquilibriumProblem`): ``f(x, p) = 0`` in one mode, eigenvalues of
-  ``f_x``, Hopf ``HB: prod_{i<j} (l_i + l_j)`` (the bialternate product; zero for a pair
-  ``+-i w``, and for a real pair ``l, -l`` -- a neutral saddle, refused), Kuznetsov section
-  10.2.
+  Floquet multipliers :math:`\mu` (the trivial one of an autonomous orbit left out),
+  stability, admissibility; period doubling ``PD``, :math:`\prod_i (\mu_i + 1)` (a real
+  multiplier through -1; a complex pair contributes :math:`|\mu + 1|^2 > 0`) and
+  Neimark-Sacker ``NS``, :math:`\prod_{i<j} (\mu_i \mu_j - 1)` (a pair with
+  :math:`\mu_i \mu_j = 1`: a complex pair on the unit circle, or a real pair
+  :math:`\mu, 1/\mu` -- a neutral saddle, which :meth:`OrbitBranchProblem.confirm` refuses);
+  Kuznetsov, *Elements of Applied Bifurcation Theory*, 3rd ed., section 10.3.
+* equilibria (:class:`EquilibriumProblem`): :math:`f(x, p) = 0` in one mode, eigenvalues of
+  :math:`f_x`, Hopf ``HB``, :math:`\prod_{i<j} (\lambda_i + \lambda_j)` (the bialternate
+  product; zero for a pair :math:`\pm i \omega`, and for a real pair :math:`\lambda, -\lambda`
+  -- a neutral saddle, refused), Kuznetsov section 10.2.
 """
 
 from __future__ import annotations
@@ -258,9 +259,11 @@ CURVE_KINDS = ("LP", "PD", "NS") + DIB_KINDS
 
 
 def orbit_test_function(kind: str, mu) -> float:
-    """The defining function of a bifurcation of a periodic orbit from its nontrivial
-    multipliers ``mu``: ``LP`` ``prod (mu_i - 1)``, ``PD`` ``prod (mu_i + 1)``, ``NS``
-    ``prod_{i<j} (mu_i mu_j - 1)`` (real for a set closed under conjugation)."""
+    r"""The defining function of a bifurcation of a periodic orbit from its multipliers.
+
+    Of the nontrivial multipliers :math:`\mu`: ``LP`` :math:`\prod_i (\mu_i - 1)`, ``PD``
+    :math:`\prod_i (\mu_i + 1)`, ``NS`` :math:`\prod_{i<j} (\mu_i \mu_j - 1)` (real for a set
+    closed under conjugation)."""
     mu = np.asarray(mu, dtype=complex)
     if kind == "LP":
         return float(np.prod(mu - 1.0).real)
@@ -272,17 +275,21 @@ def orbit_test_function(kind: str, mu) -> float:
 
 
 class BifurcationCurveProblem:
-    """A fold, period-doubling or Neimark-Sacker point of a periodic orbit followed in two
-    parameters: unknowns ``U = (u, p2)``, continued parameter ``lam = p1``, and
+    r"""A fold, period-doubling or Neimark-Sacker point of a periodic orbit in two parameters.
 
-        G(U, lam) = ( F(u, p1, p2), psi(u, p1, p2) ) = 0
+    Unknowns :math:`U = (u, p_2)`, continued parameter :math:`\lambda = p_1`, and
 
-    with ``F`` the orbit problem and ``psi`` the bifurcation's test function of the
+    .. math::
+
+        G(U, \lambda) = \begin{pmatrix} F(u, p_1, p_2) \\ \psi(u, p_1, p_2) \end{pmatrix} = 0
+
+    with :math:`F` the orbit problem and :math:`\psi` the bifurcation's test function of the
     multipliers (:func:`orbit_test_function`) -- the orbit problem bordered by its defining
     condition, the augmented system of two-parameter continuation (Kuznetsov, section 10.3;
-    the slides' "two-parameter continuation" of bifurcation curves). ``F_u``, ``F_p`` are the
-    problem's own; the row of ``psi``'s derivatives is a central difference (its accuracy
-    decides how fast Newton converges, not where: the curve is where ``psi = 0``)."""
+    the slides' "two-parameter continuation" of bifurcation curves). :math:`F_u`, :math:`F_p`
+    are the problem's own; the row of :math:`\psi`'s derivatives is a central difference (its
+    accuracy decides how fast Newton converges, not where: the curve is where
+    :math:`\psi = 0`)."""
 
     kind = "orbit"
 

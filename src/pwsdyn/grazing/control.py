@@ -21,7 +21,7 @@ the persistence sequence (eq. 2.35) of the controlled system are therefore
     s_n = h_z P^n beta + h_delta c . sum_{k<n} c0^(n-1-k) J_C P^k beta,
 
 linear in ``c`` for a given ``c0``: persistence (every ``s_n > 0``) is a linear feasibility
-problem. :func:`design_control` solves it for a grid of ``c0`` by linear programming,
+problem. :func:`~pwsdyn.design_control` solves it for a grid of ``c0`` by linear programming,
 maximising the smallest normalised term, and returns the gains, or says that none up to a
 bound on the gains makes the bifurcation persistent.
 """

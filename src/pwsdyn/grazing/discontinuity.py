@@ -1,26 +1,35 @@
-"""Nordmark's discontinuity map at a grazing orbit, and the persistence test.
+r"""Nordmark's discontinuity map at a grazing orbit, and the persistence test.
 
-At a graze of an impact surface ``h = 0`` by a periodic orbit at ``x*`` (thesis eq. 2.30-2.32:
-``h(x*) = 0``, ``h_x f = 0`` and ``a* = (h_x f)_x f > 0``), the effect of a low-velocity impact
-is a correction applied on the section ``h_turning = h_x f = 0`` (the points of zero normal
-velocity) to the smooth flow that ignores the surface. To lowest order (eq. 2.33-2.34)
+At a graze of an impact surface :math:`h = 0` by a periodic orbit at :math:`x^*` (thesis
+eq. 2.30-2.32: :math:`h(x^*) = 0`, :math:`h_x f = 0` and :math:`a^* = (h_x f)_x f > 0`), the
+effect of a low-velocity impact is a correction applied on the section
+:math:`h_{turning} = h_x f = 0` (the points of zero normal velocity) to the smooth flow that
+ignores the surface. To lowest order (eq. 2.33-2.34)
 
-    x -> x                                   where h(x) >= 0,
-    x -> x + beta sqrt(-h_x(x*) . (x - x*))  where h(x) < 0,
+.. math::
 
-    beta = sqrt(2 / a*) ( f(x*) h_turning,x(x*) / a* - I ) g_x(x*) f(x*),
+    x \mapsto \begin{cases}
+        x & \text{where } h(x) \ge 0, \\
+        x + \beta \sqrt{-h_x(x^*) \cdot (x - x^*)} & \text{where } h(x) < 0,
+    \end{cases}
+    \qquad
+    \beta = \sqrt{\frac{2}{a^*}}
+        \left(\frac{f(x^*)\, h_{turning,x}(x^*)}{a^*} - I\right) g_x(x^*) f(x^*),
 
-with ``g`` the impact's reset. The square root makes the composition with the smooth
-Poincaré map ``P`` singular at the graze; whether a local attractor persists through the
+with :math:`g` the impact's reset. The square root makes the composition with the smooth
+Poincaré map :math:`P` singular at the graze; whether a local attractor persists through the
 grazing bifurcation is decided (eq. 2.35; the thesis's ref. [19]) by the signs of
 
-    h_x(x*) . P^n beta,   n = 1, 2, ...
+.. math::
+
+    h_x(x^*) \cdot P^n \beta, \qquad n = 1, 2, \ldots
 
 all positive: persistence; otherwise loss of the local attractor (typically hysteresis).
 
-A forced system is written autonomously in ``(x, t)`` with ``t' = 1`` (the surfaces, fields
-and resets may depend on time; the map shifts the time of an impacting orbit at first order:
-for the impact oscillator ``beta`` has only a time component, ``-(1 + r) sqrt(2 / a*)``).
+A forced system is written autonomously in :math:`(x, t)` with :math:`t' = 1` (the surfaces,
+fields and resets may depend on time; the map shifts the time of an impacting orbit at first
+order: for the impact oscillator :math:`\beta` has only a time component,
+:math:`-(1 + r) \sqrt{2 / a^*}`).
 """
 
 from __future__ import annotations
@@ -204,7 +213,15 @@ def _kink_graze(point):
 
 
 def discontinuity_map(point) -> DiscontinuityMap:
-    """Nordmark's discontinuity map (thesis eq. 2.33-2.34) at a grazing point.
+    r"""Nordmark's discontinuity map at a grazing point, to lowest order.
+
+    The map of thesis eq. 2.33-2.34,
+
+    .. math::
+
+        x \mapsto x + \beta \sqrt{-h_x (x - x^*)},
+
+    on the section of zero normal velocity through the grazing point :math:`x^*`.
 
     Parameters
     ----------

@@ -1,74 +1,106 @@
-"""The friction impact oscillator of thesis Papers D and E: the grazing of its stick set, the
+r"""The friction impact oscillator of thesis Papers D and E: the grazing of its stick set, the
 one-dimensional stick-position map, and the low-cost control law 5.3 with its robustness.
 
 The model is the zoo's ``friction-impact-oscillator`` (thesis eq. 3.3-3.5, 5.4): a mass on a
-spring, ``m q'' + k q = F`` with dry friction ``F``, forced only by impacts with a constraint at
-``q = -b + a sin(omega t)`` (restitution ``e`` on the relative velocity). Papers D and E take
-one friction level ``F_f`` (``Fs = Fd``); section 5.3.1 of the thesis a static level ``Fs`` above
-the dynamic one ``Fd``. Everything here is written in the thesis's scaled variables::
+spring, :math:`m q'' + k q = F` with dry friction :math:`F`, forced only by impacts with a
+constraint at :math:`q = -b + a \sin(\omega t)` (restitution :math:`e` on the relative
+velocity). Papers D and E take one friction level :math:`F_f` (``Fs = Fd``); section 5.3.1 of
+the thesis a static level :math:`F_s` above the dynamic one :math:`F_d`. Everything here is
+written in the thesis's scaled variables
 
-    x = k q / Fd,   tau = sqrt(k/m) t,   a~ = k a / Fd,   b~ = k b / Fd,   Omega = omega sqrt(m/k),
+.. math::
 
-in which slipping up is ``x'' + x = -1`` (ellipses about -1 in the plane (x, dx/dtau)), slipping
-down ``x'' + x = +1`` (ellipses about +1), and the mass sticks where ``|x| <= Fs/Fd``.
+    x = \frac{k q}{F_d}, \quad \tau = \sqrt{k/m}\, t, \quad \tilde a = \frac{k a}{F_d}, \quad
+    \tilde b = \frac{k b}{F_d}, \quad \Omega = \omega \sqrt{m/k},
 
-Grazing (thesis Fig. 5.1). A resting mass at ``x`` is reached by the constraint only where
-``x < a~ - b~``: at ``a~* = b~ + 1`` (``a* = b + Fd/k``) the top of the constraint touches the
-edge ``x = 1`` of the stick set and the stick solutions at the edge start to be hit. With
-``Fs > Fd`` stick solutions remain up to ``a** = b + Fs/k`` (section 5.3.1).
+in which slipping up is :math:`x'' + x = -1` (ellipses about -1 in the plane
+:math:`(x, dx/d\tau)`), slipping down :math:`x'' + x = +1` (ellipses about +1), and the mass
+sticks where :math:`|x| \le F_s/F_d`.
 
-The stick-position map (Paper E; thesis Fig. 5.2). Let the mass rest at ``x`` and the constraint
-reach it on its rising branch, at ``a~ sin(theta) = x + b~``. After the impact (3.5) it moves up
-with the velocity ``v+ = (1 + e) a~ Omega cos(theta)``, so that, exactly::
+Grazing (thesis Fig. 5.1). A resting mass at :math:`x` is reached by the constraint only where
+:math:`x < \tilde a - \tilde b`: at :math:`\tilde a^* = \tilde b + 1` (:math:`a^* = b + F_d/k`)
+the top of the constraint touches the edge :math:`x = 1` of the stick set and the stick
+solutions at the edge start to be hit. With :math:`F_s > F_d` stick solutions remain up to
+:math:`a^{**} = b + F_s/k` (section 5.3.1).
 
-    v+^2 = (1 + e)^2 Omega^2 (a~^2 - (x + b~)^2).                                        (1)
+The stick-position map (Paper E; thesis Fig. 5.2). Let the mass rest at :math:`x` and the
+constraint reach it on its rising branch, at :math:`\tilde a \sin\theta = x + \tilde b`. After
+the impact (3.5) it moves up with the velocity :math:`v_+ = (1 + e) \tilde a \Omega \cos\theta`,
+so that, exactly,
 
-It slips up on the ellipse about -1 to ``x_max``, ``(x_max + 1)^2 = (x + 1)^2 + v+^2``, stops
-there if ``x_max <= Fs/Fd``, and otherwise reverses and slips down on the ellipse about +1 to
-``x' = 2 - x_max``, where it comes to rest (for ``x_max`` near 1). As long as the constraint does
-not touch the mass again during this excursion and has fallen away before the mass is at
-rest (the thesis's restriction to driving frequencies below twice the natural one: the
-down-slip takes half a natural period), the map from one stick position to the next,
-``P^2`` of the thesis (two crossings of ``S = {dx/dtau = 0}``), is therefore in closed form::
+.. math::
+    :label: fi-impact-velocity
 
-    x' = 3 - sqrt((x + 1)^2 + (1 + e)^2 Omega^2 (a~^2 - (x + b~)^2)).                      (2)
+    v_+^2 = (1 + e)^2 \Omega^2 \left(\tilde a^2 - (x + \tilde b)^2\right).
 
-To lowest order about the graze (``x = 1 - xi``, ``a~ = a~* + Delta``, ``xi, Delta`` small),
-``v+^2 = (1 + e)^2 Omega^2 (Delta + xi)(2 a~* + Delta - xi)`` and ``x_max - 1 = -xi + v+^2 / 4
-+ O(2)``, so::
+It slips up on the ellipse about -1 to :math:`x_{max}`,
+:math:`(x_{max} + 1)^2 = (x + 1)^2 + v_+^2`, stops there if :math:`x_{max} \le F_s/F_d`, and
+otherwise reverses and slips down on the ellipse about +1 to :math:`x' = 2 - x_{max}`, where it
+comes to rest (for :math:`x_{max}` near 1). As long as the constraint does not touch the mass
+again during this excursion and has fallen away before the mass is at rest (the thesis's
+restriction to driving frequencies below twice the natural one: the down-slip takes half a
+natural period), the map from one stick position to the next, :math:`P^2` of the thesis (two
+crossings of :math:`S = \{dx/d\tau = 0\}`), is therefore in closed form:
 
-    x' - 1 = (gamma - 1)(x - 1) - gamma (a~ - a~*) + O(|x - 1| + |a~ - a~*|)^2,              (3)
-    gamma = (1 + e)^2 Omega^2 a~* / 2 = m a* omega^2 (1 + e)^2 / (2 F_f)          (thesis 5.1).
+.. math::
+    :label: fi-stick-map
 
-The multiplier is ``gamma - 1``: the grazing stick solution is stable, and a branch of
-impacting period-one orbits with the stick position ``x* = 1 - gamma (a~ - a~*) / (2 - gamma)``
-grows from it for ``a > a*`` (persistence), iff ``gamma < 2`` (condition 5.1). For ``gamma > 2``
-the impacting branch is unstable and lies on the other side, ``a < a*`` (loss of the local
-attractor). The error of (3) is of second order: the fixed point of (3) is off that of (2) by
-``O(a~ - a~*)^2``. Two caveats the closed form checks (:func:`stick_map` with ``exact=True``
-raises where they fail): for ``gamma < 1`` the mass does not clear the top of the constraint
-(``x_max - 1 - (a~ - b~ - 1) = (gamma - 1)(xi + Delta)`` to lowest order) and is hit again
-during the excursion, so (2) and (3) apply for ``1 < gamma`` only; and the down-slip must end
-before the constraint comes back.
+    x' = 3 - \sqrt{(x + 1)^2 + (1 + e)^2 \Omega^2 \left(\tilde a^2 - (x + \tilde b)^2\right)}.
+
+To lowest order about the graze (:math:`x = 1 - \xi`, :math:`\tilde a = \tilde a^* + \Delta`,
+:math:`\xi, \Delta` small),
+:math:`v_+^2 = (1 + e)^2 \Omega^2 (\Delta + \xi)(2 \tilde a^* + \Delta - \xi)` and
+:math:`x_{max} - 1 = -\xi + v_+^2 / 4 + O(2)`, so
+
+.. math::
+    :label: fi-linear-map
+
+    x' - 1 &= (\gamma - 1)(x - 1) - \gamma (\tilde a - \tilde a^*)
+              + O\left(|x - 1| + |\tilde a - \tilde a^*|\right)^2, \\
+    \gamma &= \frac{(1 + e)^2 \Omega^2 \tilde a^*}{2}
+            = \frac{m a^* \omega^2 (1 + e)^2}{2 F_f} \qquad \text{(thesis 5.1).}
+
+The multiplier is :math:`\gamma - 1`: the grazing stick solution is stable, and a branch of
+impacting period-one orbits with the stick position
+:math:`x^* = 1 - \gamma (\tilde a - \tilde a^*) / (2 - \gamma)` grows from it for
+:math:`a > a^*` (persistence), iff :math:`\gamma < 2` (condition 5.1). For :math:`\gamma > 2`
+the impacting branch is unstable and lies on the other side, :math:`a < a^*` (loss of the local
+attractor). The error of :eq:`fi-linear-map` is of second order: its fixed point is off that of
+:eq:`fi-stick-map` by :math:`O(\tilde a - \tilde a^*)^2`. Two caveats the closed form checks
+(:meth:`~pwsdyn.grazing.FrictionImpact.stick_map` with ``exact=True`` raises where they
+fail): for :math:`\gamma < 1` the mass does not clear the top of the constraint
+(:math:`x_{max} - 1 - (\tilde a - \tilde b - 1) = (\gamma - 1)(\xi + \Delta)` to lowest order)
+and is hit again during the excursion, so :eq:`fi-stick-map` and :eq:`fi-linear-map` apply for
+:math:`1 < \gamma` only; and the down-slip must end before the constraint comes back.
 
 Control (thesis eq. 5.3, 5.5, 5.11). The constraint's neutral position is reset where the mass
-comes to rest, from the stick position ``x`` and the amplitude::
+comes to rest, from the stick position :math:`x` and the amplitude:
 
-    b~ = a~* - 1 + (1 - c_a)((1 + eps_1)(a~ - a~*) + delta_1)
-                 + (1 - 2 c_x / gamma)((1 + eps_2)(1 - x) + delta_2),
+.. math::
 
-with ``eps_1, eps_2`` multiplicative (5.5) and ``delta_1, delta_2`` additive (5.11) measurement
-errors (all 0: law 5.3; ``c_a = 1, c_x = gamma / 2``: no control). With it the top of the
-constraint is at ``a~ - b~ - 1`` above the edge, and (3) becomes (thesis 5.6 and 5.12)::
+    \tilde b = \tilde a^* - 1
+        + (1 - c_a)\left((1 + \varepsilon_1)(\tilde a - \tilde a^*) + \delta_1\right)
+        + \left(1 - \frac{2 c_x}{\gamma}\right)\left((1 + \varepsilon_2)(1 - x) + \delta_2\right),
 
-    x' - 1 = mu (x - 1) - gamma (c_a + (c_a - 1) eps_1)(a~ - a~*) - gamma (c_a - 1) delta_1
-             + (gamma - 2 c_x) delta_2,         mu = 2 c_x - 1 + (2 c_x - gamma) eps_2,      (4)
+with :math:`\varepsilon_1, \varepsilon_2` multiplicative (5.5) and :math:`\delta_1, \delta_2`
+additive (5.11) measurement errors (all 0: law 5.3; :math:`c_a = 1, c_x = \gamma / 2`: no
+control). With it the top of the constraint is at :math:`\tilde a - \tilde b - 1` above the
+edge, and :eq:`fi-linear-map` becomes (thesis 5.6 and 5.12)
 
-stable iff ``|mu| < 1`` (5.7); at ``c_x = 1/2`` iff ``|eps_2| < 1 / |1 - gamma|`` (5.8). The law
-acts at the crossings of ``S`` that start a stick (events ``stop_neg``, ``stop_pos``): the ``x``
-of the map. The crossing in between, where the mass reverses at ``x_max``, would give a value
-overwritten at the stop before the next impact, and would move the constraint while its top is
-within ``O(a - a*)`` of the mass.
+.. math::
+    :label: fi-controlled-map
+
+    x' - 1 &= \mu (x - 1)
+              - \gamma \left(c_a + (c_a - 1) \varepsilon_1\right)(\tilde a - \tilde a^*)
+              - \gamma (c_a - 1) \delta_1 + (\gamma - 2 c_x) \delta_2, \\
+    \mu &= 2 c_x - 1 + (2 c_x - \gamma) \varepsilon_2,
+
+stable iff :math:`|\mu| < 1` (5.7); at :math:`c_x = 1/2` iff
+:math:`|\varepsilon_2| < 1 / |1 - \gamma|` (5.8). The law acts at the crossings of :math:`S`
+that start a stick (events ``stop_neg``, ``stop_pos``): the :math:`x` of the map. The crossing
+in between, where the mass reverses at :math:`x_{max}`, would give a value overwritten at the
+stop before the next impact, and would move the constraint while its top is within
+:math:`O(a - a^*)` of the mass.
 """
 
 from __future__ import annotations
@@ -89,7 +121,7 @@ MODEL = "friction-impact-oscillator"
 #: stick (the ``x`` of the thesis's map ``P^2``).
 CONTROL_EVENTS = ("stop_neg", "stop_pos")
 
-#: Parameters of :func:`controlled_model`'s law, with their values for no errors.
+#: Parameters of :func:`~pwsdyn.grazing.controlled_model`'s law, with their values for no errors.
 LAW_PARAMETERS = ("c_x", "c_a", "a_star", "eps_1", "eps_2", "delta_1", "delta_2")
 
 _NAMES = ("m", "k", "Fs", "Fd", "a", "b", "omega", "e")
@@ -416,7 +448,7 @@ class FrictionImpact:
         return {n: getattr(self, n) for n in _NAMES}
 
     def law_params(self, gains: ControlGains) -> dict:
-        """The values of the parameters of :func:`controlled_model`'s law."""
+        """The values of the parameters of :func:`~pwsdyn.grazing.controlled_model`'s law."""
         return {"c_x": gains.c_x, "c_a": gains.c_a, "a_star": self.a_ref,
                 "eps_1": gains.eps_1, "eps_2": gains.eps_2, "delta_1": gains.delta_1,
                 "delta_2": gains.delta_2}
@@ -435,9 +467,10 @@ def controlled_model(model=MODEL, *, gains: ControlGains | None = None,
     the law 5.3 (with the errors of 5.5 and 5.11) each time the mass comes to rest.
 
     ``b`` becomes a state (:func:`pwsdyn.with_discrete_control` with
-    ``section="event:stop_neg,stop_pos"``); the law's parameters :data:`LAW_PARAMETERS`
-    (``c_x``, ``c_a``, ``a_star``, ``eps_1``, ``eps_2``, ``delta_1``, ``delta_2``) are
-    parameters of the model, so they can be swept and continued.
+    ``section="event:stop_neg,stop_pos"``); the law's parameters
+    :data:`~pwsdyn.grazing.friction_impact.LAW_PARAMETERS` (``c_x``, ``c_a``, ``a_star``,
+    ``eps_1``, ``eps_2``, ``delta_1``, ``delta_2``) are parameters of the model, so they can be
+    swept and continued.
 
     Parameters
     ----------

@@ -1,17 +1,25 @@
-"""Modes that are affine in the state with harmonic forcing, for exact propagation.
+r"""Modes that are affine in the state with harmonic forcing, for exact propagation.
 
 Most models of the field are piecewise linear: the impact oscillator, the ball on a vibrating
 table, linear friction oscillators, relay feedback of a linear plant. In such a mode the
 vector field has the form
 
-    f(t, x) = A x + b + sum_j ( c_j cos(w_j t) + d_j sin(w_j t) ),
+.. math::
 
-with ``A, b, c_j, d_j, w_j`` depending on the parameters only. Appending the forcing to the
-state, ``z = (x, 1, cos(w_1 t), sin(w_1 t), ...)``, makes the flow autonomous and linear,
+    f(t, x) = A x + b + \sum_j \left(c_j \cos(\omega_j t) + d_j \sin(\omega_j t)\right),
 
-    z' = M z,   M = [[A, b, c_1, d_1, ...], [0, 0, ...], [rotation blocks (0 -w_j; w_j 0)]],
+with :math:`A, b, c_j, d_j, \omega_j` depending on the parameters only. Appending the forcing
+to the state, :math:`z = (x, 1, \cos(\omega_1 t), \sin(\omega_1 t), \ldots)`, makes the flow
+autonomous and linear,
 
-so ``z(t + h) = exp(M h) z(t)`` exactly (the augmentation of Van Loan, IEEE TAC 23 (1978),
+.. math::
+
+    z' = M z, \qquad
+    M = \begin{pmatrix} A & b & c_1 & d_1 & \cdots \\ 0 & 0 & 0 & 0 & \cdots \\
+                        0 & 0 & R_1 & & \\ \vdots & & & \ddots & \end{pmatrix}, \qquad
+    R_j = \begin{pmatrix} 0 & -\omega_j \\ \omega_j & 0 \end{pmatrix},
+
+so :math:`z(t + h) = e^{M h} z(t)` exactly (the augmentation of Van Loan, IEEE TAC 23 (1978),
 which also covers singular ``A``, as for a ball in flight, and resonant forcing, where the
 particular solution of the textbook method does not exist).
 

@@ -1,16 +1,20 @@
-"""Parameters as states: the model extended by ``p' = 0``.
+r"""Parameters as states: the model extended by ``p' = 0``.
 
-For a parameter ``p`` of a model ``x' = f(t, x, p)`` with surfaces ``h(t, x, p)`` and resets
-``g(t, x, p)``, the extended model has the state ``(x, p)`` with ``p' = 0`` and the reset
-``p -> p``. Its variational solution is
+For a parameter :math:`p` of a model :math:`x' = f(t, x, p)` with surfaces :math:`h(t, x, p)`
+and resets :math:`g(t, x, p)`, the extended model has the state :math:`(x, p)` with
+:math:`p' = 0` and the reset :math:`p \mapsto p`. Its variational solution is
 
-    d(x, p)(t) / d(x, p)(t0) = [[dx/dx0, dx/dp], [0, I]],
+.. math::
 
-so the parameter sensitivities ``dx(t)/dp`` of a hybrid trajectory are the last columns of its
-Jacobian, and every derivative the code generator writes (``f_x``, ``h_x``, ``g_x``, the
-saltation matrices built from them) carries the parameter derivatives ``f_p``, ``h_p``,
-``g_p`` symbolically, with no new code (the standard device of parameter continuation codes;
-e.g. the "parameters as states" option of sensitivity solvers).
+    \frac{\partial (x, p)(t)}{\partial (x, p)(t_0)}
+        = \begin{pmatrix} \partial x / \partial x_0 & \partial x / \partial p \\
+                          0 & I \end{pmatrix},
+
+so the parameter sensitivities :math:`\partial x(t) / \partial p` of a hybrid trajectory are
+the last columns of its Jacobian, and every derivative the code generator writes (``f_x``,
+``h_x``, ``g_x``, the saltation matrices built from them) carries the parameter derivatives
+``f_p``, ``h_p``, ``g_p`` symbolically, with no new code (the standard device of parameter
+continuation codes; e.g. the "parameters as states" option of sensitivity solvers).
 
 What carries over to simulation, checked by ``tests/test_orbit_problem.py``:
 

@@ -1,11 +1,13 @@
-"""Piecewise-smooth maps as models.
+r"""Piecewise-smooth maps as models.
 
 The slides ("Simulation: ODEs vs. Hybrid (ODEs and maps)") list discrete-time systems beside
-flows: a map ``x_{k+1} = F_i(x_k)`` whose definition ``F_i`` changes across borders in state
-space ("border crossing"). Nordmark's square-root normal form of a grazing impact,
+flows: a map :math:`x_{k+1} = F_i(x_k)` whose definition :math:`F_i` changes across borders in
+state space ("border crossing"). Nordmark's square-root normal form of a grazing impact,
 
-    x -> mu + lam * x        for x <= 0,
-    x -> mu - sqrt(x)        for x > 0,
+.. math::
+
+    x \mapsto \begin{cases} \mu + \lambda x & \text{for } x \le 0, \\
+                            \mu - \sqrt{x} & \text{for } x > 0, \end{cases}
 
 is the zoo's example (``sqrt-map``). A map model is data like a flow model: a TOML file or a
 dict with ``kind = "map"``, states, parameters, optional definitions and either one smooth

@@ -1,48 +1,57 @@
-"""A hybrid periodic orbit on a fixed signature as a problem ``F(u, p) = 0`` with exact
-Jacobians ``F_u`` and ``F_p``.
+r"""A hybrid periodic orbit on a fixed signature as a problem with exact Jacobians.
+
+The problem is :math:`F(u, p) = 0`, with its Jacobians :math:`F_u` and :math:`F_p`.
 
 Unknowns (the segment formulation of COCO's ``hspo`` toolbox, Dankowicz & Schilder,
 *Recipes for Continuation*, SIAM 2013, ch. 4; Thota & Dankowicz, TC-HAT, SIAM J. Appl.
 Dyn. Syst. 7 (2008)): the orbit's signature (:class:`~pwsdyn.orbits.signature.Signature`) is
 cut into ``m`` segments, segment ``i`` ending with boundary ``i`` (one event, or an impact or a
-chattering sequence followed at the same instant by the start of sticking). With ``n`` states,
+chattering sequence followed at the same instant by the start of sticking). With :math:`n`
+states,
 
-    u = (t_0, x_0, T_0, x_1, T_1, ..., x_{m-1}, T_{m-1})
+.. math::
 
-``x_i`` the state at the start of segment ``i`` (just after boundary ``i - 1``), ``T_i`` its
-duration and ``t_0`` the time segment 0 starts -- an unknown for a forced model (the phase of
-the orbit), left out for an autonomous one. Segment ``i`` starts at
-``t_i = t_0 + sum_{j<i} (T_j + delta_j)``, ``delta_j`` the jump in time of boundary ``j`` (the
-complete-chattering map; zero otherwise). Residual, per segment:
+    u = (t_0, x_0, T_0, x_1, T_1, \ldots, x_{m-1}, T_{m-1}),
 
-    x_{i+1} - E_i(t_i + T_i, y_i) = 0      (n rows: continuity through the event map E_i)
-    c_i(t_i + T_i, y_i) = 0                (1 row: the event condition)
+:math:`x_i` the state at the start of segment :math:`i` (just after boundary :math:`i - 1`),
+:math:`T_i` its duration and :math:`t_0` the time segment 0 starts -- an unknown for a forced
+model (the phase of the orbit), left out for an autonomous one. Segment :math:`i` starts at
+:math:`t_i = t_0 + \sum_{j<i} (T_j + \delta_j)`, :math:`\delta_j` the jump in time of boundary
+:math:`j` (the complete-chattering map; zero otherwise). Residual, per segment:
 
-with ``y_i = phi_i(t_i + T_i; t_i, x_i, p)`` the segment's flow (``x_m = x_0``), ``c_i`` the
-surface ``h`` (impacts, transitions, crossings, sliding entry, chattering), the normal velocity
-of the exit mode (sliding exit) or the free normal acceleration (release), and ``E_i`` the
-reset, the identity or the chattering map. A forced model adds the period
-``t_m - t_0 - k T_f(p) = 0`` (``k`` forcing periods); an autonomous one needs no phase
-condition: the event conditions fix where the segments start (the section is the last
-event's surface). Square: ``1 + m (n + 1)`` (forced) or ``m (n + 1)`` unknowns and equations.
-Without events (``m = 0``) the problem is single shooting: ``phi(t_0 + P; t_0, x_0) - x_0``
-with ``t_0`` fixed, plus, autonomous, the unknown ``P`` and the phase condition
-``n . (x_0 - x_ref) = 0``.
+.. math::
+
+    x_{i+1} - E_i(t_i + T_i, y_i) &= 0
+        \qquad \text{($n$ rows: continuity through the event map $E_i$)}, \\
+    c_i(t_i + T_i, y_i) &= 0 \qquad \text{(1 row: the event condition)},
+
+with :math:`y_i = \varphi_i(t_i + T_i; t_i, x_i, p)` the segment's flow (:math:`x_m = x_0`),
+:math:`c_i` the surface :math:`h` (impacts, transitions, crossings, sliding entry,
+chattering), the normal velocity of the exit mode (sliding exit) or the free normal
+acceleration (release), and :math:`E_i` the reset, the identity or the chattering map. A
+forced model adds the period :math:`t_m - t_0 - k T_f(p) = 0` (:math:`k` forcing periods); an
+autonomous one needs no phase condition: the event conditions fix where the segments start
+(the section is the last event's surface). Square: :math:`1 + m (n + 1)` (forced) or
+:math:`m (n + 1)` unknowns and equations. Without events (:math:`m = 0`) the problem is single
+shooting: :math:`\varphi(t_0 + P; t_0, x_0) - x_0` with :math:`t_0` fixed, plus, autonomous,
+the unknown :math:`P` and the phase condition :math:`n \cdot (x_0 - x_{ref}) = 0`.
 
 Jacobians: each segment is integrated by the compiled kernel with its variational equations
-in the state extended by the chosen parameters (``p' = 0``; :mod:`pwsdyn.orbits._segments`),
-so ``Phi = d(y, p)/d(x, p)`` holds ``dy/dx`` and ``dy/dp``; ``dy/dT = f(t_e, y)`` and
-``dy/dt_i = f(t_e, y) - Phi f(t_i, x_i)``. The conditions and maps are generated with their
-gradients over ``(x, p)`` and ``t``; the chattering map's projection onto the sticking manifold
-is differentiated implicitly. All are chained by the product rule (forward mode) into
-``[F_u | F_p]``: exact up to the integration tolerance, no difference quotient of ``F``.
+in the state extended by the chosen parameters (:math:`p' = 0`; ``pwsdyn.orbits._segments``),
+so :math:`\Phi = \partial(y, p)/\partial(x, p)` holds :math:`\partial y/\partial x` and
+:math:`\partial y/\partial p`; :math:`\partial y/\partial T = f(t_e, y)` and
+:math:`\partial y/\partial t_i = f(t_e, y) - \Phi f(t_i, x_i)`. The conditions and maps are
+generated with their gradients over :math:`(x, p)` and :math:`t`; the chattering map's
+projection onto the sticking manifold is differentiated implicitly. All are chained by the
+product rule (forward mode) into :math:`[F_u \mid F_p]`: exact up to the integration
+tolerance, no difference quotient of :math:`F`.
 
 On a fixed signature nothing stops a segment at a surface it is not meant to end at: the orbit
 can be followed past a grazing into the region where it is not a solution of the hybrid
-model. :meth:`OrbitProblem.admissibility` says whether it is one and, if not, why (a segment
-crossing a constraint or a switching surface, an impact with the flow leaving the surface,
-sticking with a pulling contact force, sliding outside the sliding region, a negative
-duration).
+model. :meth:`~pwsdyn.orbits.OrbitProblem.admissibility` says whether it is one and, if not,
+why (a segment crossing a constraint or a switching surface, an impact with the flow leaving
+the surface, sticking with a pulling contact force, sliding outside the sliding region, a
+negative duration).
 """
 
 from __future__ import annotations
@@ -78,7 +87,7 @@ _SAMPLES = 8
 _SYSTEMS: dict = {}
 
 
-#: Kinds of the monitors of :meth:`OrbitProblem.dib_monitors` (discontinuity-induced
+#: Kinds of the monitors of :meth:`~pwsdyn.orbits.OrbitProblem.dib_monitors` (discontinuity-induced
 #: bifurcations of an orbit): grazing, grazing-, switching-, crossing- and adding-sliding,
 #: corner collision.
 DIB_KINDS = ("GR", "GS", "SS", "CS", "AS", "CC")
@@ -1714,7 +1723,7 @@ class OrbitProblem:
 @dataclass(frozen=True)
 class OrbitSensitivity:
     """Derivatives of a periodic orbit with respect to a parameter along its branch
-    (:meth:`PeriodicOrbit.sensitivity`).
+    (:meth:`~pwsdyn.PeriodicOrbit.sensitivity`).
 
     Attributes
     ----------

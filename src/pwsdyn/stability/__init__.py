@@ -4,9 +4,9 @@ Floquet multipliers.
 The variational equations are integrated by the compiled kernel (``simulate(...,
 variational=True)``), per smooth segment, with the saltation matrix of every event; the
 trajectory keeps them as ``transfer_matrices``. This package reads them: :func:`segments`,
-:func:`monodromy`, the two forms of saltation matrix (:func:`saltation_matrix`, full and
-projected, thesis eq. 2.36), Poincaré maps with Jacobians (:func:`poincare_map`, thesis
-eq. 2.25) and :func:`floquet_multipliers`.
+:func:`~pwsdyn.monodromy`, the two forms of saltation matrix (:func:`~pwsdyn.saltation_matrix`,
+full and projected, thesis eq. 2.36), Poincaré maps with Jacobians
+(:func:`~pwsdyn.poincare_map`, thesis eq. 2.25) and :func:`~pwsdyn.floquet_multipliers`.
 """
 
 from ._floquet import floquet_multipliers as floquet_multipliers

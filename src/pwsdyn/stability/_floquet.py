@@ -36,7 +36,7 @@ def section_basis(normal) -> np.ndarray:
 
 def floquet_multipliers(monodromy: ArrayLike, *, flow_direction: ArrayLike | None = None,
                         section_normal: ArrayLike | None = None) -> np.ndarray:
-    """Nontrivial Floquet multipliers, sorted by decreasing modulus.
+    r"""Nontrivial Floquet multipliers, sorted by decreasing modulus.
 
     Parameters
     ----------
@@ -54,8 +54,8 @@ def floquet_multipliers(monodromy: ArrayLike, *, flow_direction: ArrayLike | Non
     -------
     numpy.ndarray
         ``n`` multipliers, or ``n - 1`` for an autonomous orbit: the eigenvalues of the
-        Poincaré-map Jacobian of thesis eq. 2.25, ``(I - f h_x / (h_x f)) M``, restricted to the
-        section's tangent space (where its eigenvalue 0 along ``f`` is absent).
+        Poincaré-map Jacobian of thesis eq. 2.25, :math:`(I - f h_x / (h_x f)) M`, restricted
+        to the section's tangent space (where its eigenvalue 0 along :math:`f` is absent).
     """
     M = V.matrix("monodromy", monodromy)
     n = M.shape[0]

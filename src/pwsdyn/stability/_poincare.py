@@ -150,7 +150,9 @@ def poincare_map(model: ModelLike, x0: StateLike, section: str, *,
                  params: Mapping[str, float] | None = None, t0: float = 0.0,
                  returns: int = 1, side: str = "after", mode: str | None = None,
                  t_max: float | None = None, **options: Any) -> PoincareResult:
-    """Evaluate a Poincaré map and its Jacobian (thesis eq. 2.25).
+    """Evaluate a Poincaré map and its Jacobian.
+
+    The map and its Jacobian from the saltation matrices of its events (thesis eq. 2.25).
 
     Parameters
     ----------

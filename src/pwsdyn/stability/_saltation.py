@@ -122,7 +122,7 @@ def saltation_matrix(model: ModelLike, event: str, t: float, x: StateLike, *,
                      params: Mapping[str, float] | None = None, mode: str | None = None,
                      form: str = "full", sliding: str = "convex",
                      sliding_gain: float = 0.0, chatter: bool = False) -> np.ndarray:
-    """Saltation matrix of a model event or switch at a point of its surface.
+    r"""Saltation matrix of a model event or switch at a point of its surface.
 
     Parameters
     ----------
@@ -137,10 +137,19 @@ def saltation_matrix(model: ModelLike, event: str, t: float, x: StateLike, *,
         The mode before the event (default: the event's first mode; for a switch, the side
         the flow arrives from, which must then be unique).
     form : {'full', 'projected'}
-        ``full``: ``S = g_x + (f_out - g_x f_in - g_t) h_x / (h_t + h_x f_in)`` (slides,
-        Adolfsson et al. 2001), the jump of the variational solution. ``projected``: thesis
-        eq. 2.36, ``g_x (I - f_in h_x / (h_t + h_x f_in)) - g_t h_x / (h_t + h_x f_in)``, the
-        Jacobian between Poincaré sections (COCO ``hspo``). See the module docstring.
+        ``full`` (slides, Adolfsson et al. 2001), the jump of the variational solution:
+
+        .. math::
+
+            S = g_x + \frac{(f_{out} - g_x f_{in} - g_t)\, h_x}{h_t + h_x f_{in}}.
+
+        ``projected`` (thesis eq. 2.36), the Jacobian between Poincaré sections (COCO
+        ``hspo``):
+
+        .. math::
+
+            S_p = g_x \left(I - \frac{f_{in} h_x}{h_t + h_x f_{in}}\right)
+                - \frac{g_t h_x}{h_t + h_x f_{in}}.
     sliding, sliding_gain : str, float
         The sliding field's method and stabilising rate (as in :func:`pwsdyn.simulate`); the
         stabilising term vanishes on the surface.

@@ -92,14 +92,14 @@ def segments(traj) -> list:
 
 
 def monodromy(traj: Trajectory, form: str = "full") -> np.ndarray:
-    """Ordered product of the transfer matrices of a trajectory.
+    r"""Ordered product of the transfer matrices of a trajectory.
 
     Parameters
     ----------
     traj : Trajectory
         A run with ``variational=True`` (over one period for a monodromy matrix).
     form : {'full', 'projected'}
-        ``full``: ``Phi_m S_m ... S_1 Phi_0`` with the full saltation matrices, equal to
+        ``full``: :math:`\Phi_m S_m \cdots S_1 \Phi_0` with the full saltation matrices, equal to
         ``traj.jacobian``; for an autonomous periodic orbit it has the trivial multiplier 1.
         ``projected``: the same product with the saltation matrices of thesis eq. 2.36, whose
         eigenvalue 0 replaces the trivial 1 (needs every event to have a projected form).
