@@ -39,7 +39,8 @@ QUIET_ENV = "PWSDYN_QUIET"
 
 #: How long the first compilation of the integrator takes, measured from fresh checkouts on a
 #: 2-core x86-64 virtual machine: 51-60 s of CPU; 51 s of wall time when the machine is idle,
-#: up to 102 s when other work shares it.
+#: 102 s with one other job, 331 s at a load average of 4.7 (which the message cannot know:
+#: it counts the seconds instead).
 KERNEL_COMPILE_TIME = "1-2 minutes on 2 cores"
 
 #: Seconds between two progress lines when stderr is not a terminal.
