@@ -519,3 +519,78 @@ def test_poincare_switch_section_matches_fd_of_the_map():
     assert np.max(np.abs(res.time_gradient - J[2])) < FD_TOL * np.max(np.abs(J[2]))
     # v on the section is vb whatever x0
     assert np.max(np.abs(res.jacobian[1])) < 1e-12
+
+
+# ======================================================================================
+# one saltation formula on the Python side
+# ======================================================================================
+
+def test_event_map_saltation_is_the_derivative_of_an_event_map():
+    """For an event map that moves time as well as state, ``(t, x) -> (t + q x, G x + g_t t)``,
+    applied where ``c = x_0 + 0.2 t - 1`` vanishes, between constant fields ``a`` before and
+    ``b`` after, every flow Jacobian is the identity: the saltation matrix is the derivative of
+    the state at a later common time with respect to the state at time 0. Everything is affine
+    along the way, so central differences are exact but for rounding (measured 1e-12)."""
+    from pwsdyn.stability._saltation import event_map_saltation
+
+    a, b = np.array([1.0, 0.5]), np.array([-0.3, 2.0])
+    q, G, gt = np.array([0.1, -0.2]), np.array([[1.0, 0.3], [0.0, -0.8]]), np.array([0.05, 0.4])
+    cx, ct, T = np.array([1.0, 0.0]), 0.2, 10.0
+
+    def later(x0):
+        s = (1.0 - x0[0]) / (a[0] + ct)             # c(s, x0 + a s) = 0
+        xs = x0 + a * s
+        tau, X = s + q @ xs, G @ xs + gt * s
+        return X + b * (T - tau)
+
+    x0 = np.array([0.2, 0.7])
+    S = event_map_saltation(G, gt, a, b, cx, ct + cx @ a, tau_x=q, tau_t=1.0)
+    np.testing.assert_allclose(S, central_fd(later, x0, 1e-3), rtol=0, atol=1e-10)
+    # a reset (tau = t): the slides' full form; for a time-independent surface and reset it
+    # takes f_in to f_out, and with no field after it (eq. 2.36's projected form) to 0
+    den = ct + cx @ a
+    np.testing.assert_allclose(event_map_saltation(G, gt, a, b, cx, den),
+                               G + np.outer(b - G @ a - gt, cx) / den, rtol=0, atol=1e-15)
+    zero = np.zeros(2)
+    np.testing.assert_allclose(event_map_saltation(G, zero, a, b, cx, cx @ a) @ a, b,
+                               rtol=0, atol=1e-15)
+    np.testing.assert_allclose(event_map_saltation(G, zero, a, zero, cx, cx @ a) @ a, zero,
+                               rtol=0, atol=1e-15)
+
+
+def test_the_orbit_problem_uses_the_one_saltation_formula(monkeypatch):
+    """``saltation_matrix`` (both forms) and the orbit problem's monodromy go through
+    ``event_map_saltation``: a stand-in for it is what they answer with, so no second copy
+    of the formula is left."""
+    from pwsdyn.orbits import problem as orbit_problem
+    from pwsdyn.orbits.problem import OrbitProblem
+    from pwsdyn.stability import _saltation
+
+    from _orbit_cases import io_orbit
+
+    formula = _saltation.event_map_saltation
+    assert orbit_problem.event_map_saltation is formula
+    orbit = io_orbit("stable")
+    prob, u = OrbitProblem.from_orbit(orbit)
+    ev = prob.evaluate(u)
+    M = prob.monodromy(ev)
+    # at another base point than the orbit's, so its eigenvalues are compared
+    np.testing.assert_allclose(np.sort_complex(np.linalg.eigvals(M)),
+                               np.sort_complex(np.linalg.eigvals(orbit.monodromy)), atol=1e-9)
+    e = orbit.trajectory.events[0]
+    p = orbit.params
+    S = {form: saltation_matrix("impact-oscillator", "impact", e.t, e.x_before, params=p,
+                                form=form) for form in ("full", "projected")}
+
+    def doubled(*args, **kwargs):
+        return 2.0 * formula(*args, **kwargs)
+
+    monkeypatch.setattr(orbit_problem, "event_map_saltation", doubled)
+    monkeypatch.setattr(_saltation, "event_map_saltation", doubled)
+    n_events = len(prob.bounds)
+    assert n_events >= 1
+    np.testing.assert_allclose(prob.monodromy(ev), 2.0 ** n_events * M, rtol=1e-14)
+    for form, S0 in S.items():
+        np.testing.assert_array_equal(
+            saltation_matrix("impact-oscillator", "impact", e.t, e.x_before, params=p,
+                             form=form), 2.0 * S0)

@@ -256,3 +256,35 @@ def test_imports_run_one_way(files, forbidden):
     bad = {(str(p.relative_to(SRC)), m) for p in SRC.glob(files) for m in _imports(p)
            if m.startswith(forbidden)}
     assert bad == set()
+
+
+def _reachable(module: str) -> set:
+    """Every pwsdyn module ``module`` loads, directly or through the modules it imports, at
+    module level or inside a function (the package ``pwsdyn`` itself, which loads everything
+    on purpose, left out)."""
+    def path(mod):
+        p = SRC.joinpath(*mod.split(".")[1:])
+        return p.with_suffix(".py") if p.with_suffix(".py").exists() else (
+            p / "__init__.py" if (p / "__init__.py").exists() else None)
+
+    seen, todo = set(), [module]
+    while todo:
+        m = todo.pop()
+        if m in seen or m == "pwsdyn" or path(m) is None:
+            continue
+        seen.add(m)
+        todo.extend(_imports(path(m)))
+    return seen
+
+
+def test_trajectory_file_layout_is_a_lower_layer():
+    """The trajectory's file layout reaches no result type and no ``pwsdyn.io``, even through
+    function-local imports, so the trajectory's ``to_dataset``/``from_dataset``/``save``
+    calling it close no circle; ``pwsdyn.io`` reaches the layout through the trajectory."""
+    below = _reachable("pwsdyn._trajectory_file")
+    assert "pwsdyn._netcdf" in below and "pwsdyn.model" in below
+    assert not {m for m in below if m.startswith(("pwsdyn.integrate", "pwsdyn.io",
+                                                  "pwsdyn.stability", "pwsdyn.orbits",
+                                                  "pwsdyn.explore", "pwsdyn.continuation"))}
+    assert "pwsdyn._trajectory_file" in _imports(SRC / "integrate" / "trajectory.py")
+    assert {"pwsdyn.integrate.trajectory", "pwsdyn._trajectory_file"} <= _reachable("pwsdyn.io")

@@ -3,7 +3,7 @@ model and the versions that made the data), the one table of status codes, JSON 
 survives non-finite numbers, and atomic writes that never leave half a file.
 
 Every result lays out its own dataset with these helpers (trajectories in
-:mod:`pwsdyn.integrate.trajectory`, periodic orbits, sweeps, basins, Lyapunov spectra beside
+:mod:`pwsdyn._trajectory_file`, periodic orbits, sweeps, basins, Lyapunov spectra beside
 their code); :mod:`pwsdyn.io` is the public face that reads and writes them all. This module
 imports no result type, so any layer may use it.
 """

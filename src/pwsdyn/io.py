@@ -59,8 +59,10 @@ Attributes: those above, ``pwsdyn_type`` (``"trajectory"``), ``params``, ``param
 ``status_code``, ``message``, ``t0``, ``t_end`` and ``provenance`` (JSON).
 
 This module is the public face of the files: every result lays out its own dataset
-(``to_dataset()``; a trajectory's in :mod:`pwsdyn.integrate.trajectory`) with the shared
-plumbing of :mod:`pwsdyn._netcdf`, re-exported here.
+(``to_dataset()``; a trajectory's layout is in :mod:`pwsdyn._trajectory_file`, which
+``Trajectory.to_dataset`` and ``Trajectory.from_dataset`` call) with the shared
+plumbing of :mod:`pwsdyn._netcdf`, re-exported here. Imports run one way: this module ->
+:mod:`pwsdyn.integrate.trajectory` -> :mod:`pwsdyn._trajectory_file` -> :mod:`pwsdyn._netcdf`.
 """
 
 from __future__ import annotations

@@ -73,6 +73,7 @@ from ..integrate._codes import REGULAR, SLIDE, STICK
 from ..integrate.trajectory import DiscreteState
 from ..stability._context import KernelState, ModelContext
 from ..stability._floquet import floquet_multipliers
+from ..stability._saltation import event_map_saltation
 from ._base import STABILITY_MARGIN, OrbitError, shooting_options
 from ._orbit import PeriodicOrbit
 from ._segments import FieldKey, SegmentSystem
@@ -1374,23 +1375,20 @@ class OrbitProblem:
         return M
 
     def _saltation(self, i, s) -> np.ndarray:
-        """Full saltation matrix of boundary ``i`` (model states): for an event map
-        ``(t, x) -> (tau, X)`` applied where ``c(t, x) = 0``,
-        ``S = C - (X_t + C f_in - F tau_t) c_x / (c_t + c_x f_in)``, ``C = X_x - F tau_x``,
-        ``F`` the field after the event (the kernel's ``_chatter_saltation`` docstring; for
-        a reset, the slides' ``S = g_x + (f_out - g_x f_in - g_t) h_x / (h_t + h_x f_in)``)."""
+        """Full saltation matrix of boundary ``i`` (model states), of its event map
+        ``(t, x) -> (tau, X)`` (:func:`~pwsdyn.stability._saltation.event_map_saltation`)."""
         n = self.n
         k = (i + 1) % self.m
         zX = np.array(s.X, dtype=float)
         Fo = self.sys.field(self._fidx[k], s.tau, zX, self._pv)[:n]
         fi = s.f_end[:n]
-        C = s.X_y[:n, :n] - np.outer(Fo, s.tau_y[:n])
         cx = s.c_z[:n]
         den = s.c_t + cx @ fi
         # den = 0 at an event with zero normal velocity (a graze): the matrix is infinite,
         # left to the callers to see (multipliers NaN)
         with np.errstate(divide="ignore", invalid="ignore"):
-            return C - np.outer(s.X_t[:n] + C @ fi - Fo * s.tau_t, cx) / den
+            return event_map_saltation(s.X_y[:n, :n], s.X_t[:n], fi, Fo, cx, den,
+                                       tau_x=s.tau_y[:n], tau_t=s.tau_t)
 
     def multipliers(self, ev: ProblemEvaluation) -> np.ndarray:
         """Floquet multipliers of the orbit at ``ev`` (nontrivial ones, autonomous)."""

@@ -1,22 +1,20 @@
-"""Saltation matrices: the full form and the projected form of thesis eq. 2.36.
+"""Saltation matrices: the full form and the projected form.
 
-Two forms are in use and they must not be mixed up:
+Two forms are in use and they must not be mixed up; both come from the one formula,
+:func:`event_map_saltation`, where their equations and sources are given:
 
-``full`` (slides, "Saltation matrices"; Adolfsson et al. 2001)
-    ``S = g_x + (f_out - g_x f_in - g_t) h_x / (h_t + h_x f_in)``: the jump of the variational
-    solution, ``Phi+ = S Phi-``, for a perturbation compared at a common time. Products of
-    flow Jacobians and full saltation matrices are Jacobians of time-``T`` maps; the monodromy
-    matrix of an autonomous periodic orbit keeps its trivial multiplier 1 (eigenvector ``f``),
-    since ``S f_in = f_out``. This is what the kernel applies (``Trajectory.jacobian``,
-    ``Trajectory.transfer_matrices``).
+``full``
+    The jump of the variational solution, ``Phi+ = S Phi-``, for a perturbation compared at a
+    common time. Products of flow Jacobians and full saltation matrices are Jacobians of
+    time-``T`` maps; the monodromy matrix of an autonomous periodic orbit keeps its trivial
+    multiplier 1 (eigenvector ``f``), since ``S f_in = f_out``. This is what the kernel applies
+    (``Trajectory.jacobian``, ``Trajectory.transfer_matrices``).
 
-``projected`` (thesis eq. 2.36; the transfer matrices of COCO's ``hspo`` toolbox)
-    ``S_p = g_x (I - f_in h_x / (h_t + h_x f_in)) - g_t h_x / (h_t + h_x f_in)``: the
-    derivative of the point where the perturbed solution hits the surface, mapped by the reset,
-    i.e. the Jacobian between Poincaré sections. ``S_p = S - f_out h_x / (h_t + h_x f_in)``; it
-    kills the flow direction (``S_p f_in = 0``), so products have eigenvalue 0 where the full
-    monodromy has 1. For time-independent ``h`` and ``g`` it is eq. 2.36 exactly; the ``h_t``,
-    ``g_t`` terms are the time components of the same projection in phase-extended state space.
+``projected`` (the transfer matrices of COCO's ``hspo`` toolbox)
+    The derivative of the point where the perturbed solution hits the surface, mapped by the
+    reset, i.e. the Jacobian between Poincaré sections: the full form without the field after
+    the event, ``S_p = S - f_out h_x / (h_t + h_x f_in)``. It kills the flow direction
+    (``S_p f_in = 0``), so products have eigenvalue 0 where the full monodromy has 1.
 
 Both are defined at events applied at the crossing time: ``impact`` and ``transition`` events
 and the Filippov ``crossing`` and ``slide_start`` of a switch (``g`` the identity). Events that
@@ -83,6 +81,47 @@ def _chatter_full(ctx: ModelContext, name: str, t: float, x_before, mode: int,
     return S
 
 
+def event_map_saltation(X_x, X_t, f_in, f_out, c_x, den, tau_x=None,
+                        tau_t: float = 1.0) -> np.ndarray:
+    r"""The saltation formula, the one every Python caller uses (the compiled kernel keeps
+    its own copy, ``_event_saltation``, with the same order of operations).
+
+    For an event map ``(t, x) -> (tau, X)`` applied where ``c(t, x) = 0``, with ``f_in`` the
+    field before the event and ``f_out`` the field after it, at ``(tau, X)``:
+
+    .. math::
+
+        S = C + \frac{(f_{out} \tau_t - C f_{in} - X_t)\, c_x}{c_t + c_x f_{in}},
+        \qquad C = X_x - f_{out} \tau_x.
+
+    A reset ``x -> g(t, x)`` (``tau = t``: ``tau_x = 0``, ``tau_t = 1``) gives the full
+    saltation matrix of the slides ("Saltation matrices"; Adolfsson et al. 2001),
+    ``S = g_x + (f_out - g_x f_in - g_t) h_x / (h_t + h_x f_in)``; with ``f_out = 0`` it is
+    the projected form of thesis eq. 2.36,
+    ``S_p = g_x (I - f_in h_x / (h_t + h_x f_in)) - g_t h_x / (h_t + h_x f_in)`` (eq. 2.36
+    exactly for time-independent ``h`` and ``g``; the ``h_t``, ``g_t`` terms are the time
+    components of the same projection in phase-extended state space). The
+    complete-chattering map moves time as well (the kernel's ``_chatter_saltation``).
+
+    Parameters
+    ----------
+    X_x, X_t : numpy.ndarray
+        Derivatives of the new state ``X`` in ``x`` (n x n) and in ``t`` (n).
+    f_in, f_out : numpy.ndarray
+        The fields before and after the event (``f_out = 0`` for the projected form).
+    c_x : numpy.ndarray
+        Gradient of the event function ``c`` in ``x``.
+    den : float
+        ``c_t + c_x f_in``, the rate at which the flow crosses the surface; the caller
+        checks it for grazing (zero gives an infinite matrix, ``inf``/``nan`` entries).
+    tau_x, tau_t : numpy.ndarray or None, float
+        Derivatives of the new time ``tau`` in ``x`` and ``t`` (default: a reset, ``None``
+        for ``tau_x = 0`` and ``tau_t = 1``).
+    """
+    C = X_x if tau_x is None else X_x - np.outer(f_out, tau_x)
+    return C + np.outer(f_out * tau_t - C @ f_in - X_t, c_x) / den
+
+
 def _saltation_pair(ctx: ModelContext, kind: str, name: str, t: float, x_before, x_after,
                     st_before: KernelState, st_after: KernelState, sliding_gain: float = 0.0):
     """Full and projected saltation matrices at one event from the model's derivatives
@@ -113,8 +152,9 @@ def _saltation_pair(ctx: ModelContext, kind: str, name: str, t: float, x_before,
         raise ArgumentError(f"{kind} {name!r} at t={t:.17g} is grazing (h_t + h_x f = {den:.3e}, "
                             f"|h_x| |f| = {scale:.3e}): its saltation matrix is unbounded (a "
                             f"simulation with variational=True gives NaN there)")
-    full = gx + np.outer(f_out - gx @ f_in - gt, hx) / den
-    proj = gx - np.outer(gx @ f_in + gt, hx) / den
+    full = event_map_saltation(gx, gt, f_in, f_out, hx, den)
+    # the projected form is the full one without the field after the event
+    proj = event_map_saltation(gx, gt, f_in, np.zeros(n), hx, den)
     return full, proj
 
 
