@@ -137,7 +137,7 @@ class Status(enum.IntEnum):
         return tuple(s for s in cls if s >= 0)
 
 
-#: The orbit failures, with the ``reason`` text of :class:`OrbitError`.
+#: The orbit failures, with the ``reason`` text of :class:`~pwsdyn.OrbitError`.
 ORBIT_FAILURES = (Status.SINGULAR, Status.PHASE, Status.EQUILIBRIUM, Status.SIGNATURE,
                   Status.BUDGET, Status.NO_PROGRESS, Status.NEWTON_DIVERGED,
                   Status.SIMULATION_FAILED)

@@ -60,7 +60,7 @@ Attributes: those above, ``pwsdyn_type`` (``"trajectory"``), ``params``, ``param
 
 This module is the public face of the files: every result lays out its own dataset
 (``to_dataset()``; a trajectory's in :mod:`pwsdyn.integrate.trajectory`) with the shared
-plumbing of :mod:`pwsdyn._netcdf`, re-exported here.
+plumbing of ``pwsdyn._netcdf``, re-exported here.
 """
 
 from __future__ import annotations
@@ -82,7 +82,7 @@ __all__ = ["CONVENTIONS", "ENGINE", "OVERWRITE_HINT", "TRAJECTORY_TYPE", "VERSIO
 
 
 def load_trajectory(path, model=None):
-    """Read a trajectory saved with :meth:`Trajectory.save` or :func:`save_dataset`.
+    """Read a trajectory saved with :meth:`~pwsdyn.Trajectory.save` or :func:`save_dataset`.
 
     Parameters
     ----------

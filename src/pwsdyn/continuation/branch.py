@@ -38,12 +38,13 @@ KINDS = {
 
 @dataclass
 class SpecialPoint:
-    """A located special point of a :class:`Branch`.
+    """A located special point of a :class:`~pwsdyn.Branch`.
 
     Attributes
     ----------
     kind : str
-        ``"LP"``, ``"BP"``, ``"PD"``, ``"NS"``, ``"HB"`` or ``"EP"`` (see :data:`KINDS`).
+        ``"LP"``, ``"BP"``, ``"PD"``, ``"NS"``, ``"HB"`` or ``"EP"`` (see
+        :data:`~pwsdyn.continuation.branch.KINDS`).
     index : int
         Its index among the branch's points.
     value : float

@@ -29,12 +29,13 @@ STATE_KINDS = _STATE_KINDS
 class DiscreteState(str):
     """A discrete state of a flow: a mode, sticking on an impact event or sliding on a switch.
 
-    ``DiscreteState(kind, name)`` with ``kind`` one of :data:`STATE_KINDS` (``"mode"``,
-    ``"stick"``, ``"slide"``) and ``name`` the mode, impact event or switch. It is the text
-    the event log, the trajectory's ``state`` and every file have always used (the mode's
-    name, ``stick:<event>``, ``slide:<switch>``) and a ``str``: it compares equal to that
-    text, hashes like it and is written as it, so code that compares states with strings
-    keeps working. :meth:`parse` is the one reader of that text.
+    ``DiscreteState(kind, name)`` with ``kind`` one of
+    :data:`~pwsdyn.integrate.trajectory.STATE_KINDS` (``"mode"``, ``"stick"``, ``"slide"``) and
+    ``name`` the mode, impact event or switch. It is the text the event log, the trajectory's
+    ``state`` and every file have always used (the mode's name, ``stick:<event>``,
+    ``slide:<switch>``) and a ``str``: it compares equal to that text, hashes like it and is
+    written as it, so code that compares states with strings keeps working. :meth:`parse` is the
+    one reader of that text.
 
     Examples
     --------
@@ -160,15 +161,15 @@ SWITCH_EVENT_KINDS = ("crossing", "slide_start", "slide_end")
 
 
 class EventLog(Sequence):
-    """The event log of a run: a read-only sequence of :class:`EventRecord` with its columns
-    as arrays.
+    """The event log of a run: a read-only sequence of :class:`~pwsdyn.EventRecord` with its
+    columns as arrays.
 
     The kernel returns the log as arrays; records are made only when the log is indexed or
     iterated (a sweep logs hundreds of events per parameter value and reads the columns
     only). The columns: ``t``, ``t_after``, ``kind_code`` (index into
-    :data:`EVENT_KINDS`), ``ref`` (event or switch index), ``x_before``, ``x_after``,
-    ``state_before``/``state_after`` (kernel discrete states ``(kind, index, mode)``, kind
-    0 a mode, 1 sticking, 2 sliding) and the derived ``kind`` and ``name``.
+    :data:`~pwsdyn.integrate.trajectory.EVENT_KINDS`), ``ref`` (event or switch index),
+    ``x_before``, ``x_after``, ``state_before``/``state_after`` (kernel discrete states ``(kind,
+    index, mode)``, kind 0 a mode, 1 sticking, 2 sliding) and the derived ``kind`` and ``name``.
     """
 
     __slots__ = ("model", "t", "t_after", "kind_code", "ref", "x_before", "x_after",
@@ -189,7 +190,7 @@ class EventLog(Sequence):
 
     @classmethod
     def from_records(cls, model, records, n: int | None = None) -> "EventLog":
-        """The log of ``records`` (:class:`EventRecord`, in time order), with its columns.
+        """The log of ``records`` (:class:`~pwsdyn.EventRecord`, in time order), with its columns.
 
         For a log that does not come from the kernel: one read from a file, the events of a
         periodic orbit put together from its segments. Its records are the ones given (their
@@ -367,11 +368,12 @@ class Trajectory:
         States at those times.
     state : numpy.ndarray of str
         Discrete state (mode name, ``stick:<event>`` or ``slide:<switch>``) at each node;
-        :meth:`DiscreteState.parse` reads an entry.
+        :meth:`~pwsdyn.integrate.DiscreteState.parse` reads an entry.
     events : EventLog
         The event log, in time order: a sequence of :class:`EventRecord` whose columns are
         also arrays. It is the hybrid orbit's segment signature. A list of records given to
-        the constructor is made an :class:`EventLog` (:meth:`EventLog.from_records`).
+        the constructor is made an :class:`~pwsdyn.integrate.EventLog`
+        (:meth:`~pwsdyn.integrate.EventLog.from_records`).
     status : Status
     message : str
     stats : dict
