@@ -110,7 +110,7 @@ class Status(enum.IntEnum):
 
     @property
     def reason(self) -> str:
-        """The short text of the outcome: :attr:`meaning`, except for the orbit failures,
+        """The short text of the outcome, :attr:`meaning`, except for the orbit failures,
         whose text is the ``reason`` :class:`OrbitError` has always carried (``'diverged'``,
         ``'simulation'``, ...)."""
         return _ORBIT_REASONS.get(self, self.meaning)

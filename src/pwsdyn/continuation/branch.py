@@ -86,8 +86,8 @@ class SpecialPoint:
 
     @property
     def monitor(self):
-        """For a discontinuity-induced bifurcation: the monitor located here, with the segment,
-        the surface and the point of tangency (``.t``, ``.x``); ``None`` otherwise."""
+        """The monitor located here for a discontinuity-induced bifurcation, with the
+        segment, the surface and the point of tangency (``.t``, ``.x``); ``None`` otherwise."""
         return self.point.data.get("monitors", {}).get(self.key)
 
     @property

@@ -117,7 +117,7 @@ from ..errors import ArgumentError
 #: The zoo model this module describes.
 MODEL = "friction-impact-oscillator"
 
-#: The events at which the control law acts: the crossings of ``S = {v = 0}`` that start a
+#: The events at which the control law acts, the crossings of ``S = {v = 0}`` that start a
 #: stick (the ``x`` of the thesis's map ``P^2``).
 CONTROL_EVENTS = ("stop_neg", "stop_pos")
 

@@ -22,7 +22,7 @@ from .._codes import EVENT_LOG_KINDS, STATE_KINDS as _STATE_KINDS
 
 #: Event kinds of the log, indexed by the kernel's codes.
 EVENT_KINDS = EVENT_LOG_KINDS
-#: Discrete states of the kernel: a regular mode, sticking on an impact surface, sliding.
+#: Discrete states of the kernel -- a regular mode, sticking on an impact surface, sliding.
 STATE_KINDS = _STATE_KINDS
 
 
@@ -124,6 +124,8 @@ class EventRecord:
     t_after : float
         Time after the event (differs from ``t`` only for ``chatter``).
 
+    Notes
+    -----
     Records are plain slotted objects (not frozen: a frozen dataclass costs five times as much
     to create, and sweeps create millions); treat them as read-only.
     """
@@ -439,21 +441,21 @@ class Trajectory:
 
     @property
     def y(self) -> np.ndarray:
-        """The full node vectors: the state, then (runs with ``variational=True``) the
+        """The full node vectors -- the state, then (runs with ``variational=True``) the
         variational matrix, row-major; the states ``x`` when there is no variational part."""
         return self.x if self._y is None else self._y
 
     @property
     def dense(self) -> np.ndarray | LazyDense | None:
-        """The dense output: per interval between consecutive nodes, the coefficients of
+        """The dense output, per interval between consecutive nodes, the coefficients of
         ``y(t0 + theta h) = y0 + sum_k dense[k] theta^(k+1)``, shape ``(intervals, len(y),
         degree)``; ``None`` for a run with ``dense=False``."""
         return self._dense
 
     @property
     def interval_kind(self) -> np.ndarray | None:
-        """How each interval between consecutive nodes is evaluated: 0 the dense polynomial,
-        1 linear (a jump, or no dense output), 2 linear across a chattering gap."""
+        """How each interval between consecutive nodes is evaluated -- 0 the dense
+        polynomial, 1 linear (a jump, or no dense output), 2 linear across a chattering gap."""
         return self._ikind
 
     @classmethod

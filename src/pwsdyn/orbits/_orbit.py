@@ -257,7 +257,7 @@ class PeriodicOrbit:
 
     @property
     def periods(self) -> int | None:
-        """Forced orbits: the period in forcing periods (2 for a period-doubled orbit);
+        """The period in forcing periods of a forced orbit (2 for a period-doubled orbit);
         ``None`` for an autonomous one."""
         if self.autonomous:
             return None

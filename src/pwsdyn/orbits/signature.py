@@ -162,7 +162,7 @@ class Signature(tuple):
 
     @property
     def states(self) -> tuple:
-        """The discrete state of each segment: ``states[k]`` is the state of the segment
+        """The discrete state of each segment -- ``states[k]`` is the state of the segment
         that event ``k`` ends (its ``mode_before``)."""
         return tuple(e.mode_before for e in self)
 
