@@ -7,13 +7,12 @@ Build (from the repository root; warnings are errors, as in CI)::
 The gallery scripts in ``examples/plot_*.py`` are run during the build (sphinx-gallery); a
 script that raises fails the build.
 
-References to pwsdyn objects that resolve to nothing (rendered as plain text, not links) are
-listed by a build with ``PWSDYN_DOCS_NITPICKY=1``; the gallery need not run for it::
+Every reference is checked (``nitpicky``): a reference to a pwsdyn object, module, page or
+label that resolves to nothing fails the build. To check only the references, without running
+the gallery::
 
-    PWSDYN_DOCS_NITPICKY=1 python -m sphinx -W --keep-going -b html \
-        -D sphinx_gallery_conf.plot_gallery=0 docs /tmp/pwsdyn-nitpicky
-
-Pages and labels (``:doc:``, ``:ref:``) are checked by every build.
+    python -m sphinx -W --keep-going -b html -D sphinx_gallery_conf.plot_gallery=0 \
+        docs /tmp/pwsdyn-references
 """
 
 from __future__ import annotations
@@ -71,20 +70,37 @@ napoleon_use_rtype = False
 napoleon_use_ivar = True
 
 # -- Cross-references -----------------------------------------------------------------------
-# PWSDYN_DOCS_NITPICKY=1 (with -W, the build then fails on one) reports every reference to a
-# pwsdyn object, module or page that resolves to nothing and so renders as plain text. Not
-# references to check: the words of a parameter's type description ("array_like, optional",
-# "{'full', 'projected'}") and the classes of other libraries, which would need intersphinx
-# and so the network.
-if os.environ.get("PWSDYN_DOCS_NITPICKY", "") not in ("", "0"):
-    nitpicky = True
-    nitpick_ignore_regex = [
-        (r"py:class", r"(?!pwsdyn\.)[a-z_].*|.*[\s'{}\[\]:,].*|[A-Z]"),   # type words
-        (r"py:class", r"(numpy|xarray|matplotlib|pathlib|sympy|dask|distributed|click|"
-                      r"collections|typing|os)\b.*"),
-        (r"py:class", r"Path|Axes|Figure|Dataset|DataArray|Client|Enum|IntEnum|Expr|Symbol|"
-                      r"Basic|The|N"),
-    ]
+# A reference that resolves to nothing would render as plain text, not a link: with -W it
+# fails the build instead. Not checked, each for its reason:
+nitpicky = True
+nitpick_ignore_regex = [
+    # the words of a parameter's type description, which napoleon turns into class references
+    # ("array_like, optional", "{'full', 'projected'}", "int or None", "n + 1")
+    (r"py:class", r"[a-z_]+|.*[\s'{}\[\]:,].*|[A-Z]|True|False|None"),
+    # other libraries' classes (linking them would need intersphinx, and so the network),
+    # by their dotted names and the two that type descriptions name without a module
+    (r"py:class", r"(collections|dask|enum|matplotlib|numpy|pathlib|sympy|xarray)\..+"),
+    (r"py:class", r"Path|Axes"),
+]
+
+
+def _public_bases(app, name, obj, options, bases):
+    """A class page's "Bases:" names public classes only: a private base (the equilibrium
+    problems' shared ``_PointProblem``) is not documented, so it gives way to its own bases."""
+    def public(base):
+        if getattr(base, "__module__", "").startswith("pwsdyn") and base.__name__[0] == "_":
+            return [b for parent in base.__bases__ for b in public(parent)]
+        return [base]
+
+    out = []
+    for base in bases:
+        out += [b for b in public(base) if b not in out]
+    bases[:] = out
+
+
+def setup(app):
+    app.connect("autodoc-process-bases", _public_bases)
+
 
 # -- Markdown pages (the user guide's continuation and extending pages) ---------------------
 myst_enable_extensions = ["dollarmath"]
@@ -162,7 +178,10 @@ def _exclusions() -> tuple[list[str], dict[str, list[str]]]:
                 continue
             if id(obj) in documented:
                 skip.append(k)
-            elif is_package:
+            elif is_package and (inspect.isclass(obj) or inspect.isroutine(obj)):
+                # autodoc finds a class's or a function's docstring through the package; a
+                # constant's ``#:`` comment it reads only in the module that assigns it, so
+                # that module's page keeps it
                 shown.append(obj)
         exclude[name] = sorted(skip)
         documented |= {id(o) for o in shown}

@@ -1,27 +1,29 @@
-"""
+r"""
 Grazing of the stick set: loss and persistence (thesis Fig. 2.3)
 ================================================================
 
 The friction impact oscillator of the thesis's Papers D and E (zoo model
-``friction-impact-oscillator`` with equal static and dynamic friction, ``Fs = Fd``): a mass on a
-spring with dry friction, forced only by impacts with a constraint at ``q = -b + a sin(omega t)``.
-For ``a < a* = b + Fd/k`` the mass can rest at the edge of the stick set, out of reach of the
-constraint; at ``a*`` the constraint's top grazes that rest. The figure shows, against the
-amplitude ``a``, the velocity of the mass just after the impact (its largest velocity over the
-orbit; 0 for the stick solutions): the branch of period-one impacting orbits continued by
-pseudo-arclength (stable solid, unstable dashed, past its graze dotted), the stick solutions
-(green), and over them the points of brute-force sweeps up (blue) and down (orange) in ``a``.
+``friction-impact-oscillator`` with equal static and dynamic friction, :math:`F_s = F_d`): a
+mass on a spring with dry friction, forced only by impacts with a constraint at
+:math:`q = -b + a \sin(\omega t)`. For :math:`a < a^* = b + F_d/k` the mass can rest at the
+edge of the stick set, out of reach of the constraint; at :math:`a^*` the constraint's top
+grazes that rest. The figure shows, against the amplitude :math:`a`, the velocity of the mass
+just after the impact (its largest velocity over the orbit; 0 for the stick solutions): the
+branch of period-one impacting orbits continued by pseudo-arclength (stable solid, unstable
+dashed, past its graze dotted), the stick solutions (green), and over them the points of
+brute-force sweeps up (blue) and down (orange) in :math:`a`.
 
 Condition 5.1 of the thesis decides the scenario: with
-``gamma = m a* omega^2 (1 + e)^2 / (2 F_f)``, the stick-position map has the multiplier
-``gamma - 1``. (a) ``gamma = 2.5 > 2``: loss of the local attractor. The unstable impacting
-branch leaves the graze at the non-smooth fold NSF towards smaller ``a``, turns at a saddle-node
-SN (labelled LP, a fold of the branch, at ``a^2 = (8 K (b + 1) - 16)/K^2``,
-``K = (1 + e)^2 omega^2``, from the closed-form map) and
-comes back as the stable upper branch: sweeping up, the mass sticks up to ``a*`` and jumps to the
-upper branch; sweeping down it stays there down to SN -- hysteresis, as the thesis describes for
-Fig. 2.3 (a). (b) ``gamma = 1.5 < 2``: persistence. A stable branch of impacting orbits grows
-from the graze, its impact velocity rising like ``sqrt(a - a*)``, and both sweeps follow it.
+:math:`\gamma = m a^* \omega^2 (1 + e)^2 / (2 F_f)`, the stick-position map has the multiplier
+:math:`\gamma - 1`. (a) :math:`\gamma = 2.5 > 2`: loss of the local attractor. The unstable
+impacting branch leaves the graze at the non-smooth fold NSF towards smaller :math:`a`, turns
+at a saddle-node SN (labelled LP, a fold of the branch, at
+:math:`a^2 = (8 K (b + 1) - 16)/K^2`, :math:`K = (1 + e)^2 \omega^2`, from the closed-form map)
+and comes back as the stable upper branch: sweeping up, the mass sticks up to :math:`a^*` and
+jumps to the upper branch; sweeping down it stays there down to SN -- hysteresis, as the thesis
+describes for Fig. 2.3 (a). (b) :math:`\gamma = 1.5 < 2`: persistence. A stable branch of
+impacting orbits grows from the graze, its impact velocity rising like
+:math:`\sqrt{a - a^*}`, and both sweeps follow it.
 """
 
 import math

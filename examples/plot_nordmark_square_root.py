@@ -1,20 +1,21 @@
-"""
+r"""
 Near-grazing impacts: the square-root growth of impact velocities
 =================================================================
 
 Thesis Paper A measures it on an experiment: close to a grazing bifurcation of an impact
 oscillator, each impact velocity grows like the *square root* of the previous one,
-``v_{n+1} ~ C sqrt(v_n)``. Nordmark's discontinuity map explains it (Nordmark 1991; thesis
-eq. 2.33-2.34): at the grazing orbit, an orbit that penetrates the stop by a depth ``d`` is
-corrected by ``beta sqrt(d)``, and the smooth Poincaré map ``P`` carries the correction round
-to the next impact.
+:math:`v_{n+1} \sim C \sqrt{v_n}`. Nordmark's discontinuity map explains it (Nordmark 1991;
+thesis eq. 2.33-2.34): at the grazing orbit, an orbit that penetrates the stop by a depth
+:math:`d` is corrected by :math:`\beta \sqrt{d}`, and the smooth Poincaré map :math:`P` carries
+the correction round to the next impact.
 
 Here the impact oscillator (zoo ``impact-oscillator``) is followed in the stop position
-``sigma`` until its non-impacting orbit grazes the stop (:func:`pwsdyn.continue_orbit` locates
-the graze, ``GR``); :func:`pwsdyn.discontinuity_map` gives ``a*`` (the relative acceleration at
-the graze), ``beta`` and ``P``. The stop is then moved a depth ``d0`` into the grazing orbit,
-so that the first impact has velocity ``v0 = sqrt(2 a* d0)``, and the next impact velocity of
-a simulation is compared with the map's prediction.
+:math:`\sigma` until its non-impacting orbit grazes the stop (:func:`pwsdyn.continue_orbit`
+locates the graze, ``GR``); :func:`pwsdyn.discontinuity_map` gives :math:`a^*` (the relative
+acceleration at the graze), :math:`\beta` and :math:`P`. The stop is then moved a depth
+:math:`d_0` into the grazing orbit, so that the first impact has velocity
+:math:`v_0 = \sqrt{2 a^* d_0}`, and the next impact velocity of a simulation is compared with
+the map's prediction.
 """
 
 import math

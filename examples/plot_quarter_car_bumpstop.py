@@ -1,17 +1,18 @@
-"""
+r"""
 Quarter-car with a controlled bumpstop: comfort and rattle space
 ================================================================
 
 The quarter-car of thesis Paper C (zoo ``quarter-car``: body and wheel, bilinear damper,
-wheel hop, a rigid bumpstop at ``delta = 5 cm`` of compression) on a road
-``zr = A sin(omega t)``. As the road amplitude ``A`` grows, the periodic motion of the
-suspension first touches the bumpstop at a graze. With soft dampers (``cc = 250``,
-``ce = 750`` N s/m) and the road at 1.27 Hz, just above the body resonance, the graze loses
-the local attractor: the motion jumps to a violent one that chatters on the bumpstop every
-cycle, and stays there when ``A`` is lowered again (hysteresis). The low-cost control of
-thesis eq. 5.2 moves the bumpstop once per road period, away from impact, by
-``delta -> delta* + c . (x - x*) + c0 (delta - delta*)``; designed at the graze
-(:func:`pwsdyn.design_control`) it makes the bifurcation persistent, and the comfort and
+wheel hop, a rigid bumpstop at :math:`\delta = 5` cm of compression) on a road
+:math:`z_r = A \sin(\omega t)`. As the road amplitude :math:`A` grows, the periodic motion of
+the suspension first touches the bumpstop at a graze. With soft dampers (compression and
+expansion damping ``cc = 250`` and ``ce = 750`` N s/m) and the road at 1.27 Hz, just above the
+body resonance, the graze loses the local attractor: the motion jumps to a violent one that
+chatters on the bumpstop every cycle, and stays there when :math:`A` is lowered again
+(hysteresis). The low-cost control of thesis eq. 5.2 moves the bumpstop once per road period,
+away from impact, by
+:math:`\delta \to \delta^* + c \cdot (x - x^*) + c_0 (\delta - \delta^*)`; designed at the
+graze (:func:`pwsdyn.design_control`) it makes the bifurcation persistent, and the comfort and
 rattle-space metrics (:mod:`pwsdyn.explore.metrics`) change gradually through it.
 """
 

@@ -238,6 +238,68 @@ def test_a_cut_summary_fails_the_build(tmp_path):
     assert "(thesis eq." in warnings.getvalue()
 
 
+def _reference_settings() -> dict:
+    """``nitpicky`` and ``nitpick_ignore_regex`` as docs/conf.py sets them (literals)."""
+    out = {}
+    for node in ast.parse((DOCS / "conf.py").read_text(encoding="utf-8")).body:
+        if (isinstance(node, ast.Assign) and len(node.targets) == 1
+                and getattr(node.targets[0], "id", None) in ("nitpicky", "nitpick_ignore_regex")):
+            out[node.targets[0].id] = ast.literal_eval(node.value)
+    return out
+
+
+def _build_with_the_reference_check(tmp_path, see_also: str):
+    """A tiny project with docs/conf.py's reference settings documenting a module whose
+    function's docstring has a numpydoc type description and ``see_also``, built as the
+    documentation is (``python -m sphinx -W --keep-going``, its own process: a second build
+    in one process warns about Sphinx's own nodes). Returns (exit status, warnings)."""
+    settings = _reference_settings()
+    tmp_path.mkdir()
+    (tmp_path / "refmod.py").write_text(
+        'def f(x, how="a"):\n'
+        '    """Do a thing.\n\n'
+        '    Parameters\n    ----------\n'
+        '    x : array_like, optional\n        The values.\n'
+        '    how : {\'a\', \'b\'} or None\n        How; see ' + see_also + '.\n'
+        '    """\n\n\n'
+        'def g():\n    """Another."""\n', encoding="utf-8")
+    src = tmp_path / "src"
+    src.mkdir()
+    (src / "conf.py").write_text(
+        "import sys\n"
+        f"sys.path[:0] = [{str(tmp_path)!r}]\n"
+        "extensions = ['sphinx.ext.autodoc', 'sphinx.ext.napoleon']\n"
+        "napoleon_google_docstring = False\n"
+        f"nitpicky = {settings['nitpicky']!r}\n"
+        f"nitpick_ignore_regex = {settings['nitpick_ignore_regex']!r}\n", encoding="utf-8")
+    (src / "index.rst").write_text("Index\n=====\n\n.. automodule:: refmod\n   :members:\n",
+                                   encoding="utf-8")
+    res = subprocess.run([sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b",
+                          "html", str(src), str(tmp_path / "out")],
+                         capture_output=True, text=True, env={**os.environ, "NO_COLOR": "1"})
+    return res.returncode, res.stderr
+
+
+def test_the_build_checks_every_reference():
+    pytest.importorskip("sphinx")
+    assert _reference_settings().get("nitpicky") is True, (
+        "docs/conf.py must set nitpicky = True: without it a broken reference renders as "
+        "plain text and the build passes")
+
+
+def test_a_broken_reference_fails_the_build(tmp_path):
+    """A reference to nothing (``:func:`nowhere```) fails a build with docs/conf.py's
+    settings, as -W makes it; the same docstring with a reference that resolves builds
+    cleanly, its type description (``array_like, optional``, ``{'a', 'b'} or None``) not
+    taken for references to check."""
+    pytest.importorskip("sphinx")
+    status, warnings = _build_with_the_reference_check(tmp_path / "broken", ":func:`nowhere`")
+    assert status != 0, warnings
+    assert "reference target not found: nowhere" in warnings
+    status, warnings = _build_with_the_reference_check(tmp_path / "good", ":func:`g`")
+    assert status == 0 and "WARNING" not in warnings, warnings
+
+
 def _summarised_objects():
     """Every object whose summary the API reference shows: the names of its tables and the
     public methods of the classes among them (the class pages' tables)."""

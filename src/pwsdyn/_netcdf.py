@@ -152,7 +152,7 @@ VERSIONED_PACKAGES = ("pwsdyn", "numpy", "scipy", "numba", "xarray", "sympy")
 @functools.lru_cache(maxsize=None)
 def package_versions() -> dict:
     """``{"pwsdyn_version": ..., "numpy_version": ..., ...}`` for
-    :data:`VERSIONED_PACKAGES` (``"unknown"`` where a version cannot be found)."""
+    ``VERSIONED_PACKAGES`` (``"unknown"`` where a version cannot be found)."""
     from importlib import metadata
 
     out = {}

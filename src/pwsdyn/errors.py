@@ -110,7 +110,7 @@ class Status(enum.IntEnum):
 
     @property
     def reason(self) -> str:
-        """The short text of the outcome: :attr:`meaning`, except for the orbit failures,
+        """The short text of the outcome, :attr:`meaning`, except for the orbit failures,
         whose text is the ``reason`` :class:`OrbitError` has always carried (``'diverged'``,
         ``'simulation'``, ...)."""
         return _ORBIT_REASONS.get(self, self.meaning)
@@ -137,7 +137,7 @@ class Status(enum.IntEnum):
         return tuple(s for s in cls if s >= 0)
 
 
-#: The orbit failures, with the ``reason`` text of :class:`OrbitError`.
+#: The orbit failures, with the ``reason`` text of :class:`~pwsdyn.OrbitError`.
 ORBIT_FAILURES = (Status.SINGULAR, Status.PHASE, Status.EQUILIBRIUM, Status.SIGNATURE,
                   Status.BUDGET, Status.NO_PROGRESS, Status.NEWTON_DIVERGED,
                   Status.SIMULATION_FAILED)

@@ -59,10 +59,10 @@ Attributes: those above, ``pwsdyn_type`` (``"trajectory"``), ``params``, ``param
 ``status_code``, ``message``, ``t0``, ``t_end`` and ``provenance`` (JSON).
 
 This module is the public face of the files: every result lays out its own dataset
-(``to_dataset()``; a trajectory's layout is in :mod:`pwsdyn._trajectory_file`, which
-``Trajectory.to_dataset`` and ``Trajectory.from_dataset`` call) with the shared
-plumbing of :mod:`pwsdyn._netcdf`, re-exported here. Imports run one way: this module ->
-:mod:`pwsdyn.integrate.trajectory` -> :mod:`pwsdyn._trajectory_file` -> :mod:`pwsdyn._netcdf`.
+(``to_dataset()``; a trajectory's layout is in ``pwsdyn._trajectory_file``, which
+``Trajectory.to_dataset`` and ``Trajectory.from_dataset`` call) with the shared plumbing of
+``pwsdyn._netcdf``, re-exported here. Imports run one way: this module ->
+:mod:`pwsdyn.integrate.trajectory` -> ``pwsdyn._trajectory_file`` -> ``pwsdyn._netcdf``.
 """
 
 from __future__ import annotations
@@ -84,7 +84,7 @@ __all__ = ["CONVENTIONS", "ENGINE", "OVERWRITE_HINT", "TRAJECTORY_TYPE", "VERSIO
 
 
 def load_trajectory(path, model=None):
-    """Read a trajectory saved with :meth:`Trajectory.save` or :func:`save_dataset`.
+    """Read a trajectory saved with :meth:`~pwsdyn.Trajectory.save` or :func:`save_dataset`.
 
     Parameters
     ----------

@@ -8,8 +8,8 @@ finds a periodic orbit by Newton shooting and prints its period, signature and F
 multipliers; ``pwsdyn continue`` follows it in a parameter and ``pwsdyn grazing`` to its
 first graze, where it prints Nordmark's discontinuity map.
 
-One name for one thing in every command that runs a model (:mod:`pwsdyn.cli._common`, whose
-:func:`~pwsdyn.cli._common.prepare` is the preamble they all share):
+One name for one thing in every command that runs a model (``pwsdyn.cli._common``, whose
+``prepare`` is the preamble they all share):
 
 * ``-p/--param NAME=VALUE`` sets a parameter (repeatable); ``-s/--set NAME=VALUE`` is a
   synonym (hidden; ``sweep`` and ``basins`` used it first). In ``sweep`` the swept parameter
@@ -54,13 +54,12 @@ if that exists) and the error message says where. A sweep store (``--store``) is
 directory: it is resumed, never replaced.
 
 Text that comes from a model or a file (names, descriptions, messages) is printed through one
-sanitiser, :func:`_safe`: control characters (C0, C1, ESC, DEL) and Unicode bidirectional
+sanitiser, ``_safe``: control characters (C0, C1, ESC, DEL) and Unicode bidirectional
 controls are shown as escapes (``\\x1b``, ``\\u202e``), so a model cannot drive the terminal.
 
-The package: :mod:`~pwsdyn.cli._output` (terminal output, output files),
-:mod:`~pwsdyn.cli._common` (the shared options and the preamble), :mod:`~pwsdyn.cli._main`
-(the group and ``models``) and one module per family of commands (``_simulate``,
-``_explore``, ``_orbits``), each registering its commands on :func:`main`.
+The package: ``_output`` (terminal output, output files), ``_common`` (the shared options
+and the preamble), ``_main`` (the group and ``models``) and one module per family of commands
+(``_simulate``, ``_explore``, ``_orbits``), each registering its commands on ``main``.
 """
 
 from __future__ import annotations

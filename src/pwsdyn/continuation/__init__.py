@@ -3,7 +3,7 @@ bifurcations and switch branches.
 
 The engine (:mod:`~pwsdyn.continuation.engine`) follows any problem ``F(u, lam) = 0`` with
 its Jacobians by pseudo-arclength continuation; the problems
-(:mod:`~pwsdyn.continuation.problems`) say what is continued; :class:`Branch` holds the
+(:mod:`~pwsdyn.continuation.problems`) say what is continued; :class:`~pwsdyn.Branch` holds the
 result.
 """
 

@@ -38,12 +38,13 @@ KINDS = {
 
 @dataclass
 class SpecialPoint:
-    """A located special point of a :class:`Branch`.
+    """A located special point of a :class:`~pwsdyn.Branch`.
 
     Attributes
     ----------
     kind : str
-        ``"LP"``, ``"BP"``, ``"PD"``, ``"NS"``, ``"HB"`` or ``"EP"`` (see :data:`KINDS`).
+        ``"LP"``, ``"BP"``, ``"PD"``, ``"NS"``, ``"HB"`` or ``"EP"`` (see
+        :data:`~pwsdyn.continuation.branch.KINDS`).
     index : int
         Its index among the branch's points.
     value : float
@@ -85,8 +86,8 @@ class SpecialPoint:
 
     @property
     def monitor(self):
-        """For a discontinuity-induced bifurcation: the monitor located here, with the segment,
-        the surface and the point of tangency (``.t``, ``.x``); ``None`` otherwise."""
+        """The monitor located here for a discontinuity-induced bifurcation, with the
+        segment, the surface and the point of tangency (``.t``, ``.x``); ``None`` otherwise."""
         return self.point.data.get("monitors", {}).get(self.key)
 
     @property

@@ -433,7 +433,7 @@ class Continuation:
             self._bar.set_postfix(lam=f"{last.lam:.6g}", refresh=False)
 
     def run(self) -> list[Point]:
-        """Follow the branch to its end; returns :attr:`points`."""
+        """Follow the branch to its end; returns ``points``."""
         for _ in self:
             pass
         return self.points

@@ -9,8 +9,9 @@ Jacobians, the data of a point and its own test functions:
   multiplier through -1; a complex pair contributes :math:`|\mu + 1|^2 > 0`) and
   Neimark-Sacker ``NS``, :math:`\prod_{i<j} (\mu_i \mu_j - 1)` (a pair with
   :math:`\mu_i \mu_j = 1`: a complex pair on the unit circle, or a real pair
-  :math:`\mu, 1/\mu` -- a neutral saddle, which :meth:`OrbitBranchProblem.confirm` refuses);
-  Kuznetsov, *Elements of Applied Bifurcation Theory*, 3rd ed., section 10.3.
+  :math:`\mu, 1/\mu` -- a neutral saddle, which
+  :meth:`~pwsdyn.continuation.OrbitBranchProblem.confirm` refuses); Kuznetsov, *Elements of Applied
+  Bifurcation Theory*, 3rd ed., section 10.3.
 * equilibria (:class:`EquilibriumProblem`): :math:`f(x, p) = 0` in one mode, eigenvalues of
   :math:`f_x`, Hopf ``HB``, :math:`\prod_{i<j} (\lambda_i + \lambda_j)` (the bialternate
   product; zero for a pair :math:`\pm i \omega`, and for a real pair :math:`\lambda, -\lambda`
@@ -284,12 +285,12 @@ class BifurcationCurveProblem:
         G(U, \lambda) = \begin{pmatrix} F(u, p_1, p_2) \\ \psi(u, p_1, p_2) \end{pmatrix} = 0
 
     with :math:`F` the orbit problem and :math:`\psi` the bifurcation's test function of the
-    multipliers (:func:`orbit_test_function`) -- the orbit problem bordered by its defining
-    condition, the augmented system of two-parameter continuation (Kuznetsov, section 10.3;
-    the slides' "two-parameter continuation" of bifurcation curves). :math:`F_u`, :math:`F_p`
-    are the problem's own; the row of :math:`\psi`'s derivatives is a central difference (its
-    accuracy decides how fast Newton converges, not where: the curve is where
-    :math:`\psi = 0`)."""
+    multipliers (:func:`~pwsdyn.continuation.problems.orbit_test_function`) -- the orbit problem
+    bordered by its defining condition, the augmented system of two-parameter continuation
+    (Kuznetsov, section 10.3; the slides' "two-parameter continuation" of bifurcation curves).
+    :math:`F_u`, :math:`F_p` are the problem's own; the row of :math:`\psi`'s derivatives is a
+    central difference (its accuracy decides how fast Newton converges, not where: the curve is
+    where :math:`\psi = 0`)."""
 
     kind = "orbit"
 

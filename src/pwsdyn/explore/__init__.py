@@ -1,7 +1,7 @@
-"""Global analysis: brute-force bifurcation diagrams (:func:`sweep`), basins of attraction
-(:func:`basins`) and Lyapunov spectra (:func:`lyapunov_spectrum`) of piecewise-smooth flows
-and maps, chunked, parallel (threads by default, or Dask) and resumable from a store on disk;
-comfort and rattle-space metrics of a response (:mod:`pwsdyn.explore.metrics`)."""
+"""Global analysis: brute-force bifurcation diagrams (:func:`~pwsdyn.sweep`), basins of attraction
+(:func:`~pwsdyn.basins`) and Lyapunov spectra (:func:`~pwsdyn.lyapunov_spectrum`) of
+piecewise-smooth flows and maps, chunked, parallel (threads by default, or Dask) and resumable from
+a store on disk; comfort and rattle-space metrics of a response (:mod:`pwsdyn.explore.metrics`)."""
 
 from ._lyapunov import LyapunovSpectrum as LyapunovSpectrum
 from ._lyapunov import lyapunov_spectrum as lyapunov_spectrum

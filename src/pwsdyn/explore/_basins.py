@@ -408,5 +408,6 @@ def _assemble(model, axes, shape, labels, table, fp, starts, settings) -> xr.Dat
 
 
 def basin_fractions(ds: xr.Dataset) -> dict:
-    """``{label: fraction}`` of a :func:`basins` result (labels with zero fraction left out)."""
+    """``{label: fraction}`` of a :func:`~pwsdyn.basins` result (labels with zero fraction
+    left out)."""
     return {int(b): float(f) for b, f in zip(ds.basin.values, ds.fraction.values) if f > 0}

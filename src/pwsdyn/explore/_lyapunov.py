@@ -48,7 +48,7 @@ if TYPE_CHECKING:
 
 @dataclass
 class LyapunovSpectrum:
-    """The result of :func:`lyapunov_spectrum`.
+    """The result of :func:`~pwsdyn.lyapunov_spectrum`.
 
     Attributes
     ----------
@@ -467,14 +467,14 @@ def lyapunov_spectrum(model: ModelLike, x0: StateLike | None = None,
     LyapunovSpectrum
         With sticking (flows): the exponents of the free motion, sticking episodes being
         resets of the tangent dynamics, and the time in contact apart (``contact_time``,
-        ``contact_episodes``, ``ends_stuck``; :class:`LyapunovSpectrum`, Notes).
+        ``contact_episodes``, ``ends_stuck``; :class:`~pwsdyn.explore.LyapunovSpectrum`, Notes).
 
     Raises
     ------
     ArgumentError
         (a ``ValueError``) Before any work: a non-positive duration, an autonomous flow
         without ``segment``, a non-finite ``t0``, a run not resolved in double-precision time
-        from ``t0`` (see :mod:`pwsdyn._validate`), a ``duration`` whose per-segment records
+        from ``t0`` (see ``pwsdyn._validate``), a ``duration`` whose per-segment records
         would exceed ``pwsdyn._validate.MEMORY_LIMIT``, ...
 
     Examples

@@ -395,7 +395,7 @@ def sweep(model: ModelLike, param: str, values: ArrayLike, x0: StateLike | None 
           expected to occur);
         - ``x_final``: the state handed on to the next value; ``steps``: integrator steps;
         - ``lyapunov`` (direction, param, exponent), with ``lyapunov=True`` (flows with
-          sticking: exponents of the free motion, see :class:`pwsdyn.LyapunovSpectrum`);
+          sticking: exponents of the free motion, see :class:`pwsdyn.explore.LyapunovSpectrum`);
         - ``chunk_start`` (direction, param): True at the first value of each chunk.
 
         Attributes hold the provenance (model name and hash, pwsdyn version, settings).

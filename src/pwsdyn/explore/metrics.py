@@ -23,10 +23,10 @@ trajectory stores there), so that for any window
 
     v(t_to) - v(t_from) = integral of the smooth acceleration + sum of the signed impulses.
 
-:func:`response_metrics` evaluates the metrics of one trajectory (Gauss-Legendre quadrature
-of the squared acceleration on each step of the dense output, exact for the polynomial
-there up to degree ``2 nodes - 1``); :func:`metrics_sweep` evaluates them over a range of a
-parameter for several variants of a model -- a fixed and a controlled bumpstop
+:func:`~pwsdyn.explore.response_metrics` evaluates the metrics of one trajectory (Gauss-Legendre
+quadrature of the squared acceleration on each step of the dense output, exact for the polynomial
+there up to degree ``2 nodes - 1``); :func:`~pwsdyn.explore.metrics_sweep` evaluates them over a
+range of a parameter for several variants of a model -- a fixed and a controlled bumpstop
 (:func:`pwsdyn.with_discrete_control`) -- continuing the state from value to value as a
 brute-force bifurcation diagram does, and returns an :class:`xarray.Dataset`;
 :func:`pwsdyn.plot.plot_metrics` draws it.
@@ -43,7 +43,8 @@ import sympy as sp
 from .. import _validate as V
 from ..errors import ArgumentError
 
-#: The metrics, in the order of :meth:`ResponseMetrics.as_dict`, with their descriptions.
+#: The metrics, in the order of :meth:`~pwsdyn.explore.ResponseMetrics.as_dict`, with their
+#: descriptions.
 METRICS = {
     "rms_acceleration": "RMS of the smooth acceleration over the window",
     "peak_acceleration": "largest magnitude of the smooth acceleration over the window",
@@ -106,7 +107,7 @@ class ResponseMetrics:
         return self.travel_max - self.travel_min
 
     def as_dict(self) -> dict:
-        """The metrics of :data:`METRICS` by name."""
+        """The metrics of :data:`~pwsdyn.explore.metrics.METRICS` by name."""
         return {k: getattr(self, k) for k in METRICS}
 
 
@@ -434,10 +435,10 @@ def metrics_sweep(variants, param: str, values, *, velocity: str, travel: str | 
     -------
     xarray.Dataset
         Dimensions ``variant``, ``direction`` and the parameter (named ``param``); one
-        variable per metric of :data:`METRICS`, with ``impacts``, ``chatter``, ``impulse``
-        and ``stick_time`` per forcing period (``impacts_per_period``, ...), and ``status``
-        (0 where the run succeeded; the :class:`pwsdyn.Status` value of a failed run, whose
-        metrics are NaN, the next value starting again from ``x0``).
+        variable per metric of :data:`~pwsdyn.explore.metrics.METRICS`, with ``impacts``,
+        ``chatter``, ``impulse`` and ``stick_time`` per forcing period (``impacts_per_period``,
+        ...), and ``status`` (0 where the run succeeded; the :class:`pwsdyn.Status` value of a
+        failed run, whose metrics are NaN, the next value starting again from ``x0``).
 
     Examples
     --------

@@ -137,7 +137,7 @@ class DiscontinuityMap:
 def _tangency(point):
     """``(problem, u, p, monitor)`` of a grazing point of an orbit branch: a ``GR`` point
     (a segment touching a surface inside it), or a ``CC`` point that is a graze at a kink
-    (:func:`_kink_graze`)."""
+    (``_kink_graze``)."""
     mon = getattr(point, "monitor", None)
     kind = getattr(point, "kind", None)
     if kind == "CC" and mon is not None:
@@ -229,7 +229,7 @@ def discontinuity_map(point) -> DiscontinuityMap:
         A ``GR`` point of an orbit branch where a segment touches an impact surface inside it
         (``Branch.special("GR")``), or a ``CC`` point where the orbit touches an impact
         surface at a kink of its field (``Branch.special("CC")``: the quarter-car's bumpstop,
-        grazed where the bilinear damper switches; see :func:`_kink_graze`).
+        grazed where the bilinear damper switches).
 
     Returns
     -------

@@ -117,7 +117,7 @@ from ..errors import ArgumentError
 #: The zoo model this module describes.
 MODEL = "friction-impact-oscillator"
 
-#: The events at which the control law acts: the crossings of ``S = {v = 0}`` that start a
+#: The events at which the control law acts, the crossings of ``S = {v = 0}`` that start a
 #: stick (the ``x`` of the thesis's map ``P^2``).
 CONTROL_EVENTS = ("stop_neg", "stop_pos")
 
@@ -312,7 +312,7 @@ class FrictionImpact:
         ``mu`` (``gamma - 1`` without control, eq. 5.7's ``2 c_x - 1 + (2 c_x - gamma) eps_2``
         with it). ``exact=True``: of the closed form (2), whose fixed points solve a quadratic
         (below), the root nearest the edge of the stick set; the multiplier is the derivative
-        of (2) there. Raises :class:`ArgumentError` where there is none (no impacting orbit
+        of (2) there. Raises :class:`~pwsdyn.ArgumentError` where there is none (no impacting orbit
         near the graze: the loss side, ``gamma > 2`` and ``a > a*``, for the linear map).
         """
         mu, c = self.linear_map(gains)
@@ -368,7 +368,7 @@ class FrictionImpact:
         (the mass reversed at ``x_max``). A mass the constraint does not reach (``x >= a~ -
         b~``) stays: ``x_next = x``.
 
-        Raises :class:`ArgumentError` where the closed form is not the model's motion: the
+        Raises :class:`~pwsdyn.ArgumentError` where the closed form is not the model's motion: the
         constraint touches the mass again before it is at rest (the gap is sampled at
         ``samples`` points per slip), or the mass leaves the neighbourhood of the stick set
         (it reverses twice).

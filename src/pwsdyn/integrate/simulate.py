@@ -26,7 +26,7 @@ from .trajectory import DiscreteState, EventLog, LazyDense, Trajectory
 if TYPE_CHECKING:
     from .._typing import ModelLike, StateLike
 
-#: Default options of :func:`simulate` (each documented there).
+#: Default options of :func:`~pwsdyn.simulate` (each documented there).
 DEFAULTS = dict(method="auto", exact="auto", rtol=1e-10, atol=1e-12, first_step=None,
                 max_step=math.inf, max_steps=1_000_000, max_events=100_000, chatter=True,
                 chatter_ratio=None, chatter_velocity=None, sliding="convex", sliding_gain=0.0,
@@ -112,7 +112,7 @@ def simulate(model: ModelLike, x0: StateLike | Trajectory | None = None,
         ``[defaults] t_end``, else ``t0 + 10`` (with a warning). Finite, ``t_end > t0``, and
         at least 1024 units of the time resolution ``eps * max(1, |t|)`` long
         (``(1e16, 1e16 + 2)`` is refused: doubles are 2 apart there; see
-        :mod:`pwsdyn._validate`). A trajectory continued from another time than its
+        ``pwsdyn._validate``). A trajectory continued from another time than its
         ``t_final`` starts from ``x_final`` by the rule for plain states.
     params : dict, optional
         Parameter values by name, over the model's defaults (``model.parameters``: the
@@ -225,7 +225,7 @@ def simulate(model: ModelLike, x0: StateLike | Trajectory | None = None,
 
     A state a little behind a constraint is put on it first: within
     ``1e-8 (1 + |x|) max(1, |h_x|)`` (a long sticking run drifts behind the wall by more than
-    the tolerances; :data:`pwsdyn.integrate._start.ADMIT_BEHIND`). A state further behind is
+    the tolerances; ``pwsdyn.integrate._start.ADMIT_BEHIND``). A state further behind is
     inside the wall: an :class:`ArgumentError` names the event and the value of ``h``. A
     start within round-off of a Filippov switching surface into which both fields point
     starts sliding.

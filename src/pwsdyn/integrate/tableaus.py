@@ -23,8 +23,9 @@ Every method is reduced to the same data the compiled kernel reads:
   ``y(t + theta h) = y + h * sum_k (K^T P)[:, k] theta^(k+1)``.
 
 A new method is one more function here returning a :class:`Tableau` and its entry in
-:data:`METHODS`; the kernel reads only these arrays (its error norm distinguishes the single
-estimate of ``code`` 0 from the combined 5th/3rd-order estimate of ``code`` 1).
+:data:`~pwsdyn.integrate.tableaus.METHODS`; the kernel reads only these arrays (its error norm
+distinguishes the single estimate of ``code`` 0 from the combined 5th/3rd-order estimate of
+``code`` 1).
 """
 
 from __future__ import annotations
@@ -259,4 +260,5 @@ def _dop853() -> Tableau:
 
 RK45 = _rk45()
 DOP853 = _dop853()
+#: The tableaus by name, for the ``method`` option of :func:`~pwsdyn.simulate`.
 METHODS = {"RK45": RK45, "DOPRI5": RK45, "DOP853": DOP853}

@@ -22,19 +22,20 @@ from .._codes import EVENT_LOG_KINDS, STATE_KINDS as _STATE_KINDS
 
 #: Event kinds of the log, indexed by the kernel's codes.
 EVENT_KINDS = EVENT_LOG_KINDS
-#: Discrete states of the kernel: a regular mode, sticking on an impact surface, sliding.
+#: Discrete states of the kernel -- a regular mode, sticking on an impact surface, sliding.
 STATE_KINDS = _STATE_KINDS
 
 
 class DiscreteState(str):
     """A discrete state of a flow: a mode, sticking on an impact event or sliding on a switch.
 
-    ``DiscreteState(kind, name)`` with ``kind`` one of :data:`STATE_KINDS` (``"mode"``,
-    ``"stick"``, ``"slide"``) and ``name`` the mode, impact event or switch. It is the text
-    the event log, the trajectory's ``state`` and every file have always used (the mode's
-    name, ``stick:<event>``, ``slide:<switch>``) and a ``str``: it compares equal to that
-    text, hashes like it and is written as it, so code that compares states with strings
-    keeps working. :meth:`parse` is the one reader of that text.
+    ``DiscreteState(kind, name)`` with ``kind`` one of
+    :data:`~pwsdyn.integrate.trajectory.STATE_KINDS` (``"mode"``, ``"stick"``, ``"slide"``) and
+    ``name`` the mode, impact event or switch. It is the text the event log, the trajectory's
+    ``state`` and every file have always used (the mode's name, ``stick:<event>``,
+    ``slide:<switch>``) and a ``str``: it compares equal to that text, hashes like it and is
+    written as it, so code that compares states with strings keeps working. :meth:`parse` is the
+    one reader of that text.
 
     Examples
     --------
@@ -123,6 +124,8 @@ class EventRecord:
     t_after : float
         Time after the event (differs from ``t`` only for ``chatter``).
 
+    Notes
+    -----
     Records are plain slotted objects (not frozen: a frozen dataclass costs five times as much
     to create, and sweeps create millions); treat them as read-only.
     """
@@ -160,15 +163,15 @@ SWITCH_EVENT_KINDS = ("crossing", "slide_start", "slide_end")
 
 
 class EventLog(Sequence):
-    """The event log of a run: a read-only sequence of :class:`EventRecord` with its columns
-    as arrays.
+    """The event log of a run: a read-only sequence of :class:`~pwsdyn.EventRecord` with its
+    columns as arrays.
 
     The kernel returns the log as arrays; records are made only when the log is indexed or
     iterated (a sweep logs hundreds of events per parameter value and reads the columns
     only). The columns: ``t``, ``t_after``, ``kind_code`` (index into
-    :data:`EVENT_KINDS`), ``ref`` (event or switch index), ``x_before``, ``x_after``,
-    ``state_before``/``state_after`` (kernel discrete states ``(kind, index, mode)``, kind
-    0 a mode, 1 sticking, 2 sliding) and the derived ``kind`` and ``name``.
+    :data:`~pwsdyn.integrate.trajectory.EVENT_KINDS`), ``ref`` (event or switch index),
+    ``x_before``, ``x_after``, ``state_before``/``state_after`` (kernel discrete states ``(kind,
+    index, mode)``, kind 0 a mode, 1 sticking, 2 sliding) and the derived ``kind`` and ``name``.
     """
 
     __slots__ = ("model", "t", "t_after", "kind_code", "ref", "x_before", "x_after",
@@ -189,7 +192,7 @@ class EventLog(Sequence):
 
     @classmethod
     def from_records(cls, model, records, n: int | None = None) -> "EventLog":
-        """The log of ``records`` (:class:`EventRecord`, in time order), with its columns.
+        """The log of ``records`` (:class:`~pwsdyn.EventRecord`, in time order), with its columns.
 
         For a log that does not come from the kernel: one read from a file, the events of a
         periodic orbit put together from its segments. Its records are the ones given (their
@@ -367,11 +370,12 @@ class Trajectory:
         States at those times.
     state : numpy.ndarray of str
         Discrete state (mode name, ``stick:<event>`` or ``slide:<switch>``) at each node;
-        :meth:`DiscreteState.parse` reads an entry.
+        :meth:`~pwsdyn.integrate.DiscreteState.parse` reads an entry.
     events : EventLog
         The event log, in time order: a sequence of :class:`EventRecord` whose columns are
         also arrays. It is the hybrid orbit's segment signature. A list of records given to
-        the constructor is made an :class:`EventLog` (:meth:`EventLog.from_records`).
+        the constructor is made an :class:`~pwsdyn.integrate.EventLog`
+        (:meth:`~pwsdyn.integrate.EventLog.from_records`).
     status : Status
     message : str
     stats : dict
@@ -437,21 +441,21 @@ class Trajectory:
 
     @property
     def y(self) -> np.ndarray:
-        """The full node vectors: the state, then (runs with ``variational=True``) the
+        """The full node vectors -- the state, then (runs with ``variational=True``) the
         variational matrix, row-major; the states ``x`` when there is no variational part."""
         return self.x if self._y is None else self._y
 
     @property
     def dense(self) -> np.ndarray | LazyDense | None:
-        """The dense output: per interval between consecutive nodes, the coefficients of
+        """The dense output, per interval between consecutive nodes, the coefficients of
         ``y(t0 + theta h) = y0 + sum_k dense[k] theta^(k+1)``, shape ``(intervals, len(y),
         degree)``; ``None`` for a run with ``dense=False``."""
         return self._dense
 
     @property
     def interval_kind(self) -> np.ndarray | None:
-        """How each interval between consecutive nodes is evaluated: 0 the dense polynomial,
-        1 linear (a jump, or no dense output), 2 linear across a chattering gap."""
+        """How each interval between consecutive nodes is evaluated -- 0 the dense
+        polynomial, 1 linear (a jump, or no dense output), 2 linear across a chattering gap."""
         return self._ikind
 
     @classmethod

@@ -27,7 +27,7 @@ particular solution of the textbook method does not exist).
 one set of frequencies shared by all modes of the model (so that ``z`` has the same layout in
 every mode). The compiled kernel evaluates ``M`` through the model's ``evaluate`` function
 (selector ``W_AFFINE``) and propagates with a Taylor-summed exponential (see
-:mod:`pwsdyn.integrate._kernel`).
+``pwsdyn.integrate._kernel``).
 """
 
 from __future__ import annotations

@@ -215,8 +215,8 @@ def load_module(kind: str, version: str, model_digest: str, generate, *, model_n
 
     ``generate()`` returns the module's text after the header (called only when the module
     must be written); ``model_digest`` is the model's full SHA-256. A failure to import or
-    compile removes the module and raises :class:`ModelError`. One thread at a time: a module
-    is in ``sys.modules`` before its code has run, so a second thread must not find it there
+    compile removes the module and raises :class:`~pwsdyn.ModelError`. One thread at a time: a
+    module is in ``sys.modules`` before its code has run, so a second thread must not find it there
     half made (sweeps run their chunks on threads).
     """
     with _LOAD_LOCK:

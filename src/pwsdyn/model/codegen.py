@@ -64,14 +64,14 @@ _QUANTITIES = {W_F: "vector field", W_FX: "Jacobian f_x", W_FT: "time derivative
                W_FU: "sliding family", W_HDU: "sliding normal velocity",
                W_HDUD: "sliding normal velocity derivative", W_AFFINE: "affine matrix"}
 
-#: Signature of the generated function: evaluate(which, idx, t, x, p, out) -> None
+#: Signature of the generated function, ``evaluate(which, idx, t, x, p, out) -> None``.
 EVALUATE_SIGNATURE = types.void(types.int64, types.int64, types.float64, types.float64[::1],
                                 types.float64[::1], types.float64[::1])
 EVALUATE_TYPE = types.FunctionType(EVALUATE_SIGNATURE)
 
 _CODEGEN_VERSION = "7"
 
-#: Largest generated module (characters) handed to the compiler: numba's time grows faster
+#: Largest generated module (characters) handed to the compiler -- numba's time grows faster
 #: than the source (40,000 characters, sixteen split modes, compile in about 7 s; the largest
 #: built-in model needs 25,000). A model past it is refused before minutes of compiling.
 MAX_SOURCE_CHARS = 100_000
@@ -278,7 +278,7 @@ class CompiledModel:
     switch_below: np.ndarray
     #: 0 Filippov, 1 continuous (crossing only) per switch
     switch_kind: np.ndarray | None = None
-    #: per surface: 1 if h depends on t explicitly (the kernel then checks that each step
+    #: Per surface, 1 if h depends on t explicitly (the kernel then checks that each step
     #: resolves h in time, not only the state)
     surface_time_dependent: np.ndarray | None = None
 

@@ -34,7 +34,7 @@ import copy
 from ..errors import ArgumentError
 from .spec import Model, as_model
 
-#: Laws of :func:`with_discrete_control` known by name.
+#: Laws of :func:`~pwsdyn.with_discrete_control` known by name.
 LAWS = ("linear",)
 
 

@@ -53,7 +53,7 @@ FILIPPOV, CONTINUOUS = "filippov", "continuous"
 #: Most distinct surfaces in one mode (2**k variants).
 MAX_SURFACES_PER_MODE = 8
 
-#: Most modes a model may have once its modes are split: each variant is compiled with its
+#: Most modes a model may have once its modes are split -- each variant is compiled with its
 #: derivatives, surfaces and switches, and compilation grows faster than the number of modes
 #: (16 modes of one field with four ``sign`` terms compile in about 7 s, 64 in minutes).
 MAX_SPLIT_MODES = 16

@@ -1,11 +1,11 @@
 """Safe parsing of user expressions into SymPy.
 
 User text is never passed to ``eval`` (SymPy's ``sympify``/``parse_expr`` do call ``eval``).
-Instead the text is parsed with :mod:`ast` and the tree is walked node by node; only numbers,
-known names, arithmetic, comparisons, boolean connectives and calls of the whitelisted
+Instead the text is parsed with Python's ``ast`` module and the tree is walked node by node; only
+numbers, known names, arithmetic, comparisons, boolean connectives and calls of the whitelisted
 functions below are accepted. Anything else -- attribute access, subscripts, lambdas,
-comprehensions, strings, unknown names -- raises :class:`ExpressionError` naming the offending
-construct.
+comprehensions, strings, unknown names -- raises :class:`~pwsdyn.ExpressionError` naming the
+offending construct.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ FUNCTIONS = {
 # the SymPy classes those names build (and DiracDelta, the derivative of sign and Heaviside)
 _FUNCTION_CLASSES = {f for f in FUNCTIONS.values() if isinstance(f, type)} | {sp.DiracDelta}
 
-#: Number of arguments each function takes: (min, max); max None = any number.
+#: How many arguments each function takes, as (min, max); max None = any number.
 ARITY = {name: (1, 1) for name in FUNCTIONS}
 ARITY.update({"atan2": (2, 2), "arctan2": (2, 2), "log": (1, 2), "Max": (1, None),
               "Min": (1, None), "max": (1, None), "min": (1, None)})

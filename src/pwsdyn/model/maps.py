@@ -20,9 +20,9 @@ on disk by the model hash, as for flows (:mod:`pwsdyn.model.codegen`)::
 
     step(x, p, out, jac, want_jac) -> piece index (or -1 if no piece applies)
 
-The iteration loops (:func:`orbit_kernel`, :func:`lyapunov_kernel`, in
-:mod:`pwsdyn.model._map_kernels`, loaded on first use) take that function as a first-class
-numba function of one fixed signature, so they are compiled once for all maps.
+The iteration loops (``orbit_kernel`` and ``lyapunov_kernel`` in ``pwsdyn.model._map_kernels``,
+loaded on first use) take that function as a first-class numba function of one fixed
+signature, so they are compiled once for all maps.
 """
 
 from __future__ import annotations

@@ -156,7 +156,7 @@ class SymbolicSystem:
     def defaults(self) -> dict:
         """The model's ``[defaults]`` table (``x0``, ``t0``, ``t_end``, ``params``; checked
         when the model was loaded), ``{}`` when it has none. Its ``params`` are already in
-        :attr:`parameters`."""
+        ``parameters``."""
         d = (self.spec or {}).get("defaults")
         return d if isinstance(d, dict) else {}
 
@@ -173,7 +173,7 @@ class SymbolicSystem:
     def parameter_vector(self, params: Mapping[str, float] | None = None):
         """Default parameter values overridden by ``params`` (by name), as a float array.
 
-        The defaults are :attr:`parameters`: the ``[parameters]`` table with the model's
+        The defaults are ``parameters``: the ``[parameters]`` table with the model's
         ``[defaults] params`` over it -- the values the command line uses too.
 
         Raises :class:`~pwsdyn.errors.ArgumentError` (a ``ValueError``) naming an unknown
@@ -345,9 +345,9 @@ def zoo_path(name: str) -> Path:
 
 
 def as_model(value, *, kind: str | None = None, caller: str = "", name: str = "model"):
-    """The model an entry point was given: ``value`` loaded with :func:`load_model`, a wrong
-    type an :class:`ArgumentError` naming ``name``; ``kind='flow'`` or ``'map'`` refuses the
-    other kind, naming ``caller``."""
+    """The model an entry point was given: ``value`` loaded with :func:`~pwsdyn.load_model`, a
+    wrong type an :class:`~pwsdyn.ArgumentError` naming ``name``; ``kind='flow'`` or ``'map'``
+    refuses the other kind, naming ``caller``."""
     from .. import _validate as V
 
     if not (isinstance(value, (str, os.PathLike, Mapping, SymbolicSystem))

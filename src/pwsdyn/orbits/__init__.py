@@ -1,6 +1,7 @@
 """Periodic orbits of hybrid models: Newton single and multiple shooting over the segments of
 the orbit, with Floquet multipliers from the saltation-corrected monodromy matrix; orbits on a
-fixed signature as problems ``F(u, p) = 0`` with exact Jacobians (:class:`OrbitProblem`)."""
+fixed signature as problems ``F(u, p) = 0`` with exact Jacobians
+(:class:`~pwsdyn.orbits.OrbitProblem`)."""
 
 from ._orbit import (PeriodicOrbit as PeriodicOrbit, Recurrence as Recurrence,
                      RecurrenceWarning as RecurrenceWarning)

@@ -31,8 +31,8 @@ class RecurrenceWarning(UserWarning):
 
 @dataclass(frozen=True)
 class Recurrence:
-    """How :meth:`PeriodicOrbit.from_trajectory` chose the period: the recurrence of the end of
-    the trajectory.
+    """How :meth:`~pwsdyn.PeriodicOrbit.from_trajectory` chose the period: the recurrence of the
+    end of the trajectory.
 
     Attributes
     ----------
@@ -63,7 +63,7 @@ class Recurrence:
     max_periods : int or None
         Forced models: the most forcing periods searched.
     message : str
-        The :class:`RecurrenceWarning` issued, ``''`` if none.
+        The :class:`~pwsdyn.RecurrenceWarning` issued, ``''`` if none.
     """
 
     period: float | None
@@ -228,7 +228,7 @@ class PeriodicOrbit:
         (``d mu/d p`` of each of :attr:`multipliers`), and the derivatives of the events' times
         and states. They come from the orbit problem on the orbit's signature:
         ``du/dp = -F_u^-1 F_p`` (exact Jacobians), the multipliers by a central difference of
-        the monodromy along that tangent (:meth:`OrbitProblem.sensitivity`).
+        the monodromy along that tangent (:meth:`~pwsdyn.orbits.OrbitProblem.sensitivity`).
 
         Examples
         --------
@@ -257,7 +257,7 @@ class PeriodicOrbit:
 
     @property
     def periods(self) -> int | None:
-        """Forced orbits: the period in forcing periods (2 for a period-doubled orbit);
+        """The period in forcing periods of a forced orbit (2 for a period-doubled orbit);
         ``None`` for an autonomous one."""
         if self.autonomous:
             return None
@@ -376,9 +376,9 @@ class PeriodicOrbit:
           to ``recurrence_tol`` (relative), unless ``period`` (a guess) is given. No recurrence
           is an :class:`~pwsdyn.errors.ArgumentError`.
 
-        ``orbit.recurrence`` (a :class:`Recurrence`) records what was found. With ``refine``
-        (default) the guess is refined by :func:`pwsdyn.find_periodic_orbit` (``kwargs`` go
-        there); otherwise one period is re-simulated from the guess and its monodromy reported
+        ``orbit.recurrence`` (a :class:`~pwsdyn.orbits.Recurrence`) records what was found. With
+        ``refine`` (default) the guess is refined by :func:`pwsdyn.find_periodic_orbit` (``kwargs``
+        go there); otherwise one period is re-simulated from the guess and its monodromy reported
         as is (``converged`` then says whether it closed to ``tol``).
 
         Parameters

@@ -700,7 +700,7 @@ class OrbitProblem:
     def evaluate(self, u, p=None, *, jacobian: bool = True) -> ProblemEvaluation:
         """``F`` and (with ``jacobian``) ``F_u``, ``F_p`` at ``(u, p)``.
 
-        Raises :class:`SegmentFailed` when a segment cannot be integrated.
+        Raises :class:`~pwsdyn.orbits.problem.SegmentFailed` when a segment cannot be integrated.
         """
         p = self._p(p)
         t0, xs, Ts = self.unpack(u)
@@ -856,7 +856,7 @@ class OrbitProblem:
         meets, to the first zero of its condition, the event map applied, and so on around
         the signature and once more through segment 0.
 
-        Raises :class:`ArgumentError` when a segment does not reach its condition within
+        Raises :class:`~pwsdyn.ArgumentError` when a segment does not reach its condition within
         ``horizon`` (default: twice the period of a forced orbit; required for an autonomous
         one, whose ``t_ref`` is set to the start of segment 0 found).
         """
@@ -1457,7 +1457,7 @@ class OrbitProblem:
     # ---- the reported orbit ----------------------------------------------------------------
     def orbit(self, u, p=None, *, t0=None, x_ref=None, phase_normal=None, history=None,
               converged: bool = True):
-        """The :class:`~pwsdyn.orbits.PeriodicOrbit` at ``(u, p)``.
+        """The :class:`~pwsdyn.PeriodicOrbit` at ``(u, p)``.
 
         Its base point: forced orbits at time ``t0`` (default: the middle of the longest
         segment in a mode); autonomous orbits where they cross the hyperplane through
@@ -1467,7 +1467,7 @@ class OrbitProblem:
         segments integrated in their discrete states and the events from the signature, so
         an orbit that is not admissible is reported as it is, with ``admissible = False`` and
         the reason. Monodromy: the segments' flow Jacobians and the boundaries' full
-        saltation matrices (:meth:`_saltation`).
+        saltation matrices (``_saltation``).
         """
 
         p = self._p(p)

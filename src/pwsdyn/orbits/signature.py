@@ -12,10 +12,11 @@ The segment ended by event ``k`` runs in ``state_before`` of event ``k``, which 
 :class:`Signature` is a tuple of :class:`SignatureEvent` (named tuples), so it compares equal
 to the plain tuples ``((kind, name, mode_before, mode_after), ...)`` that
 ``PeriodicOrbit.signature`` has always returned, is hashable and ordered like a tuple, and
-adds what the orbit code needs: a readable ``str``, :meth:`~Signature.doubled` (the signature
-of the period-doubled orbit near a period-doubling), :meth:`~Signature.rotated`,
-:meth:`~Signature.same_cycle` (equality up to where the period starts), the segment states,
-and :meth:`~Signature.parse` (the inverse of ``str``).
+adds what the orbit code needs: a readable ``str``, :meth:`~pwsdyn.orbits.Signature.doubled` (the
+signature of the period-doubled orbit near a period-doubling),
+:meth:`~pwsdyn.orbits.Signature.rotated`, :meth:`~pwsdyn.orbits.Signature.same_cycle` (equality up
+to where the period starts), the segment states, and :meth:`~pwsdyn.orbits.Signature.parse` (the
+inverse of ``str``).
 """
 
 from __future__ import annotations
@@ -105,7 +106,7 @@ class Signature(tuple):
     # ---- construction -------------------------------------------------------------------
     @classmethod
     def from_events(cls, events) -> "Signature":
-        """The signature of a sequence of :class:`EventRecord` (one period of an orbit)."""
+        """The signature of a sequence of :class:`~pwsdyn.EventRecord` (one period of an orbit)."""
         return cls(events)
 
     @classmethod
@@ -161,7 +162,7 @@ class Signature(tuple):
 
     @property
     def states(self) -> tuple:
-        """The discrete state of each segment: ``states[k]`` is the state of the segment
+        """The discrete state of each segment -- ``states[k]`` is the state of the segment
         that event ``k`` ends (its ``mode_before``)."""
         return tuple(e.mode_before for e in self)
 

@@ -345,7 +345,7 @@ def plot_basins(ds: xr.Dataset, path: str | Path | None = None, *, overwrite: bo
 # ======================================================================================
 # ======================================================================================
 #: Metrics drawn by :func:`plot_metrics` by default (variables of
-#: :func:`pwsdyn.explore.metrics.metrics_sweep`).
+#: :func:`pwsdyn.explore.metrics_sweep`).
 DEFAULT_METRICS = ("rms_acceleration", "travel_range", "impact_velocity_max")
 #: Colours of the variants of :func:`plot_metrics`, in order (Okabe-Ito).
 VARIANT_COLORS = ("#000000", "#D55E00", "#0072B2", "#009E73", "#CC79A7", "#E69F00")
@@ -361,9 +361,9 @@ def plot_metrics(ds: xr.Dataset, metrics: Sequence[str] | None = None,
     Parameters
     ----------
     ds : xarray.Dataset
-        The result of :func:`pwsdyn.explore.metrics.metrics_sweep`.
+        The result of :func:`pwsdyn.explore.metrics_sweep`.
     metrics : sequence of str, optional
-        Its variables drawn (default :data:`DEFAULT_METRICS`).
+        Its variables drawn (default ``DEFAULT_METRICS``).
     path : str or Path, optional
         Also save the figure there (see :func:`plot_trajectory`).
     overwrite : bool
