@@ -14,11 +14,13 @@ The model is symbolic (SymPy). :mod:`pwsdyn.model.codegen` turns it into compile
 
 from __future__ import annotations
 
+import errno
 import functools
 import hashlib
 import math
 import os
 import re
+import time
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
@@ -188,6 +190,11 @@ class SymbolicSystem:
         if params is not None and not isinstance(params, Mapping):
             raise ArgumentError(f"`params` must be a dict of parameter values by name or None, "
                                 f"got {describe(params)}")
+        if not params:
+            # the defaults: in the order of ``parameters``, as below
+            p = np.array(list(self.parameters.values()), dtype=float)
+            if np.isfinite(p).all():
+                return p
         values = dict(self.parameters)
         for k, v in (params or {}).items():
             if not isinstance(k, str) or k not in values:
@@ -299,7 +306,7 @@ class Model(SymbolicSystem):
         expression (a SymPy substitution costs milliseconds, as much as a shooting step)."""
         if self.forcing_period is None:
             return lambda *p: math.nan
-        return sp.lambdify(self.parameter_symbols, self.forcing_period, modules="math")
+        return _lambdified_period(tuple(self.parameters), self.forcing_period)
 
     # --- identity ------------------------------------------------------------------------
     @functools.cached_property
@@ -330,24 +337,122 @@ class Model(SymbolicSystem):
                 f"switches={[s.name for s in self.switches]})")
 
 
+@functools.lru_cache(maxsize=256)
+def _lambdified_period(parameters: tuple, period):
+    # shared by the models of one structure: every load of a file by name makes a new Model
+    return sp.lambdify([sp.Symbol(p, real=True) for p in parameters], period, modules="math")
+
+
 # ======================================================================================
 # loading
 # ======================================================================================
 
+@functools.cache
+def _zoo_dir() -> Path:
+    return Path(str(resources.files("pwsdyn.model") / "zoo"))
+
+
+#: The built-in model names with the directory's (mtime, size) they were listed at.
+_ZOO_NAMES: list = [None, ()]
+
+
 def zoo_names() -> list[str]:
     """Names of the built-in models."""
-    root = resources.files("pwsdyn.model") / "zoo"
-    return sorted(p.name[:-5] for p in root.iterdir() if p.name.endswith(".toml"))
+    return list(_zoo_names())
+
+
+def _zoo_names() -> tuple:
+    root = _zoo_dir()
+    st = os.stat(root)
+    key = (st.st_mtime_ns, st.st_size, st.st_ino)
+    if _ZOO_NAMES[0] != key:
+        # listed again whenever the directory changes (a model file added or removed)
+        _ZOO_NAMES[:] = [key, tuple(sorted(p.name[:-5] for p in root.iterdir()
+                                           if p.name.endswith(".toml")))]
+    return _ZOO_NAMES[1]
 
 
 def zoo_path(name: str) -> Path:
-    return Path(str(resources.files("pwsdyn.model") / "zoo" / f"{name}.toml"))
+    return _zoo_dir() / f"{name}.toml"
+
+
+#: Models read from files, by the path as given: ``(file key, model)``. The model is never
+#: handed out; each load returns a copy (:func:`_copy_model`), so a caller that changes its
+#: model changes no later load. The key (:func:`_file_key`) makes an edited file read again.
+_LOADED: dict = {}
+_LOADED_MAX = 128
+#: A file modified less than this long (ns) before it was read is not cached: a second edit
+#: within the file system's timestamp resolution could leave its key unchanged.
+_RACY_NS = 2_000_000_000
+
+
+def _file_key(path: Path):
+    """What identifies a version of a file: device, inode, size and modification time;
+    None when it does not exist (or cannot be examined)."""
+    try:
+        st = os.stat(path)
+    except OSError as exc:
+        # what ``Path.exists`` counts as absent; other errors (permissions) propagate
+        if exc.errno in (errno.ENOENT, errno.ENOTDIR, errno.EBADF, errno.ELOOP):
+            return None
+        raise
+    except ValueError:      # a NUL in the path
+        return None
+    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+
+
+def _copy_data(value):
+    """A copy of parsed TOML data (dicts and lists of immutable values) that shares no
+    container with ``value``."""
+    if isinstance(value, dict):
+        return {k: _copy_data(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_copy_data(v) for v in value]
+    return value
+
+
+def _copy_model(model):
+    """A new model equal to ``model`` (a :class:`Model` or a map): the immutable parts
+    (names, modes, surfaces, events, switches, pieces: tuples of frozen values and SymPy
+    expressions) and what is derived from them alone (``digest``, ``hash``) shared, every
+    dict and list copied (``spec`` to the leaves)."""
+    new = object.__new__(type(model))
+    new.__dict__.update({k: _copy_data(v) if k == "spec" else
+                         dict(v) if isinstance(v, dict) else
+                         _copy_data(v) if isinstance(v, list) else v
+                         for k, v in model.__dict__.items()})
+    return new
+
+
+def _load_file(path: Path, key) -> "Model":
+    """The model in the file ``path`` (whose :func:`_file_key` is ``key``), from
+    :data:`_LOADED` while the file is unchanged."""
+    name = str(path)
+    hit = _LOADED.get(name)
+    if hit is not None and hit[0] == key:
+        return _copy_model(hit[1])
+    read_at = time.time_ns()
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ModelError(f"cannot read model file: {exc}", source=name) from None
+    model = _model_from_toml_text(text, name)
+    if _file_key(path) == key and read_at - key[3] > _RACY_NS:
+        # what every run needs (it names the compiled model), computed once for the copies
+        model.digest, model.hash
+        if len(_LOADED) >= _LOADED_MAX:
+            _LOADED.clear()
+        _LOADED[name] = (key, model)
+        return _copy_model(model)
+    return model
 
 
 def as_model(value, *, kind: str | None = None, caller: str = "", name: str = "model"):
     """The model an entry point was given: ``value`` loaded with :func:`load_model`, a wrong
     type an :class:`ArgumentError` naming ``name``; ``kind='flow'`` or ``'map'`` refuses the
     other kind, naming ``caller``."""
+    if type(value) is Model and kind != "map":
+        return value        # the common case, on every call of a loop
     from .. import _validate as V
 
     if not (isinstance(value, (str, os.PathLike, Mapping, SymbolicSystem))
@@ -411,18 +516,15 @@ def load_model(source: str | os.PathLike[str] | Mapping[str, Any] | Model,
     if isinstance(source, (str, Path)):
         text_source = str(source)
         path = Path(text_source)
-        if "\n" not in text_source and text_source in zoo_names():
+        if "\n" not in text_source and text_source in _zoo_names():
             path = zoo_path(text_source)
-        if "\n" in text_source or (not path.exists() and "=" in text_source):
+        key = None if "\n" in text_source else _file_key(path)
+        if "\n" in text_source or (key is None and "=" in text_source):
             return _model_from_toml_text(text_source, "<string>")
-        if not path.exists():
+        if key is None:
             raise ModelError(f"no model file {text_source!r} and no built-in model of that name; "
                              f"built-in models are {', '.join(zoo_names())}", source=text_source)
-        try:
-            text = path.read_text()
-        except OSError as exc:
-            raise ModelError(f"cannot read model file: {exc}", source=str(path)) from None
-        return _model_from_toml_text(text, str(path))
+        return _load_file(path, key)
     raise ArgumentError(f"`source` must be a path, a model name, a dict or a Model, "
                     f"got {type(source).__name__}")
 
