@@ -11,7 +11,7 @@ import numpy as np
 from .._version import __version__
 from .. import _validate as V
 from ..errors import ArgumentError, SolveError, Status
-from ..model import compile_model
+from ..model import codegen as _codegen, compile_model
 from ..model.codegen import CompiledModel
 from ..model.affine import affine_structure
 from ..model.spec import as_model, run_defaults
@@ -56,7 +56,7 @@ def integrator_options(options: Mapping, caller: str, reserved=()) -> dict:
         raise ArgumentError(f"{caller} got unexpected keyword argument(s) {unknown}; "
                             f"integrator options are {sorted(set(DEFAULTS) - set(reserved))}")
     opts = {**DEFAULTS, **options}
-    check_options(opts)
+    _check_options(opts)
     return opts
 
 
@@ -255,8 +255,9 @@ def simulate(model: ModelLike, x0: StateLike | Trajectory | None = None,
     if cont is None:
         t_end = t_span if t_span is None or V.is_real(t_span) else 0.0
         run = run_defaults(model, x0=x0, t_end=t_end)
-        for note in run.note(model):
-            warnings.warn(note, stacklevel=2)
+        if run.fallback:
+            for note in run.note(model):
+                warnings.warn(note, stacklevel=2)
         x0, t0_default = run.x0, run.t0
         if t_span is None:
             t_span = (run.t0, run.t_end)
@@ -271,13 +272,24 @@ def simulate(model: ModelLike, x0: StateLike | Trajectory | None = None,
     check_mode(model, opts)
     if not isinstance(opts["exact"], str) and opts["exact"]:
         _check_exact(model)
-    cm = compile_model(model)
+    cm = _compiled(model)
     state = None if cont is None else cont.final_discrete_state
     if state is not None and t0 == cont.t_final and len(state) == 3:
         kind, idx, mode0 = (int(v) for v in state)
         return _simulate_compiled(cm, x, t0, t_end, p, opts, mode0=mode0, dkind0=kind,
-                                  didx0=idx, refuse=True)
-    return _simulate_compiled(cm, x, t0, t_end, p, opts, refuse=True)
+                                  didx0=idx, refuse=True, model=model, checked=True)
+    return _simulate_compiled(cm, x, t0, t_end, p, opts, refuse=True, model=model,
+                              checked=True)
+
+
+def _compiled(model) -> CompiledModel:
+    """The compiled functions of ``model``, from :func:`compile_model`'s memo by digest
+    without pairing them with ``model``: a model loaded by name is a new object on every
+    load (:func:`pwsdyn.load_model`), which :func:`compile_model` would pair anew on every
+    call. The ``cm.model`` returned may be another object with the same digest; the caller's
+    model goes into the trajectory."""
+    cm = _codegen._COMPILED.get(model.digest)
+    return compile_model(model) if cm is None else cm
 
 
 def _lazy_dense(cm, p, etab, stab, kopts, tab, t0, x0, nodes_t, nodes_y, nodes_s, hstep,
@@ -373,8 +385,27 @@ def check_options(opts) -> None:
         raise V.fail("mode", "None or a mode name", mode)
 
 
+#: Option sets that passed :func:`check_options`, as their items and the values' types: the
+#: check is a function of the values and their types alone, and loops (sweeps, shooting,
+#: continuation) pass the same options on every call.
+_CHECKED: set = set()
+_CHECKED_MAX = 512
+
+
 def _check_options(opts):
+    """:func:`check_options`, once per set of option values."""
+    try:
+        key = (tuple(opts.items()), tuple(map(type, opts.values())))
+        known = key in _CHECKED
+    except TypeError:       # an unhashable value: checked every time
+        key, known = None, False
+    if known:
+        return
     check_options(opts)
+    if key is not None:
+        if len(_CHECKED) >= _CHECKED_MAX:
+            _CHECKED.clear()
+        _CHECKED.add(key)
 
 
 def resolve_method(opts) -> str:
@@ -459,7 +490,7 @@ def _build_kernel_tables(cm: CompiledModel, sliding: str):
 
 def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dkind0=None,
                        didx0=None, stop=None, sample=None, admit=True, refuse=False,
-                       store_dense=False):
+                       store_dense=False, model=None, checked=False):
     """The kernel run behind :func:`simulate`, without re-validating model, state, params.
 
     ``dkind0``, ``didx0``: initial discrete state (0 mode, 1 sticking on event ``didx0``, 2
@@ -478,9 +509,13 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
     run) from the dense output, without events or landing steps: stroboscopic sections
     (``traj.samples``). ``store_dense`` stores the dense output of every step as the run
     goes (as variational runs do) instead of rebuilding it from the nodes when it is read.
+    ``model``: the model the trajectory carries (default ``cm.model``; one with the same
+    digest); ``checked``: ``opts`` passed :func:`check_options` already.
     """
-    _check_options(opts)
-    model = cm.model
+    if not checked:
+        _check_options(opts)
+    if model is None:
+        model = cm.model
     method = resolve_method(opts)
     tab = METHODS[method]
     etab, eact, stab = kernel_tables(cm, opts.get("sliding", "convex"))
@@ -488,7 +523,7 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
         mode0 = model.initial_mode if opts["mode"] is None else model.mode_index(opts["mode"])
     if admit and not dkind0 and len(etab):
         x = np.asarray(x, dtype=float)
-        xmax = float(np.max(np.abs(x))) if x.size else 0.0
+        xmax = float(np.abs(x).max()) if x.size else 0.0
         st = start_state(cm, etab, eact, stab, t0, x, p, int(mode0),
                          pos_tol=opts["atol"] + opts["rtol"] * xmax,
                          behind_tol=ADMIT_BEHIND * (1.0 + xmax), refuse=refuse)
@@ -531,27 +566,33 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
     # discrete state per node, mapped through the few distinct codes (vectorised: runs can
     # have millions of nodes)
     N = len(nodes_s)
-    d = nodes_s[1:] != nodes_s[:-1]
-    starts = np.concatenate(([0], np.flatnonzero(d[:, 0] | d[:, 1] | d[:, 2]) + 1))[:N]
-    label: dict = {}
-    for code in map(tuple, nodes_s[starts].tolist()):
-        if code not in label:
-            label[code] = _state_name(model, *code)
-    run_names = np.array([label[c] for c in map(tuple, nodes_s[starts].tolist())], dtype=str)
-    states = (np.full(N, run_names[0]) if len(starts) == 1 else
-              np.repeat(run_names, np.diff(np.append(starts, N))))
+    if N and (nodes_s == nodes_s[0]).all():
+        # one discrete state throughout (most short runs): the same array, fewer steps
+        states = np.full(N, np.array([_state_name(model, *nodes_s[0].tolist())],
+                                     dtype=str)[0])
+    else:
+        d = nodes_s[1:] != nodes_s[:-1]
+        starts = np.concatenate(([0], np.flatnonzero(d[:, 0] | d[:, 1] | d[:, 2]) + 1))[:N]
+        label: dict = {}
+        for code in map(tuple, nodes_s[starts].tolist()):
+            if code not in label:
+                label[code] = _state_name(model, *code)
+        run_names = np.array([label[c] for c in map(tuple, nodes_s[starts].tolist())],
+                             dtype=str)
+        states = (np.full(N, run_names[0]) if len(starts) == 1 else
+                  np.repeat(run_names, np.diff(np.append(starts, N))))
     # the event log as arrays; its records are made when it is read (sweeps read columns)
     events = EventLog(model, ev_t, ev_t2, ev_info, ev_xb[:, :n].copy(), ev_xa[:, :n].copy(),
                       _state_name)
-    stat = dict(zip(STATS, (int(s) for s in stats)))
-    params = dict(zip(model.parameters, (float(v) for v in p)))
+    stat = dict(zip(STATS, stats.tolist()))
+    params = dict(zip(model.parameters, pv.tolist()))
     traj = Trajectory(
         t=nodes_t, x=nodes_y[:, :n].copy(), state=states, events=events, status=status,
         message=status.message, stats=stat, model=model, params=params,
         options={**{k: v for k, v in opts.items() if k != "throw"}, "method": method},
         t0=t0, t_end=t_end,
         jacobian=jac, transfer_matrices=transfer,
-        final_discrete_state=tuple(int(v) for v in dstate),
+        final_discrete_state=tuple(dstate.tolist()),
         samples=(samples[:, 0].copy(), samples[:, 1:].copy()) if sample is not None else None,
         _dense=dense if opts["dense"] else None,
         _ikind=ikind, _y=nodes_y,

@@ -27,6 +27,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping
 
+import numpy as np
 import sympy as sp
 
 from .._codes import MODEL_EVENT_KINDS
@@ -182,19 +183,16 @@ class SymbolicSystem:
         parameter, a value that is not a real number (a string, ``None``, a bool) or a
         non-finite value, or ``params`` that is not a mapping.
         """
-        import numpy as np
-
+        if params is None or (type(params) is dict and not params):
+            # the defaults (most calls): in the order of ``parameters``, as below
+            p = np.array(list(self.parameters.values()), dtype=float)
+            if np.isfinite(p).all():
+                return p
         from .._validate import describe, is_real
-        from ..errors import ArgumentError
 
         if params is not None and not isinstance(params, Mapping):
             raise ArgumentError(f"`params` must be a dict of parameter values by name or None, "
                                 f"got {describe(params)}")
-        if not params:
-            # the defaults: in the order of ``parameters``, as below
-            p = np.array(list(self.parameters.values()), dtype=float)
-            if np.isfinite(p).all():
-                return p
         values = dict(self.parameters)
         for k, v in (params or {}).items():
             if not isinstance(k, str) or k not in values:
