@@ -17,6 +17,7 @@ from __future__ import annotations
 import errno
 import functools
 import hashlib
+import marshal
 import math
 import os
 import re
@@ -371,7 +372,15 @@ def _zoo_names() -> tuple:
 
 
 def zoo_path(name: str) -> Path:
-    return _zoo_dir() / f"{name}.toml"
+    path = _ZOO_PATHS.get(name)
+    if path is None:
+        path = _zoo_dir() / f"{name}.toml"
+        if len(_ZOO_PATHS) < 1024:
+            _ZOO_PATHS[name] = path
+    return path
+
+
+_ZOO_PATHS: dict = {}
 
 
 #: Models read from files, by the path as given: ``(file key, model)``. The model is never
@@ -409,17 +418,31 @@ def _copy_data(value):
     return value
 
 
-def _copy_model(model):
+def _copy_model(model, spec_bytes: bytes | None = None):
     """A new model equal to ``model`` (a :class:`Model` or a map): the immutable parts
     (names, modes, surfaces, events, switches, pieces: tuples of frozen values and SymPy
-    expressions) and what is derived from them alone (``digest``, ``hash``) shared, every
-    dict and list copied (``spec`` to the leaves)."""
+    expressions) and what is derived from them alone (``digest``, ``hash``, the forcing
+    period's function) shared, every dict and list copied (``spec`` to the leaves: from
+    ``spec_bytes``, its :mod:`marshal` form, where given)."""
     new = object.__new__(type(model))
-    new.__dict__.update({k: _copy_data(v) if k == "spec" else
-                         dict(v) if isinstance(v, dict) else
-                         _copy_data(v) if isinstance(v, list) else v
-                         for k, v in model.__dict__.items()})
+    d = new.__dict__
+    d.update(model.__dict__)
+    for k, v in d.items():
+        if type(v) is dict:
+            d[k] = dict(v)      # values immutable: parameters, units, definitions, ...
+        elif isinstance(v, (dict, list)):
+            d[k] = _copy_data(v)
+    d["spec"] = _copy_data(model.spec) if spec_bytes is None else marshal.loads(spec_bytes)
     return new
+
+
+def _marshalled(data) -> bytes | None:
+    """``data`` in :mod:`marshal` form (unmarshalling is the fastest deep copy), or None
+    where it holds what marshal does not write (TOML dates and times)."""
+    try:
+        return marshal.dumps(data)
+    except ValueError:
+        return None
 
 
 def _load_file(path: Path, key) -> "Model":
@@ -428,7 +451,7 @@ def _load_file(path: Path, key) -> "Model":
     name = str(path)
     hit = _LOADED.get(name)
     if hit is not None and hit[0] == key:
-        return _copy_model(hit[1])
+        return _copy_model(hit[1], hit[2])
     read_at = time.time_ns()
     try:
         text = path.read_text()
@@ -436,12 +459,16 @@ def _load_file(path: Path, key) -> "Model":
         raise ModelError(f"cannot read model file: {exc}", source=name) from None
     model = _model_from_toml_text(text, name)
     if _file_key(path) == key and read_at - key[3] > _RACY_NS:
-        # what every run needs (it names the compiled model), computed once for the copies
+        # what every run needs (the digest names the compiled model; the forcing period
+        # bounds the steps), computed once for the copies
         model.digest, model.hash
+        if getattr(model, "forcing_period", None) is not None:
+            model.forcing_period_function
+        spec_bytes = _marshalled(model.spec)
         if len(_LOADED) >= _LOADED_MAX:
             _LOADED.clear()
-        _LOADED[name] = (key, model)
-        return _copy_model(model)
+        _LOADED[name] = (key, model, spec_bytes)
+        return _copy_model(model, spec_bytes)
     return model
 
 
@@ -507,17 +534,19 @@ def load_model(source: str | os.PathLike[str] | Mapping[str, Any] | Model,
     """
     if kwargs:
         raise ArgumentError(f"load_model() got unexpected keyword argument(s) {sorted(kwargs)}")
-    if isinstance(source, Model) or getattr(source, "is_map", False):
-        return source
-    if isinstance(source, Mapping):
-        return _built(model_from_dict, dict(source), origin="<dict>")
+    if type(source) is not str:     # (a name or path: the common case, tested first)
+        if isinstance(source, Model) or getattr(source, "is_map", False):
+            return source
+        if isinstance(source, Mapping):
+            return _built(model_from_dict, dict(source), origin="<dict>")
     if isinstance(source, (str, Path)):
         text_source = str(source)
-        path = Path(text_source)
-        if "\n" not in text_source and text_source in _zoo_names():
-            path = zoo_path(text_source)
-        key = None if "\n" in text_source else _file_key(path)
-        if "\n" in text_source or (key is None and "=" in text_source):
+        if "\n" in text_source:
+            return _model_from_toml_text(text_source, "<string>")
+        path = (zoo_path(text_source) if text_source in _zoo_names() else
+                Path(text_source))
+        key = _file_key(path)
+        if key is None and "=" in text_source:
             return _model_from_toml_text(text_source, "<string>")
         if key is None:
             raise ModelError(f"no model file {text_source!r} and no built-in model of that name; "
