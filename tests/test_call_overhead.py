@@ -192,3 +192,41 @@ def test_option_errors_stay_after_good_calls():
             pwsdyn.simulate(m, (-0.5, 0.0), 1.0, rtol=float("nan"))
         with pytest.raises(ArgumentError, match="`first_step`"):
             pwsdyn.simulate(m, (-0.5, 0.0), 1.0, first_step=[1e-3])   # unhashable
+
+
+def test_abs_max_is_numpys_max_of_abs():
+    from pwsdyn.integrate._start import abs_max
+
+    for v in ([-0.5, 0.0], [1e308, -1e308, 3.0], [np.nan, 1.0], [1.0, np.nan], [-np.inf, 2.0],
+              [-0.0], [3.0, -7.25, 7.25]):
+        a = np.array(v)
+        want = float(np.max(np.abs(a)))
+        got = abs_max(a)
+        assert (math.isnan(got) and math.isnan(want)) or (got == want and type(got) is float)
+
+
+def test_a_spec_marshal_cannot_write_is_copied_to_the_leaves():
+    import datetime
+
+    data = {"a": [1, {"b": datetime.date(2020, 1, 2)}], "c": {"d": 1.5}}
+    assert spec._marshalled(data) is None
+    assert spec._marshalled({"a": [1, {"b": "x"}]}) is not None
+    copy = spec._copy_data(data)
+    assert copy == data and copy["a"] is not data["a"] and copy["a"][1] is not data["a"][1]
+
+
+def test_fast_argument_paths_agree_with_the_checks():
+    m = pwsdyn.load_model("impact-oscillator")
+    ref = pwsdyn.simulate(m, np.array([-0.5, 0.0]), np.array([0.0, 2.0]), dense=False)
+    for x0 in ((-0.5, 0.0), [-0.5, 0.0], {"x": -0.5, "v": 0.0}):
+        for span in ((0.0, 2.0), [0, 2], 2.0, (np.float64(0.0), 2)):
+            tr = pwsdyn.simulate(m, x0, span, dense=False)
+            assert np.array_equal(tr.x_final, ref.x_final) and tr.t0 == 0.0 and tr.t_end == 2.0
+    for x0, what in (((-0.5, float("nan")), "finite"), ((-0.5,), "2 entries"),
+                     ((-0.5, 0.0, 1.0), "2 entries")):
+        with pytest.raises(ArgumentError, match=what):
+            pwsdyn.simulate(m, x0, 1.0)
+    with pytest.raises(ArgumentError, match="with finite numbers"):
+        pwsdyn.simulate(m, (-0.5, 0.0), (0.0, float("inf")))
+    with pytest.raises(ArgumentError, match="t_end > t0"):
+        pwsdyn.simulate(m, (-0.5, 0.0), (2.0, 1.0))

@@ -18,7 +18,7 @@ from ..model.spec import as_model, run_defaults
 from ._load import kernel
 from ._codes import (EVENT_TABLE, SAVE_DENSE, SAVE_EVENTS, SAVE_NODES, STATS, SWITCH_TABLE,
                      VAR_NONE, VAR_SEGMENTS, KernelResult, kernel_options)
-from ._start import ADMIT_BEHIND, STICK, start_state
+from ._start import ADMIT_BEHIND, STICK, abs_max, start_state
 from ._variational import assemble_segments
 from .tableaus import METHODS
 from .trajectory import DiscreteState, EventLog, LazyDense, Trajectory
@@ -267,7 +267,7 @@ def simulate(model: ModelLike, x0: StateLike | Trajectory | None = None,
             raise ArgumentError("`t_span` is required to continue a trajectory: give t_end "
                                 "or (t0, t_end)")
     p = model.parameter_vector(params)
-    x = state_vector(model, x0)
+    x = _state(model, x0)
     t0, t_end = _time_span(t_span, t0=t0_default)
     check_mode(model, opts)
     if not isinstance(opts["exact"], str) and opts["exact"]:
@@ -307,6 +307,16 @@ def _lazy_dense(cm, p, etab, stab, kopts, tab, t0, x0, nodes_t, nodes_y, nodes_s
     return LazyDense((len(hstep), nodes_y.shape[1], deg), rebuild)
 
 
+def _state(model, x0) -> np.ndarray:
+    """:func:`state_vector`, with a shortcut for a tuple or list of finite floats."""
+    if (type(x0) is tuple or type(x0) is list) and len(x0) == model.n_states \
+            and all(type(v) is float for v in x0):
+        x = np.array(x0, dtype=float)
+        if np.isfinite(x).all():
+            return x
+    return state_vector(model, x0)
+
+
 def _continued_params(model, traj, opts, params):
     """The parameters of a run continuing ``traj``: its own, with ``params`` over them;
     ``traj`` must be a trajectory of ``model`` and ``mode`` unset."""
@@ -331,6 +341,12 @@ def _time_span(t_span, name: str = "t_span", t0=None):
     """``(t0, t_end)`` from ``t_span``: finite, ``t_end > t0`` and resolvable in double
     precision (:func:`pwsdyn._validate.time_span`: at least 1024 units ``eps max(1, |t|)``).
     A single number is ``t_end`` from ``t0`` (default 0)."""
+    if type(t_span) is tuple and len(t_span) == 2:
+        # two finite floats (most calls): what the checks below return for them
+        a, b = t_span
+        if type(a) is float and type(b) is float and math.isfinite(a) and math.isfinite(b):
+            V.time_span(name, a, b)
+            return a, b
     must = "(t0, t_end) or t_end, with finite numbers"
     if V.is_real(t_span):
         t0, t_end = (0.0 if t0 is None else float(t0)), V.number(name, t_span, must=must)
@@ -523,7 +539,7 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
         mode0 = model.initial_mode if opts["mode"] is None else model.mode_index(opts["mode"])
     if admit and not dkind0 and len(etab):
         x = np.asarray(x, dtype=float)
-        xmax = float(np.abs(x).max()) if x.size else 0.0
+        xmax = abs_max(x) if x.size else 0.0
         st = start_state(cm, etab, eact, stab, t0, x, p, int(mode0),
                          pos_tol=opts["atol"] + opts["rtol"] * xmax,
                          behind_tol=ADMIT_BEHIND * (1.0 + xmax), refuse=refuse)
