@@ -88,6 +88,23 @@ def _state_name(model, kind: int, idx: int, mode: int) -> DiscreteState:
     return DiscreteState("slide", model.switches[idx].name)
 
 
+#: One-entry arrays of the discrete states' names, by model digest and kernel code.
+_LABELS: dict = {}
+
+
+def _label_array(model, code: tuple) -> np.ndarray:
+    """``np.array([name], dtype=str)`` of the discrete state ``code`` of ``model`` (the
+    names are part of the digest)."""
+    key = (model.digest, code)
+    arr = _LABELS.get(key)
+    if arr is None:
+        if len(_LABELS) >= 4096:
+            _LABELS.clear()
+        arr = _LABELS[key] = np.array([_state_name(model, *code)], dtype=str)
+        arr.flags.writeable = False
+    return arr
+
+
 def simulate(model: ModelLike, x0: StateLike | Trajectory | None = None,
              t_span: float | tuple[float, float] | Sequence[float] | None = None,
              params: Mapping[str, float] | None = None, **options: Any) -> Trajectory:
@@ -310,10 +327,8 @@ def _lazy_dense(cm, p, etab, stab, kopts, tab, t0, x0, nodes_t, nodes_y, nodes_s
 def _state(model, x0) -> np.ndarray:
     """:func:`state_vector`, with a shortcut for a tuple or list of finite floats."""
     if (type(x0) is tuple or type(x0) is list) and len(x0) == model.n_states \
-            and all(type(v) is float for v in x0):
-        x = np.array(x0, dtype=float)
-        if np.isfinite(x).all():
-            return x
+            and all(type(v) is float and math.isfinite(v) for v in x0):
+        return np.array(x0, dtype=float)
     return state_vector(model, x0)
 
 
@@ -584,8 +599,7 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
     N = len(nodes_s)
     if N and (nodes_s == nodes_s[0]).all():
         # one discrete state throughout (most short runs): the same array, fewer steps
-        states = np.full(N, np.array([_state_name(model, *nodes_s[0].tolist())],
-                                     dtype=str)[0])
+        states = np.repeat(_label_array(model, tuple(nodes_s[0].tolist())), N)
     else:
         d = nodes_s[1:] != nodes_s[:-1]
         starts = np.concatenate(([0], np.flatnonzero(d[:, 0] | d[:, 1] | d[:, 2]) + 1))[:N]

@@ -31,6 +31,7 @@ from typing import Any, Mapping
 import numpy as np
 import sympy as sp
 
+from .. import _validate as V
 from .._codes import MODEL_EVENT_KINDS
 from ..errors import ArgumentError, ModelError, PwsdynError
 from .elements import Event as Event, Mode as Mode, Surface as Surface, Switch as Switch
@@ -186,9 +187,13 @@ class SymbolicSystem:
         """
         if params is None or (type(params) is dict and not params):
             # the defaults (most calls): in the order of ``parameters``, as below
-            p = np.array(list(self.parameters.values()), dtype=float)
-            if np.isfinite(p).all():
-                return p
+            vals = list(self.parameters.values())
+            try:
+                finite = all(map(math.isfinite, vals))
+            except (TypeError, OverflowError):
+                finite = False      # reported below
+            if finite:
+                return np.array(vals, dtype=float)
         from .._validate import describe, is_real
 
         if params is not None and not isinstance(params, Mapping):
@@ -478,8 +483,6 @@ def as_model(value, *, kind: str | None = None, caller: str = "", name: str = "m
     other kind, naming ``caller``."""
     if type(value) is Model and kind != "map":
         return value        # the common case, on every call of a loop
-    from .. import _validate as V
-
     if not (isinstance(value, (str, os.PathLike, Mapping, SymbolicSystem))
             or getattr(value, "is_map", False)):
         raise V.fail(name, "a Model, a model name, a path to a TOML file or a dict", value)
@@ -543,9 +546,14 @@ def load_model(source: str | os.PathLike[str] | Mapping[str, Any] | Model,
         text_source = str(source)
         if "\n" in text_source:
             return _model_from_toml_text(text_source, "<string>")
-        path = (zoo_path(text_source) if text_source in _zoo_names() else
-                Path(text_source))
+        # a name in the listing kept is looked up without listing the directory again
+        # while its file is there; any other string lists it again (a model added)
+        zoo = text_source in _ZOO_NAMES[1] or text_source in _zoo_names()
+        path = zoo_path(text_source) if zoo else Path(text_source)
         key = _file_key(path)
+        if key is None and zoo and text_source not in _zoo_names():
+            path = Path(text_source)       # the built-in model was removed
+            key = _file_key(path)
         if key is None and "=" in text_source:
             return _model_from_toml_text(text_source, "<string>")
         if key is None:
