@@ -48,11 +48,11 @@ def integrator_options(options: Mapping, caller: str, reserved=()) -> dict:
     """``options`` merged over :data:`DEFAULTS` and checked (:func:`check_options`), after
     rejecting unknown names and those the caller sets itself (``reserved``), with an
     :class:`~pwsdyn.errors.ArgumentError` (a ``TypeError``) naming ``caller``."""
-    bad = sorted(set(options) & set(reserved))
+    bad = sorted(set(options) & set(reserved)) if reserved else None
     if bad:
         raise ArgumentError(f"{caller}: option(s) {bad} are set by {caller} itself; remove them")
-    unknown = sorted(set(options) - set(DEFAULTS), key=str)
-    if unknown:
+    if not options.keys() <= DEFAULTS.keys():
+        unknown = sorted(set(options) - set(DEFAULTS), key=str)
         raise ArgumentError(f"{caller} got unexpected keyword argument(s) {unknown}; "
                             f"integrator options are {sorted(set(DEFAULTS) - set(reserved))}")
     opts = {**DEFAULTS, **options}
@@ -269,7 +269,9 @@ def simulate(model: ModelLike, x0: StateLike | Trajectory | None = None,
     if cont is not None:
         params = _continued_params(model, cont, opts, params)
         x0 = cont.x_final
-    if cont is None:
+    if cont is None and x0 is not None and type(t_span) is tuple:
+        t0_default = None       # no default needed: the caller gives the state and both ends
+    elif cont is None:
         t_end = t_span if t_span is None or V.is_real(t_span) else 0.0
         run = run_defaults(model, x0=x0, t_end=t_end)
         if run.fallback:
