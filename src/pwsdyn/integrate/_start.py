@@ -246,7 +246,7 @@ def start_state(cm, etab, eact, stab, t, x, p, mode: int, *, pos_tol: float = 0.
     x = np.array(x, dtype=float)
     n = model.n_states
     impacts = _impacts(etab, eact)
-    if not impacts or not np.isfinite(x).all():
+    if not impacts or not all(map(math.isfinite, x.tolist())):
         return Start(x, REGULAR, -1, mode)
     E = _Eval(cm, p)
     mode_r, slide = side_mode(E, stab, t, x, int(mode))
@@ -266,7 +266,7 @@ def start_state(cm, etab, eact, stab, t, x, p, mode: int, *, pos_tol: float = 0.
         h = E.scalar(W_H, k, t, x)
         hx = E(W_HX, k, t, x, n)
         gmax = max(1.0, abs_max(hx))
-        rband = round_off_band(xmax, hx)
+        rband = BAND_ULPS * _EPS * xmax * gmax      # round_off_band(xmax, hx)
         band = max(rband, gmax * pos_tol)
         H = sigma * h
         if H > band or not np.isfinite(H):
