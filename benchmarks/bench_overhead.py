@@ -129,6 +129,7 @@ def profile(batch: int, top: int) -> str:
     model = pwsdyn.load_model(NAME)
     T = 2 * math.pi / model.parameters["omega"]
     pwsdyn.simulate(model, X0, (0.0, T))
+    gc.collect()
     pr = cProfile.Profile()
     pr.enable()
     for _ in range(batch):
