@@ -11,14 +11,14 @@ import numpy as np
 from .._version import __version__
 from .. import _validate as V
 from ..errors import ArgumentError, SolveError, Status
-from ..model import compile_model
+from ..model import codegen as _codegen, compile_model
 from ..model.codegen import CompiledModel
 from ..model.affine import affine_structure
 from ..model.spec import as_model, run_defaults
 from ._load import kernel
 from ._codes import (EVENT_TABLE, SAVE_DENSE, SAVE_EVENTS, SAVE_NODES, STATS, SWITCH_TABLE,
                      VAR_NONE, VAR_SEGMENTS, KernelResult, kernel_options)
-from ._start import ADMIT_BEHIND, STICK, start_state
+from ._start import ADMIT_BEHIND, STICK, abs_max, start_state
 from ._variational import assemble_segments
 from .tableaus import METHODS
 from .trajectory import DiscreteState, EventLog, LazyDense, Trajectory
@@ -48,15 +48,15 @@ def integrator_options(options: Mapping, caller: str, reserved=()) -> dict:
     """``options`` merged over :data:`DEFAULTS` and checked (:func:`check_options`), after
     rejecting unknown names and those the caller sets itself (``reserved``), with an
     :class:`~pwsdyn.errors.ArgumentError` (a ``TypeError``) naming ``caller``."""
-    bad = sorted(set(options) & set(reserved))
+    bad = sorted(set(options) & set(reserved)) if reserved else None
     if bad:
         raise ArgumentError(f"{caller}: option(s) {bad} are set by {caller} itself; remove them")
-    unknown = sorted(set(options) - set(DEFAULTS), key=str)
-    if unknown:
+    if not options.keys() <= DEFAULTS.keys():
+        unknown = sorted(set(options) - set(DEFAULTS), key=str)
         raise ArgumentError(f"{caller} got unexpected keyword argument(s) {unknown}; "
                             f"integrator options are {sorted(set(DEFAULTS) - set(reserved))}")
     opts = {**DEFAULTS, **options}
-    check_options(opts)
+    _check_options(opts)
     return opts
 
 
@@ -86,6 +86,23 @@ def _state_name(model, kind: int, idx: int, mode: int) -> DiscreteState:
     if kind == 1:
         return DiscreteState("stick", model.events[idx].name)
     return DiscreteState("slide", model.switches[idx].name)
+
+
+#: One-entry arrays of the discrete states' names, by model digest and kernel code.
+_LABELS: dict = {}
+
+
+def _label_array(model, code: tuple) -> np.ndarray:
+    """``np.array([name], dtype=str)`` of the discrete state ``code`` of ``model`` (the
+    names are part of the digest)."""
+    key = (model.digest, code)
+    arr = _LABELS.get(key)
+    if arr is None:
+        if len(_LABELS) >= 4096:
+            _LABELS.clear()
+        arr = _LABELS[key] = np.array([_state_name(model, *code)], dtype=str)
+        arr.flags.writeable = False
+    return arr
 
 
 def simulate(model: ModelLike, x0: StateLike | Trajectory | None = None,
@@ -252,11 +269,14 @@ def simulate(model: ModelLike, x0: StateLike | Trajectory | None = None,
     if cont is not None:
         params = _continued_params(model, cont, opts, params)
         x0 = cont.x_final
-    if cont is None:
+    if cont is None and x0 is not None and type(t_span) is tuple:
+        t0_default = None       # no default needed: the caller gives the state and both ends
+    elif cont is None:
         t_end = t_span if t_span is None or V.is_real(t_span) else 0.0
         run = run_defaults(model, x0=x0, t_end=t_end)
-        for note in run.note(model):
-            warnings.warn(note, stacklevel=2)
+        if run.fallback:
+            for note in run.note(model):
+                warnings.warn(note, stacklevel=2)
         x0, t0_default = run.x0, run.t0
         if t_span is None:
             t_span = (run.t0, run.t_end)
@@ -266,18 +286,29 @@ def simulate(model: ModelLike, x0: StateLike | Trajectory | None = None,
             raise ArgumentError("`t_span` is required to continue a trajectory: give t_end "
                                 "or (t0, t_end)")
     p = model.parameter_vector(params)
-    x = state_vector(model, x0)
+    x = _state(model, x0)
     t0, t_end = _time_span(t_span, t0=t0_default)
     check_mode(model, opts)
     if not isinstance(opts["exact"], str) and opts["exact"]:
         _check_exact(model)
-    cm = compile_model(model)
+    cm = _compiled(model)
     state = None if cont is None else cont.final_discrete_state
     if state is not None and t0 == cont.t_final and len(state) == 3:
         kind, idx, mode0 = (int(v) for v in state)
         return _simulate_compiled(cm, x, t0, t_end, p, opts, mode0=mode0, dkind0=kind,
-                                  didx0=idx, refuse=True)
-    return _simulate_compiled(cm, x, t0, t_end, p, opts, refuse=True)
+                                  didx0=idx, refuse=True, model=model, checked=True)
+    return _simulate_compiled(cm, x, t0, t_end, p, opts, refuse=True, model=model,
+                              checked=True)
+
+
+def _compiled(model) -> CompiledModel:
+    """The compiled functions of ``model``, from :func:`compile_model`'s memo by digest
+    without pairing them with ``model``: a model loaded by name is a new object on every
+    load (:func:`pwsdyn.load_model`), which :func:`compile_model` would pair anew on every
+    call. The ``cm.model`` returned may be another object with the same digest; the caller's
+    model goes into the trajectory."""
+    cm = _codegen._COMPILED.get(model.digest)
+    return compile_model(model) if cm is None else cm
 
 
 def _lazy_dense(cm, p, etab, stab, kopts, tab, t0, x0, nodes_t, nodes_y, nodes_s, hstep,
@@ -293,6 +324,14 @@ def _lazy_dense(cm, p, etab, stab, kopts, tab, t0, x0, nodes_t, nodes_y, nodes_s
                                            deg)
 
     return LazyDense((len(hstep), nodes_y.shape[1], deg), rebuild)
+
+
+def _state(model, x0) -> np.ndarray:
+    """:func:`state_vector`, with a shortcut for a tuple or list of finite floats."""
+    if (type(x0) is tuple or type(x0) is list) and len(x0) == model.n_states \
+            and all(type(v) is float and math.isfinite(v) for v in x0):
+        return np.array(x0, dtype=float)
+    return state_vector(model, x0)
 
 
 def _continued_params(model, traj, opts, params):
@@ -319,6 +358,12 @@ def _time_span(t_span, name: str = "t_span", t0=None):
     """``(t0, t_end)`` from ``t_span``: finite, ``t_end > t0`` and resolvable in double
     precision (:func:`pwsdyn._validate.time_span`: at least 1024 units ``eps max(1, |t|)``).
     A single number is ``t_end`` from ``t0`` (default 0)."""
+    if type(t_span) is tuple and len(t_span) == 2:
+        # two finite floats (most calls): what the checks below return for them
+        a, b = t_span
+        if type(a) is float and type(b) is float and math.isfinite(a) and math.isfinite(b):
+            V.time_span(name, a, b)
+            return a, b
     must = "(t0, t_end) or t_end, with finite numbers"
     if V.is_real(t_span):
         t0, t_end = (0.0 if t0 is None else float(t0)), V.number(name, t_span, must=must)
@@ -373,8 +418,27 @@ def check_options(opts) -> None:
         raise V.fail("mode", "None or a mode name", mode)
 
 
+#: Option sets that passed :func:`check_options`, as their items and the values' types: the
+#: check is a function of the values and their types alone, and loops (sweeps, shooting,
+#: continuation) pass the same options on every call.
+_CHECKED: set = set()
+_CHECKED_MAX = 512
+
+
 def _check_options(opts):
+    """:func:`check_options`, once per set of option values."""
+    try:
+        key = (tuple(opts.items()), tuple(map(type, opts.values())))
+        known = key in _CHECKED
+    except TypeError:       # an unhashable value: checked every time
+        key, known = None, False
+    if known:
+        return
     check_options(opts)
+    if key is not None:
+        if len(_CHECKED) >= _CHECKED_MAX:
+            _CHECKED.clear()
+        _CHECKED.add(key)
 
 
 def resolve_method(opts) -> str:
@@ -459,7 +523,7 @@ def _build_kernel_tables(cm: CompiledModel, sliding: str):
 
 def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dkind0=None,
                        didx0=None, stop=None, sample=None, admit=True, refuse=False,
-                       store_dense=False):
+                       store_dense=False, model=None, checked=False):
     """The kernel run behind :func:`simulate`, without re-validating model, state, params.
 
     ``dkind0``, ``didx0``: initial discrete state (0 mode, 1 sticking on event ``didx0``, 2
@@ -478,9 +542,13 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
     run) from the dense output, without events or landing steps: stroboscopic sections
     (``traj.samples``). ``store_dense`` stores the dense output of every step as the run
     goes (as variational runs do) instead of rebuilding it from the nodes when it is read.
+    ``model``: the model the trajectory carries (default ``cm.model``; one with the same
+    digest); ``checked``: ``opts`` passed :func:`check_options` already.
     """
-    _check_options(opts)
-    model = cm.model
+    if not checked:
+        _check_options(opts)
+    if model is None:
+        model = cm.model
     method = resolve_method(opts)
     tab = METHODS[method]
     etab, eact, stab = kernel_tables(cm, opts.get("sliding", "convex"))
@@ -488,7 +556,7 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
         mode0 = model.initial_mode if opts["mode"] is None else model.mode_index(opts["mode"])
     if admit and not dkind0 and len(etab):
         x = np.asarray(x, dtype=float)
-        xmax = float(np.max(np.abs(x))) if x.size else 0.0
+        xmax = abs_max(x) if x.size else 0.0
         st = start_state(cm, etab, eact, stab, t0, x, p, int(mode0),
                          pos_tol=opts["atol"] + opts["rtol"] * xmax,
                          behind_tol=ADMIT_BEHIND * (1.0 + xmax), refuse=refuse)
@@ -531,27 +599,32 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
     # discrete state per node, mapped through the few distinct codes (vectorised: runs can
     # have millions of nodes)
     N = len(nodes_s)
-    d = nodes_s[1:] != nodes_s[:-1]
-    starts = np.concatenate(([0], np.flatnonzero(d[:, 0] | d[:, 1] | d[:, 2]) + 1))[:N]
-    label: dict = {}
-    for code in map(tuple, nodes_s[starts].tolist()):
-        if code not in label:
-            label[code] = _state_name(model, *code)
-    run_names = np.array([label[c] for c in map(tuple, nodes_s[starts].tolist())], dtype=str)
-    states = (np.full(N, run_names[0]) if len(starts) == 1 else
-              np.repeat(run_names, np.diff(np.append(starts, N))))
+    if N and (nodes_s == nodes_s[0]).all():
+        # one discrete state throughout (most short runs): the same array, fewer steps
+        states = np.repeat(_label_array(model, tuple(nodes_s[0].tolist())), N)
+    else:
+        d = nodes_s[1:] != nodes_s[:-1]
+        starts = np.concatenate(([0], np.flatnonzero(d[:, 0] | d[:, 1] | d[:, 2]) + 1))[:N]
+        label: dict = {}
+        for code in map(tuple, nodes_s[starts].tolist()):
+            if code not in label:
+                label[code] = _state_name(model, *code)
+        run_names = np.array([label[c] for c in map(tuple, nodes_s[starts].tolist())],
+                             dtype=str)
+        states = (np.full(N, run_names[0]) if len(starts) == 1 else
+                  np.repeat(run_names, np.diff(np.append(starts, N))))
     # the event log as arrays; its records are made when it is read (sweeps read columns)
     events = EventLog(model, ev_t, ev_t2, ev_info, ev_xb[:, :n].copy(), ev_xa[:, :n].copy(),
                       _state_name)
-    stat = dict(zip(STATS, (int(s) for s in stats)))
-    params = dict(zip(model.parameters, (float(v) for v in p)))
+    stat = dict(zip(STATS, stats.tolist()))
+    params = dict(zip(model.parameters, pv.tolist()))
     traj = Trajectory(
         t=nodes_t, x=nodes_y[:, :n].copy(), state=states, events=events, status=status,
         message=status.message, stats=stat, model=model, params=params,
         options={**{k: v for k, v in opts.items() if k != "throw"}, "method": method},
         t0=t0, t_end=t_end,
         jacobian=jac, transfer_matrices=transfer,
-        final_discrete_state=tuple(int(v) for v in dstate),
+        final_discrete_state=tuple(dstate.tolist()),
         samples=(samples[:, 0].copy(), samples[:, 1:].copy()) if sample is not None else None,
         _dense=dense if opts["dense"] else None,
         _ikind=ikind, _y=nodes_y,

@@ -14,19 +14,24 @@ The model is symbolic (SymPy). :mod:`pwsdyn.model.codegen` turns it into compile
 
 from __future__ import annotations
 
+import errno
 import functools
 import hashlib
+import marshal
 import math
 import os
 import re
+import time
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping
 
+import numpy as np
 import sympy as sp
 
+from .. import _validate as V
 from .._codes import MODEL_EVENT_KINDS
 from ..errors import ArgumentError, ModelError, PwsdynError
 from .elements import Event as Event, Mode as Mode, Surface as Surface, Switch as Switch
@@ -180,10 +185,16 @@ class SymbolicSystem:
         parameter, a value that is not a real number (a string, ``None``, a bool) or a
         non-finite value, or ``params`` that is not a mapping.
         """
-        import numpy as np
-
+        if params is None or (type(params) is dict and not params):
+            # the defaults (most calls): in the order of ``parameters``, as below
+            vals = list(self.parameters.values())
+            try:
+                finite = all(map(math.isfinite, vals))
+            except (TypeError, OverflowError):
+                finite = False      # reported below
+            if finite:
+                return np.array(vals, dtype=float)
         from .._validate import describe, is_real
-        from ..errors import ArgumentError
 
         if params is not None and not isinstance(params, Mapping):
             raise ArgumentError(f"`params` must be a dict of parameter values by name or None, "
@@ -299,7 +310,7 @@ class Model(SymbolicSystem):
         expression (a SymPy substitution costs milliseconds, as much as a shooting step)."""
         if self.forcing_period is None:
             return lambda *p: math.nan
-        return sp.lambdify(self.parameter_symbols, self.forcing_period, modules="math")
+        return _lambdified_period(tuple(self.parameters), self.forcing_period)
 
     # --- identity ------------------------------------------------------------------------
     @functools.cached_property
@@ -330,26 +341,148 @@ class Model(SymbolicSystem):
                 f"switches={[s.name for s in self.switches]})")
 
 
+@functools.lru_cache(maxsize=256)
+def _lambdified_period(parameters: tuple, period):
+    # shared by the models of one structure: every load of a file by name makes a new Model
+    return sp.lambdify([sp.Symbol(p, real=True) for p in parameters], period, modules="math")
+
+
 # ======================================================================================
 # loading
 # ======================================================================================
 
+@functools.cache
+def _zoo_dir() -> Path:
+    return Path(str(resources.files("pwsdyn.model") / "zoo"))
+
+
+#: The built-in model names with the directory's (mtime, size) they were listed at.
+_ZOO_NAMES: list = [None, ()]
+
+
 def zoo_names() -> list[str]:
     """Names of the built-in models."""
-    root = resources.files("pwsdyn.model") / "zoo"
-    return sorted(p.name[:-5] for p in root.iterdir() if p.name.endswith(".toml"))
+    return list(_zoo_names())
+
+
+def _zoo_names() -> tuple:
+    root = _zoo_dir()
+    st = os.stat(root)
+    key = (st.st_mtime_ns, st.st_size, st.st_ino)
+    if _ZOO_NAMES[0] != key:
+        # listed again whenever the directory changes (a model file added or removed)
+        _ZOO_NAMES[:] = [key, tuple(sorted(p.name[:-5] for p in root.iterdir()
+                                           if p.name.endswith(".toml")))]
+    return _ZOO_NAMES[1]
 
 
 def zoo_path(name: str) -> Path:
-    return Path(str(resources.files("pwsdyn.model") / "zoo" / f"{name}.toml"))
+    path = _ZOO_PATHS.get(name)
+    if path is None:
+        path = _zoo_dir() / f"{name}.toml"
+        if len(_ZOO_PATHS) < 1024:
+            _ZOO_PATHS[name] = path
+    return path
+
+
+_ZOO_PATHS: dict = {}
+
+
+#: Models read from files, by the path as given: ``(file key, model)``. The model is never
+#: handed out; each load returns a copy (:func:`_copy_model`), so a caller that changes its
+#: model changes no later load. The key (:func:`_file_key`) makes an edited file read again.
+_LOADED: dict = {}
+_LOADED_MAX = 128
+#: A file modified less than this long (ns) before it was read is not cached: a second edit
+#: within the file system's timestamp resolution could leave its key unchanged.
+_RACY_NS = 2_000_000_000
+
+
+def _file_key(path: Path):
+    """What identifies a version of a file: device, inode, size and modification time;
+    None when it does not exist (or cannot be examined)."""
+    try:
+        st = os.stat(path)
+    except OSError as exc:
+        # what ``Path.exists`` counts as absent; other errors (permissions) propagate
+        if exc.errno in (errno.ENOENT, errno.ENOTDIR, errno.EBADF, errno.ELOOP):
+            return None
+        raise
+    except ValueError:      # a NUL in the path
+        return None
+    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+
+
+def _copy_data(value):
+    """A copy of parsed TOML data (dicts and lists of immutable values) that shares no
+    container with ``value``."""
+    if isinstance(value, dict):
+        return {k: _copy_data(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_copy_data(v) for v in value]
+    return value
+
+
+def _copy_model(model, spec_bytes: bytes | None = None):
+    """A new model equal to ``model`` (a :class:`Model` or a map): the immutable parts
+    (names, modes, surfaces, events, switches, pieces: tuples of frozen values and SymPy
+    expressions) and what is derived from them alone (``digest``, ``hash``, the forcing
+    period's function) shared, every dict and list copied (``spec`` to the leaves: from
+    ``spec_bytes``, its :mod:`marshal` form, where given)."""
+    new = object.__new__(type(model))
+    d = new.__dict__
+    d.update(model.__dict__)
+    for k, v in d.items():
+        if type(v) is dict:
+            d[k] = dict(v)      # values immutable: parameters, units, definitions, ...
+        elif isinstance(v, (dict, list)):
+            d[k] = _copy_data(v)
+    d["spec"] = _copy_data(model.spec) if spec_bytes is None else marshal.loads(spec_bytes)
+    return new
+
+
+def _marshalled(data) -> bytes | None:
+    """``data`` in :mod:`marshal` form (unmarshalling is the fastest deep copy), or None
+    where it holds what marshal does not write (TOML dates and times)."""
+    try:
+        return marshal.dumps(data)
+    except ValueError:
+        return None
+
+
+def _load_file(path: Path, key) -> "Model":
+    """The model in the file ``path`` (whose :func:`_file_key` is ``key``), from
+    :data:`_LOADED` while the file is unchanged."""
+    name = str(path)
+    hit = _LOADED.get(name)
+    if hit is not None and hit[0] == key:
+        return _copy_model(hit[1], hit[2])
+    read_at = time.time_ns()
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ModelError(f"cannot read model file: {exc}", source=name) from None
+    model = _model_from_toml_text(text, name)
+    if _file_key(path) == key and read_at - key[3] > _RACY_NS:
+        # what every run needs (the digest names the compiled model; the forcing period
+        # bounds the steps), computed once for the copies
+        model.digest, model.hash
+        if getattr(model, "forcing_period", None) is not None:
+            model.forcing_period_function
+        spec_bytes = _marshalled(model.spec)
+        if len(_LOADED) >= _LOADED_MAX:
+            _LOADED.clear()
+        _LOADED[name] = (key, model, spec_bytes)
+        return _copy_model(model, spec_bytes)
+    return model
 
 
 def as_model(value, *, kind: str | None = None, caller: str = "", name: str = "model"):
     """The model an entry point was given: ``value`` loaded with :func:`~pwsdyn.load_model`, a
     wrong type an :class:`~pwsdyn.ArgumentError` naming ``name``; ``kind='flow'`` or ``'map'``
     refuses the other kind, naming ``caller``."""
-    from .. import _validate as V
-
+    if type(value) is Model and kind != "map":
+        return value        # the common case, on every call of a loop
     if not (isinstance(value, (str, os.PathLike, Mapping, SymbolicSystem))
             or getattr(value, "is_map", False)):
         raise V.fail(name, "a Model, a model name, a path to a TOML file or a dict", value)
@@ -404,25 +537,29 @@ def load_model(source: str | os.PathLike[str] | Mapping[str, Any] | Model,
     """
     if kwargs:
         raise ArgumentError(f"load_model() got unexpected keyword argument(s) {sorted(kwargs)}")
-    if isinstance(source, Model) or getattr(source, "is_map", False):
-        return source
-    if isinstance(source, Mapping):
-        return _built(model_from_dict, dict(source), origin="<dict>")
+    if type(source) is not str:     # (a name or path: the common case, tested first)
+        if isinstance(source, Model) or getattr(source, "is_map", False):
+            return source
+        if isinstance(source, Mapping):
+            return _built(model_from_dict, dict(source), origin="<dict>")
     if isinstance(source, (str, Path)):
         text_source = str(source)
-        path = Path(text_source)
-        if "\n" not in text_source and text_source in zoo_names():
-            path = zoo_path(text_source)
-        if "\n" in text_source or (not path.exists() and "=" in text_source):
+        if "\n" in text_source:
             return _model_from_toml_text(text_source, "<string>")
-        if not path.exists():
+        # a name in the listing kept is looked up without listing the directory again
+        # while its file is there; any other string lists it again (a model added)
+        zoo = text_source in _ZOO_NAMES[1] or text_source in _zoo_names()
+        path = zoo_path(text_source) if zoo else Path(text_source)
+        key = _file_key(path)
+        if key is None and zoo and text_source not in _zoo_names():
+            path = Path(text_source)       # the built-in model was removed
+            key = _file_key(path)
+        if key is None and "=" in text_source:
+            return _model_from_toml_text(text_source, "<string>")
+        if key is None:
             raise ModelError(f"no model file {text_source!r} and no built-in model of that name; "
                              f"built-in models are {', '.join(zoo_names())}", source=text_source)
-        try:
-            text = path.read_text()
-        except OSError as exc:
-            raise ModelError(f"cannot read model file: {exc}", source=str(path)) from None
-        return _model_from_toml_text(text, str(path))
+        return _load_file(path, key)
     raise ArgumentError(f"`source` must be a path, a model name, a dict or a Model, "
                     f"got {type(source).__name__}")
 
