@@ -692,7 +692,7 @@ def trajectory_to_dataset(traj) -> xr.Dataset:
 
 
 def trajectory_from_dataset(ds: xr.Dataset, model=None) -> Trajectory:
-    """Rebuild a :class:`Trajectory` from its dataset.
+    """Rebuild a :class:`~pwsdyn.Trajectory` from its dataset.
 
     Parameters
     ----------
