@@ -458,6 +458,16 @@ def test_property_start_on_incline(c):
     _check_incline_start(c)
 
 
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("x0", [1e-18, 1e-16, 1e-13])
+def test_start_at_rest_near_the_origin_of_an_incline(method, x0):
+    """At rest on the incline a few atol or less from the origin: the state is within atol
+    of zero but not zero, and the initial-step estimate 0.01 |y| / |f| (scaled by the
+    tolerances) fell below the resolution of t = 0: the run stopped at once with
+    STEP_TOO_SMALL (found by the property above, x0 = 1e-18)."""
+    _check_incline_start({"method": method, "k": 2.0, "x0": x0, "u": 0.0, "w": 0.0, "e": 0.0})
+
+
 # --------------------------------------------------------------------------------------
 # 2. plastic and elastic impacts on the cylinder x^2 + y^2 >= R^2
 # --------------------------------------------------------------------------------------

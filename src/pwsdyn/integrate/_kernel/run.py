@@ -545,6 +545,13 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                     d0 = np.sqrt(d0 / n)
                     d1 = np.sqrt(d1 / n)
                     h = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+                    # a state within atol of zero but not zero (a mass at rest a few 1e-14
+                    # from the corner of an incline, with atol = 1e-13) has d0 ~ 1 and, with
+                    # a field of order one, d1 ~ 1/atol: the estimate falls below the
+                    # resolution of t, and the run would stop at once with STEP_TOO_SMALL.
+                    # A first step too large is only rejected and shortened by the error
+                    # control; one too small is fatal, so it is kept well above that limit.
+                    h = max(h, 100.0 * _ulp(t))
                     h = min(h, abs(t_end - t))
                 restart = False
 
