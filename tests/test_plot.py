@@ -83,7 +83,8 @@ def no_new_figure(monkeypatch):
         raise AssertionError("pwsdyn.plot created a figure although ax= was given")
 
     # every module of the package that makes figures
-    for module in (plot._trajectories, plot._orbits, plot._sweeps, plot._branches):
+    for module in (plot._common, plot._trajectories, plot._orbits, plot._sweeps,
+                   plot._branches):
         monkeypatch.setattr(module, "Figure", forbidden)
 
 

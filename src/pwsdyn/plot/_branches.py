@@ -12,7 +12,7 @@ from matplotlib.figure import Figure
 
 from ..errors import ArgumentError
 from ._common import (_check_figure_path, _free_side, _label_beside, _legend, _legend_entry,
-                      _save_figure, _tex, _user_axes)
+                      _one_axes, _save_figure, _tex)
 from ._sweeps import plot_bifurcation
 
 if TYPE_CHECKING:
@@ -173,12 +173,7 @@ def plot_branch(branch, y=None, path: str | Path | None = None, *, ax: Axes | No
     """
     if path is not None:
         _check_figure_path(path, overwrite)
-    if ax is None:
-        fig = Figure(figsize=(7.5, 4.8), layout="constrained")
-        ax = fig.subplots()
-    else:
-        axes, fig = _user_axes(ax, {1: "the diagram"})
-        ax = axes[0]
+    ax, fig = _one_axes(ax, (7.5, 4.8), "the diagram")
     if sweep is not None:
         plot_bifurcation(sweep, ax=ax, markersize=1.0)
     lam = branch.values

@@ -105,6 +105,16 @@ def _root_figure(ax) -> Figure:
     return fig
 
 
+def _one_axes(ax, figsize: tuple, what: str) -> tuple:
+    """The axes a one-panel figure draws into: ``ax`` checked (one Axes, ``what`` naming the
+    panel in the error), or the axes of a new figure of ``figsize``. Returns ``(ax, fig)``."""
+    if ax is None:
+        fig = Figure(figsize=figsize, layout="constrained")
+        return fig.subplots(), fig
+    (ax,), fig = _user_axes(ax, {1: what})
+    return ax, fig
+
+
 def _user_axes(ax, counts: dict, argname: str = "ax", single_ok: bool = False) -> tuple:
     """Check ``ax`` (one Axes or a sequence of them) against the accepted numbers of axes.
 

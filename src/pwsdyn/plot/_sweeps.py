@@ -13,8 +13,8 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from ..errors import ArgumentError
-from ._common import (_check_figure_path, _label_beside, _save_figure, _tex, _user_axes,
-                      _values_text)
+from ._common import (_check_figure_path, _label_beside, _one_axes, _save_figure, _tex,
+                      _user_axes, _values_text)
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -183,11 +183,7 @@ def plot_lyapunov(ds: xr.Dataset, path: str | Path | None = None, *, overwrite: 
         raise ArgumentError("the sweep has no Lyapunov exponents: run it with lyapunov=True")
     if path is not None:
         _check_figure_path(path, overwrite)
-    if ax is None:
-        fig = Figure(figsize=(8.0, 4.4), layout="constrained")
-        ax = fig.subplots()
-    else:
-        (ax,), fig = _user_axes(ax, {1: "the exponents"})
+    ax, fig = _one_axes(ax, (8.0, 4.4), "the exponents")
     pv = ds[pname].values
     ax.axhline(0.0, color="0.5", lw=0.8)
     for d in [str(x) for x in ds.direction.values]:
@@ -262,11 +258,7 @@ def plot_basins(ds: xr.Dataset, path: str | Path | None = None, *, overwrite: bo
         raise ArgumentError("expected the dataset of pwsdyn.basins (attribute kind = 'basins')")
     if path is not None:
         _check_figure_path(path, overwrite)
-    if ax is None:
-        fig = Figure(figsize=(7.8, 6.0), layout="constrained")
-        ax = fig.subplots()
-    else:
-        (ax,), fig = _user_axes(ax, {1: "the basins"})
+    ax, fig = _one_axes(ax, (7.8, 6.0), "the basins")
     lab = ds.label
     dims = lab.dims
     K = ds.sizes["attractor"]
