@@ -304,7 +304,7 @@ def exercise(source, *, compile_it, cli_it=lambda: False) -> str:
     if ``compile_it()`` says so, compile and run it; TOML text goes through the command line
     too when ``cli_it()`` says so. Returns the outcome; raises on anything that is not
     pwsdyn's own error, and if the sentinel appeared."""
-    from pwsdyn.model import codegen, maps
+    from pwsdyn.model import codegen, iteration, maps
 
     try:
         if isinstance(source, str) and cli_it():
@@ -328,7 +328,7 @@ def exercise(source, *, compile_it, cli_it=lambda: False) -> str:
             return "accepted (source checked)"
         try:
             if is_map:
-                maps.iterate(m, np.full(m.n_states, 0.5), 20)
+                iteration.iterate(m, np.full(m.n_states, 0.5), 20)
             else:
                 pwsdyn.simulate(m, np.full(m.n_states, 0.5), (0.0, 0.5), max_steps=5000,
                                 max_events=200, throw=False)

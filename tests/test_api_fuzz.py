@@ -34,7 +34,7 @@ from pwsdyn.continuation import Branch
 from pwsdyn.errors import ArgumentError, PwsdynError
 from pwsdyn.explore._lyapunov import LyapunovSpectrum
 from pwsdyn.integrate.trajectory import Trajectory
-from pwsdyn.model.maps import iterate
+from pwsdyn.model.iteration import iterate
 from pwsdyn.stability import monodromy
 from pwsdyn.stability._poincare import PoincareResult
 

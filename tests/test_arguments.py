@@ -15,7 +15,7 @@ import pytest
 import pwsdyn
 from pwsdyn import ArgumentError, PeriodicOrbit
 from pwsdyn import _validate as V
-from pwsdyn.model.maps import iterate
+from pwsdyn.model.iteration import iterate
 
 IO = "impact-oscillator"
 X0 = [0.0, -0.5]

@@ -22,7 +22,8 @@ import xarray as xr
 
 import pwsdyn
 from pwsdyn.explore import StoreMismatchError, basin_fractions
-from pwsdyn.model.maps import MapModel, iterate
+from pwsdyn.model.iteration import iterate
+from pwsdyn.model.maps import MapModel
 
 G = 9.81
 OMEGA = 2 * np.pi   # table frequency: period T = 1

@@ -463,5 +463,5 @@ def test_map_with_a_negative_power_at_zero_stops_as_nonfinite():
     stops there (NaN afterwards) instead of raising ZeroDivisionError."""
     m = pwsdyn.load_model({"name": "pow-map", "kind": "map", "states": ["x"],
                            "pieces": [{"name": "a", "map": {"x": "x**-2"}}]})
-    xs, pieces = pwsdyn.model.maps.iterate(m, {"x": 0.0}, 3)
+    xs, pieces = pwsdyn.model.iterate(m, {"x": 0.0}, 3)
     assert np.isinf(xs[1, 0]) or np.isnan(xs[1:, 0]).all()

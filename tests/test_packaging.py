@@ -74,3 +74,13 @@ def test_a_dependency_without_lower_bound_is_refused(tmp_path):
     path.write_text('[project]\nname = "x"\ndependencies = ["dask[distributed]>=2024.1, <2030"]\n',
                     encoding="utf-8")
     assert module.lower_bounds(path, []) == ["dask==2024.1"]
+
+
+def test_ci_checks_the_import_contracts():
+    """The architecture's contracts (pyproject.toml [tool.importlinter]) run in CI on their
+    own, before the suite, so a broken layer is named first."""
+    run = (ROOT / ".ci" / "run").read_text(encoding="utf-8")
+    assert "lint-imports --config pyproject.toml" in run
+    lines = [ln.strip() for ln in run.splitlines()]
+    assert lines.index("lint-imports --config pyproject.toml --no-cache") < lines.index(
+        "python -m pytest -q")

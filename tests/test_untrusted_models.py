@@ -83,7 +83,7 @@ def test_coding_declaration_in_a_name_is_refused_from_every_source(tmp_path, pri
                 m = pwsdyn.load_model(source)
                 assert m.name == name
                 if getattr(m, "is_map", False):
-                    pwsdyn.model.maps.iterate(m, [0.5], 3)
+                    pwsdyn.model.iterate(m, [0.5], 3)
                 else:
                     pwsdyn.simulate(m, np.ones(m.n_states), (0.0, 0.1))
                 continue
@@ -335,7 +335,7 @@ def test_a_complex_derivative_is_refused_for_flows_and_maps(private_cache):
     """A negative number to a symbolic power is finite where the power is an integer, but its
     derivative has log(-a) = log(a) + I pi: complex at every point. Flows and maps are refused
     at code generation, naming the field (a map once put I into its generated code)."""
-    from pwsdyn.model import maps
+    from pwsdyn.model import iteration, maps
 
     flow = {"name": "cf", "states": ["x", "v"], "modes": {"m": {"x": "v", "v": "(-0.5)**x"}}}
     with pytest.raises(ModelError, match="complex"):
@@ -348,7 +348,7 @@ def test_a_complex_derivative_is_refused_for_flows_and_maps(private_cache):
         maps.generate_map_source(pwsdyn.load_model(pieces))
     single = {"name": "cs", "kind": "map", "states": ["a"], "map": {"a": "(-2)**a"}}
     with pytest.raises(ModelError, match=r"map\.a.*complex"):
-        maps.iterate(single, [1.0], 3)
+        iteration.iterate(single, [1.0], 3)
 
 
 def test_non_finite_numbers_in_toml_and_guards_are_refused(tmp_path):

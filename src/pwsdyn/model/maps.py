@@ -43,7 +43,9 @@ from ._map_step import (MAP_DIVERGED, MAP_NO_PIECE, MAP_NONFINITE, MAP_OK,  # no
                         MAP_STEP_SIGNATURE, MAP_STEP_TYPE)
 from ._printer import NumbaPrinter, unprintable
 from .expressions import parse_expression
-from .spec import SymbolicSystem, check_identifiers
+from .symbolic import (_RESERVED, SymbolicSystem, _Where, _is_name, check_annotations,
+                       check_identifiers, check_model_name, default_parameters,
+                       states_and_parameters)
 
 _MAP_CODEGEN_VERSION = "3"
 _NAME_OK = "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ_0123456789"
@@ -139,9 +141,6 @@ def map_model_from_dict(data: dict, origin: str = "<dict>", text: str | None = N
     ModelError
         A malformed map model; the message names the source and the field.
     """
-    from .spec import (_RESERVED, _Where, _is_name, check_annotations, check_model_name,
-                       default_parameters, states_and_parameters)
-
     W = _Where(origin, text)
     unknown = sorted(set(data) - _TOP_KEYS)
     if unknown:
@@ -389,52 +388,3 @@ def __getattr__(name: str):
     if name in _MAP_KERNELS:
         return _map_kernel(name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def iterate(model, x0, n: int, params: Mapping[str, float] | None = None, transient: int = 0,
-            bound: float = 1e12):
-    """Iterate a map: ``transient`` iterations discarded, then ``n`` states recorded.
-
-    Parameters
-    ----------
-    model : MapModel, str, path or dict
-        A map model or anything :func:`pwsdyn.load_model` accepts that describes one.
-    x0 : sequence or dict
-        Initial state, in state order or by state name.
-    n : int
-        Number of states recorded (the first is the state after the transient).
-    params : dict, optional
-        Parameter values overriding the defaults.
-    transient : int
-        Iterations discarded first.
-    bound : float
-        Stop (status ``diverged``) when a component exceeds this magnitude.
-
-    Returns
-    -------
-    states : numpy.ndarray, shape (n, n_states)
-        NaN after an early stop.
-    pieces : numpy.ndarray of int, shape (n,)
-        Index of the piece applied to each recorded state (-1 after an early stop).
-
-    Examples
-    --------
-    >>> xs, pieces = iterate("sqrt-map", [0.1], 5, params={"mu": 0.2, "lam": 0.3})
-    >>> xs.shape
-    (5, 1)
-    """
-    from .. import _validate as V
-    from .spec import as_model
-
-    n = V.integer("n", n, lo=0)
-    transient = V.integer("transient", transient, lo=0)
-    bound = V.positive("bound", bound, allow_inf=True)
-    model = as_model(model, kind="map", caller="iterate()")
-    p = model.parameter_vector(params)
-    x = V.state_vector(model, x0)
-    V.memory(f"iterate() with n={n}", 8.0 * n * (model.n_states + 1))
-    cm = compile_map(model)
-    orbit_kernel = _map_kernel("orbit_kernel")
-    _, xs, pieces, _, _ = orbit_kernel(cm.step, x, p if p.size else np.zeros(1),
-                                       int(transient), int(n), float(bound))
-    return xs, pieces

@@ -172,7 +172,7 @@ def _check_figure_path(path, overwrite: bool = False) -> str:
 
 
 def _save_figure(fig: Figure, path, overwrite: bool = False) -> Path:
-    from ..io import atomic_write
+    from .._netcdf import atomic_write
 
     fmt = _figure_format(path)
     return atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=120, format=fmt),
