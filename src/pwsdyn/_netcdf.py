@@ -67,7 +67,8 @@ def _json_restore(obj, *, keep_strings=frozenset()):
     return obj
 
 
-def _dumps(obj) -> str:
+def json_text(obj) -> str:
+    """``obj`` as JSON text for a file attribute (non-finite floats spelled out)."""
     return json.dumps(_json_safe(obj), allow_nan=False, sort_keys=False)
 
 
@@ -158,7 +159,7 @@ def package_versions() -> dict:
     out = {}
     for name in VERSIONED_PACKAGES:
         if name == "pwsdyn":
-            out["pwsdyn_version"] = _library_version()
+            out["pwsdyn_version"] = library_version()
             continue
         try:
             out[f"{name}_version"] = metadata.version(name)
@@ -207,7 +208,7 @@ def cf_global_attrs(model, kind: str, title: str, source: str) -> dict:
     return {
         "Conventions": CONVENTIONS,
         "title": title,
-        "source": f"pwsdyn {_library_version()}: {source}",
+        "source": f"pwsdyn {library_version()}: {source}",
         "pwsdyn_type": kind,
         **package_versions(),
         **model_attrs(model),
@@ -259,10 +260,10 @@ def state_coords(model) -> dict:
     coordinates (``""`` where the model gives no unit)."""
     names = list(model.states)
     return {
-        "state": ("state", _str_array(names), {"long_name": "state variable"}),
-        "state_units": ("state", _str_array(model.unit(s) or "" for s in names),
+        "state": ("state", string_array(names), {"long_name": "state variable"}),
+        "state_units": ("state", string_array(model.unit(s) or "" for s in names),
                         {"long_name": "unit of the state variable (empty: not given)"}),
-        "state_long_name": ("state", _str_array(model.describe(s) or s for s in names),
+        "state_long_name": ("state", string_array(model.describe(s) or s for s in names),
                             {"long_name": "description of the state variable"}),
     }
 
@@ -345,7 +346,7 @@ def stamp(ds: xr.Dataset) -> xr.Dataset:
     now = _utc_now()
     ds = ds.copy()
     ds.attrs.setdefault("date_created", now)
-    line = f"{now} written by pwsdyn {_library_version()}"
+    line = f"{now} written by pwsdyn {library_version()}"
     old = str(ds.attrs.get("history", "") or "")
     ds.attrs["history"] = f"{old}\n{line}" if old else line
     return ds
@@ -355,13 +356,15 @@ def stamp(ds: xr.Dataset) -> xr.Dataset:
 # strings
 # ======================================================================================
 
-def _str_array(values) -> np.ndarray:
+def string_array(values) -> np.ndarray:
+    """``values`` as a string array for a NetCDF variable."""
     # Fixed-width unicode arrays are written by h5netcdf as variable-length UTF-8 strings and
     # read back as unicode; `dtype=str` keeps an empty list a (0,) string array, not float.
     return np.array([str(v) for v in values], dtype=str)
 
 
-def _library_version() -> str:
+def library_version() -> str:
+    """The version of pwsdyn, as files record it."""
     from ._version import __version__
 
     return __version__
@@ -437,7 +440,7 @@ def save_dataset(ds, path, *, overwrite: bool = False) -> Path:
 OVERWRITE_HINT = "pass overwrite=True to replace it"
 
 
-def _check_output_path(path, *, overwrite: bool = False, hint: str = OVERWRITE_HINT) -> Path:
+def check_output_path(path, *, overwrite: bool = False, hint: str = OVERWRITE_HINT) -> Path:
     """Check that ``path`` can be written, before any work is done; return it as a Path.
 
     Its directory must exist and be writable, ``path`` must not be a directory and, unless
@@ -479,7 +482,7 @@ def atomic_write(path, write, *, overwrite: bool = False) -> Path:
     called (:class:`~pwsdyn.OutputExistsError`), and the final move never replaces a file that
     appeared in the meantime. With ``overwrite=True`` an existing file is replaced.
     """
-    path = _check_output_path(path, overwrite=overwrite)
+    path = check_output_path(path, overwrite=overwrite)
     directory = path.parent if str(path.parent) else Path(".")
     # hidden name in the same directory: os.replace is atomic only within one file system
     tmp = directory / f".{path.name}.{uuid.uuid4().hex}.tmp"
@@ -542,3 +545,8 @@ def open_dataset(path, *, lazy: bool = False) -> xr.Dataset:
         if lazy:
             return xr.open_dataset(path, **kwargs)
         return xr.load_dataset(path, **kwargs)
+
+
+# the former private names, for the modules that move to the public ones in the next change
+_dumps, _str_array = json_text, string_array
+_library_version, _check_output_path = library_version, check_output_path

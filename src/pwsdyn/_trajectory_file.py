@@ -21,8 +21,8 @@ import warnings
 import numpy as np
 import xarray as xr
 
-from ._netcdf import (TRAJECTORY_TYPE, _STRING_OPTIONS, _dumps, _json_restore,
-                      _library_version, _str_array, cf_global_attrs, flag_attrs,
+from ._netcdf import (TRAJECTORY_TYPE, _STRING_OPTIONS, json_text, _json_restore,
+                      library_version, string_array, cf_global_attrs, flag_attrs,
                       quantity_attrs, state_attrs, state_coords, status_codes)
 from .errors import ArgumentError, Status
 from .model import load_model
@@ -55,7 +55,7 @@ def trajectory_dataset(traj) -> xr.Dataset:
     tattrs = quantity_attrs(model, "t", "time")
     data_vars = {
         "x": (("node", "state"), x, state_attrs(model, "state at the node")),
-        "discrete_state": (("node",), _str_array(traj.state),
+        "discrete_state": (("node",), string_array(traj.state),
                            {"long_name": "discrete state at the node: mode name, "
                                          "stick:<event> or slide:<switch>"}),
         "y": (("node", "ycomp"), y,
@@ -87,15 +87,15 @@ def trajectory_dataset(traj) -> xr.Dataset:
         "event_t_after": (("event",), np.array([e.t_after for e in ev], dtype=float),
                           {**tattrs, "long_name": "time after the event (accumulation time "
                                                   "of chatter)"}),
-        "event_name": (("event",), _str_array(e.name for e in ev),
+        "event_name": (("event",), string_array(e.name for e in ev),
                        {"long_name": "name of the event or switch"}),
-        "event_kind": (("event",), _str_array(e.kind for e in ev),
+        "event_kind": (("event",), string_array(e.kind for e in ev),
                        {"long_name": "kind of the event record (impact, transition, "
                                      "crossing, chatter, stick, release, slide_start, "
                                      "slide_end, ...)"}),
-        "event_mode_before": (("event",), _str_array(e.mode_before for e in ev),
+        "event_mode_before": (("event",), string_array(e.mode_before for e in ev),
                               {"long_name": "discrete state before the event"}),
-        "event_mode_after": (("event",), _str_array(e.mode_after for e in ev),
+        "event_mode_after": (("event",), string_array(e.mode_after for e in ev),
                              {"long_name": "discrete state after the event"}),
         "event_x_before": (("event", "state"), evx("x_before"),
                            state_attrs(model, "state just before the event")),
@@ -118,11 +118,11 @@ def trajectory_dataset(traj) -> xr.Dataset:
         "t": ("node", t, tattrs),
         **state_coords(model),
         "event": ("event", np.arange(ne), {"long_name": "index of the event record"}),
-        "ycomp": ("ycomp", _str_array(_ycomp_labels(names, ny)),
+        "ycomp": ("ycomp", string_array(_ycomp_labels(names, ny)),
                   {"long_name": "component of the full node vector"}),
     }
     if traj.jacobian is not None:
-        coords["state_in"] = ("state_in", _str_array(names),
+        coords["state_in"] = ("state_in", string_array(names),
                               {"long_name": "initial state variable"})
 
     provenance = dict(traj.provenance or {})
@@ -131,20 +131,20 @@ def trajectory_dataset(traj) -> xr.Dataset:
                           f"pwsdyn trajectory of model {model.name}",
                           f"event-driven simulation (pwsdyn.simulate, method "
                           f"{traj.options.get('method', '?')})"),
-        "params": _dumps(dict(traj.params)),
+        "params": json_text(dict(traj.params)),
         "parameter_units": json.dumps({k: model.unit(k) for k in model.parameters
                                        if model.unit(k) is not None}),
-        "options": _dumps(dict(traj.options)),
+        "options": json_text(dict(traj.options)),
         "status": status.name,
         "status_code": int(status),
         "message": str(traj.message),
-        "stats": _dumps(dict(traj.stats)),
+        "stats": json_text(dict(traj.stats)),
         "t0": float(traj.t0),
         "t_end": float(traj.t_end),
-        "provenance": _dumps(provenance),
+        "provenance": json_text(provenance),
     }
     # the version that made the data (a reloaded trajectory keeps its own)
-    attrs["pwsdyn_version"] = str(provenance.get("pwsdyn_version", _library_version()))
+    attrs["pwsdyn_version"] = str(provenance.get("pwsdyn_version", library_version()))
     return xr.Dataset(data_vars, coords=coords, attrs=attrs)
 
 

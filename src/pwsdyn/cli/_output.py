@@ -79,7 +79,7 @@ def _check_outputs(force: bool, outputs) -> None:
     outputs = [o for o in outputs if o[1] is not None]
     if not outputs:     # nothing to check: xarray and matplotlib are not imported
         return
-    from .._netcdf import _check_output_path
+    from .._netcdf import check_output_path
 
     for option, path, kind in outputs:
         p = Path(path)
@@ -99,7 +99,7 @@ def _check_outputs(force: bool, outputs) -> None:
                     f"{str(path)!r}: unknown figure format {p.suffix!r}; supported formats: "
                     f"{', '.join('.' + f for f in formats)}", param_hint=hint)
         try:
-            _check_output_path(p, overwrite=force, hint="pass --force to replace it")
+            check_output_path(p, overwrite=force, hint="pass --force to replace it")
         except OSError as exc:
             _fail(f"{option}: {exc}")
 

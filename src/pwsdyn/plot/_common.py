@@ -164,10 +164,10 @@ def _figure_format(path) -> str:
 
 def _check_figure_path(path, overwrite: bool = False) -> str:
     """Check a figure path before drawing: its format, directory and an existing file."""
-    from .._netcdf import _check_output_path
+    from .._netcdf import check_output_path
 
     fmt = _figure_format(path)
-    _check_output_path(path, overwrite=overwrite)
+    check_output_path(path, overwrite=overwrite)
     return fmt
 
 
