@@ -12,5 +12,5 @@ from ._shooting import find_periodic_orbit as find_periodic_orbit
 from .monitors import Monitor as Monitor, MonitorKey as MonitorKey
 from .problem import (Admissibility as Admissibility, OrbitProblem as OrbitProblem,
                       OrbitSensitivity as OrbitSensitivity,
-                      ProblemEvaluation as ProblemEvaluation)
+                      ProblemEvaluation as ProblemEvaluation, SegmentFailed as SegmentFailed)
 from .signature import Signature as Signature, SignatureEvent as SignatureEvent

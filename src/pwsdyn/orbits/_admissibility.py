@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._base import ADMISSIBILITY_RTOL
-from ._sampling import lowest_point, sample_times
+from ._sampling import lowest_point
 from .surfaces import (guard_holds, model_context, normal_acceleration, normal_velocity,
                        state_field, surface)
 
@@ -76,13 +76,9 @@ def admissibility(prob, u, p=None, evaluation=None
 
 def _interior(prob, i, s, ctx, p):
     n = prob.n
-    tr = prob._dense_segment(i, s, p)
-    if tr is None:
+    tr, ts, Y = prob._dense_samples(i, s, p)
+    if tr is None or not len(ts):
         return []
-    ts = sample_times(tr)[1:-1]
-    if not len(ts):
-        return []
-    Y = np.asarray(tr(ts))[:, :n]
     scale = 1.0 + float(np.max(np.abs(Y)))
     fk = prob.fields[i]
     m = prob.model

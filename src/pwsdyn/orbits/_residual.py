@@ -21,6 +21,7 @@ from ..integrate.trajectory import DiscreteState
 from ..model.spec import as_model
 from ..newton import TrialRejected, newton
 from ._base import shooting_options
+from ._sampling import sample_times
 from ._segments import FieldKey, SegmentSystem
 from .signature import Signature
 
@@ -423,7 +424,7 @@ class OrbitProblemBase:
         if p is None:
             return self.p0.copy()
         p = np.asarray(p, dtype=float).reshape(-1)
-        if p.shape != (self.q,) or not np.all(np.isfinite(p)):
+        if p.shape != (self.q,) or not np.isfinite(p).all():
             raise ArgumentError(f"`p` must hold {self.q} finite values {list(self.parameters)}")
         return p
 
@@ -435,13 +436,27 @@ class OrbitProblemBase:
 
     def period_value(self, p=None) -> float:
         """The period: ``periods * forcing_period`` (forced models)."""
-        d = self.param_dict(p)
-        return self.periods * self.model.forcing_period_at([d[k] for k in self.model.parameters])
+        return self._period_at(p)[0]
 
     def _period_grad(self, p) -> np.ndarray:
-        d = self.param_dict(p)
-        args = [d[k] for k in self.model.parameters]
-        return self.periods * np.array([float(g(*args)) for g in self._Tf_p])
+        return self._period_at(p)[1].copy()
+
+    def _period_at(self, p):
+        """``(period, its gradient over p)`` at ``p``, kept for the last few ``p``: a
+        continuation step asks for them at each Newton iterate and check at one ``p``."""
+        key = self._p(p).tobytes()
+        cache = self.__dict__.setdefault("_period_cache", {})
+        got = cache.get(key)
+        if got is None:
+            if len(cache) > 16:
+                cache.clear()
+            d = self.param_dict(p)
+            args = [d[k] for k in self.model.parameters]
+            value = self.periods * self.model.forcing_period_at(args)
+            grad = (self.periods * np.array([float(g(*args)) for g in self._Tf_p])
+                    if self.forced else None)
+            got = cache[key] = (value, grad)
+        return got
 
     def _seg_opts(self, p, dense=False, variational=True):
         o = dict(self.opts, variational=variational, dense=dense, throw=False, chatter=False,
@@ -473,15 +488,33 @@ class OrbitProblemBase:
         """Segment ``i`` of an evaluation integrated again with dense output (no variational
         equations), for the checks along it; the last few are kept, so that the
         admissibility check and the monitors of one point integrate each segment once."""
+        return self._dense_entry(i, s, p)[0]
+
+    def _dense_entry(self, i, s, p) -> list:
         key = (i, float(s.t), np.asarray(s.z).tobytes(), float(s.T),
                np.asarray(p, dtype=float).tobytes())
         cache = self.__dict__.setdefault("_dense_cache", {})
         if key not in cache:
             if len(cache) > 4 * max(self.m, 1):
                 cache.clear()
-            cache[key] = self._flow(i, s.t, s.z, s.T,
-                                    self._seg_opts(p, dense=True, variational=False))[2]
+            cache[key] = [self._flow(i, s.t, s.z, s.T,
+                                     self._seg_opts(p, dense=True, variational=False))[2], None]
         return cache[key]
+
+    def _dense_samples(self, i, s, p):
+        """``(run, ts, Y)``: the run of :meth:`_dense_segment`, the sample times inside it
+        (``sample_times(run)[1:-1]``) and the model states there, evaluated once for the
+        admissibility check and the monitors of a point (``(None, None, None)`` for a
+        segment of no time). Read them, do not write into them."""
+        entry = self._dense_entry(i, s, p)
+        tr = entry[0]
+        if tr is None:
+            return None, None, None
+        if entry[1] is None:
+            ts = sample_times(tr)[1:-1]
+            Y = np.asarray(tr(ts))[:, :self.n] if len(ts) else np.zeros((0, self.n))
+            entry[1] = (ts, Y)
+        return (tr,) + entry[1]
 
     def _flow(self, i, t, z, T, opts, dense=False):
         """``(y, Phi, traj)`` of segment field ``i`` from ``(t, z)`` for duration ``T``."""
@@ -585,7 +618,7 @@ class OrbitProblemBase:
     def evaluate(self, u, p=None, *, jacobian: bool = True) -> ProblemEvaluation:
         """``F`` and (with ``jacobian``) ``F_u``, ``F_p`` at ``(u, p)``.
 
-        Raises :class:`~pwsdyn.orbits.problem.SegmentFailed` when a segment cannot be integrated.
+        Raises :class:`~pwsdyn.orbits.SegmentFailed` when a segment cannot be integrated.
         """
         p = self._p(p)
         t0, xs, Ts = self.unpack(u)

@@ -34,7 +34,7 @@ def monodromy(prob, ev) -> np.ndarray:
 
 def boundary_saltation(prob, i, s) -> np.ndarray:
     """Full saltation matrix of boundary ``i`` (model states), of its event map
-    ``(t, x) -> (tau, X)`` (:func:`~pwsdyn.stability._saltation.event_map_saltation`)."""
+    ``(t, x) -> (tau, X)`` (``event_map_saltation``, the one formula of :mod:`pwsdyn.stability`)."""
     n = prob.n
     k = (i + 1) % prob.m
     zX = np.array(s.X, dtype=float)

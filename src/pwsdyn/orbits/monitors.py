@@ -3,10 +3,11 @@ orbit problem (:class:`~pwsdyn.orbits.OrbitProblem`), signed distances from a gr
 sliding bifurcation or a corner collision, each zero at the bifurcation and positive on the
 side where the orbit keeps its signature (:func:`dib_monitors`).
 
-A monitor is named by a :class:`MonitorKey` (its kind, the surface, event or switch it
+A monitor is named by a :class:`~pwsdyn.orbits.MonitorKey` (its kind, the surface, event or switch it
 watches, the segment and where on it); its string form ``"GR/impact/0"``,
 ``"GR/impact@0"``, ``"GR/x/2/arc"``, ``"AS/vrel:above/2"`` is the name a branch's column, a
-special point and a saved file carry (:meth:`MonitorKey.parse` reads it back).
+special point and a saved file carry (:meth:`~pwsdyn.orbits.MonitorKey.parse` reads it
+back).
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._sampling import interior_minimum, sample_times
+from ._sampling import interior_minimum
 from .surfaces import (model_context, normal_acceleration, normal_velocity,
                        sliding_boundary_rate, state_field, surface)
 
@@ -29,9 +30,9 @@ MONITOR_PLACES = ("interior", "boundary", "arc")
 
 
 class MonitorKey(NamedTuple):
-    """The name of a monitor: its ``kind`` (one of :data:`DIB_KINDS`), the ``name`` of the
+    """The name of a monitor: its ``kind`` (one of :data:`~pwsdyn.orbits.monitors.DIB_KINDS`), the ``name`` of the
     surface, event or switch it watches, its ``segment``, where on it (``at``, one of
-    :data:`MONITOR_PLACES`) and, for a sliding segment's adding-sliding monitor, the
+    :data:`~pwsdyn.orbits.monitors.MONITOR_PLACES`) and, for a sliding segment's adding-sliding monitor, the
     ``side`` (``'above'`` or ``'below'``) whose field it watches.
 
     ``str(key)`` is its string form (``"GR/impact/0"``, ``"GR/impact@0"``,
@@ -55,7 +56,7 @@ class MonitorKey(NamedTuple):
     @classmethod
     def parse(cls, text: str) -> "MonitorKey":
         """The key of a monitor's string form; ``ValueError`` for a text that names no
-        monitor of :func:`dib_monitors`."""
+        monitor of :func:`~pwsdyn.orbits.monitors.dib_monitors`."""
         kind, sep, body = str(text).partition("/")
         if not sep or kind not in DIB_KINDS:
             raise ValueError(f"{text!r} is not a monitor key (KIND/... with KIND one of "
@@ -153,13 +154,9 @@ def dib_monitors(prob, u, p=None, evaluation=None) -> dict:
         fk = prob.fields[i]
         out.update(_arc_monitor(prob, i, s))
         if fk.kind == "mode" and s.T > 0:
-            tr = prob._dense_segment(i, s, p)
-            if tr is None:
+            tr, ts, Y = prob._dense_samples(i, s, p)
+            if tr is None or len(ts) < 3:
                 continue
-            ts = sample_times(tr)[1:-1]
-            if len(ts) < 3:
-                continue
-            Y = np.asarray(tr(ts))[:, :n]
             for name, k, sign, other in _bounding_surfaces(prob, fk.index):
                 fn = surface(ctx, k)
                 vals = sign * fn.rows(ts, Y)
@@ -268,14 +265,10 @@ def _sliding_monitors(prob, i, s, p, ctx) -> dict:
     ``(h_x f)_x f = 0`` there: adding-sliding, the slides' defining conditions); past it
     the orbit leaves at the touching point, runs a short arc and slides again."""
     sw = prob.model.switches[prob.fields[i].index]
-    tr = prob._dense_segment(i, s, p)
-    if tr is None:
-        return {}
-    ts = sample_times(tr)[1:-1]
-    if len(ts) < 3:
+    tr, ts, Y = prob._dense_samples(i, s, p)
+    if tr is None or len(ts) < 3:
         return {}
     n = prob.n
-    Y = np.asarray(tr(ts))[:, :n]
     out = {}
     for side, mode, sign in (("above", sw.above, -1.0), ("below", sw.below, 1.0)):
         fn = normal_velocity(ctx, sw.surface, mode)

@@ -90,7 +90,7 @@ class OrbitProblem(OrbitProblemBase):
     """A periodic orbit of a hybrid model on a fixed signature: ``F(u, p) = 0``.
 
     See the module docstring for the unknowns ``u`` and the residual. The problem, its layout
-    and evaluation are :class:`OrbitProblemBase`'s; the methods below are the functions of a
+    and evaluation are those of ``OrbitProblemBase`` (:mod:`pwsdyn.orbits.problem`); the methods below are the functions of a
     problem and a solution in the modules of their own (guesses, admissibility, monitors,
     results), which import the problem and not the reverse.
 
@@ -126,6 +126,24 @@ class OrbitProblem(OrbitProblemBase):
     >>> prob, u = OrbitProblem.from_orbit(orbit, parameters=["sigma"])
     >>> F_u, F_p = prob.jacobian(u, prob.p0)
     """
+
+    # ---- the problem's own interface: its definition, the layout of u, the evaluation of F
+    # and its Jacobians, Newton (pwsdyn.orbits._residual), named here so that it is this
+    # class's interface (and documented with it)
+    replace = vars(OrbitProblemBase)["replace"]
+    from_orbit = vars(OrbitProblemBase)["from_orbit"]
+    pack = vars(OrbitProblemBase)["pack"]
+    unpack = vars(OrbitProblemBase)["unpack"]
+    param_dict = vars(OrbitProblemBase)["param_dict"]
+    period_value = vars(OrbitProblemBase)["period_value"]
+    evaluate = vars(OrbitProblemBase)["evaluate"]
+    residual = vars(OrbitProblemBase)["residual"]
+    jacobian = vars(OrbitProblemBase)["jacobian"]
+    norm = vars(OrbitProblemBase)["norm"]
+    solve = vars(OrbitProblemBase)["solve"]
+    segment_options = vars(OrbitProblemBase)["segment_options"]
+    flow = vars(OrbitProblemBase)["flow"]
+    dense_segment = vars(OrbitProblemBase)["dense_segment"]
 
     # ---- guesses that follow the signature (pwsdyn.orbits._guesses) ----------------------
     @_same_doc(_guesses.follow)
@@ -248,7 +266,7 @@ def locked_orbit(model, x0, *, params, T, Tf, t0, mode, signature, phase, tol, m
 # PeriodicOrbit.problem() and PeriodicOrbit.sensitivity() solve the orbit's problem: they are
 # defined here and given to the result type, which imports no solver
 
-def orbit_problem(self, parameters=None):
+def _orbit_problem(self, parameters=None):
     """The orbit problem of this orbit's signature and the orbit's unknowns:
     ``(OrbitProblem, u, p)`` (see :class:`~pwsdyn.orbits.OrbitProblem`; ``parameters``
     default all of the model's)."""
@@ -266,7 +284,7 @@ def orbit_problem(self, parameters=None):
         self._source = src
     return src
 
-def orbit_sensitivity(self, name: str):
+def _orbit_sensitivity(self, name: str):
     """Derivatives of the orbit with respect to parameter ``name`` along its branch.
 
     Returns an :class:`~pwsdyn.orbits.OrbitSensitivity`: ``x0`` (``d x0/d p``; forced
@@ -290,15 +308,15 @@ def orbit_sensitivity(self, name: str):
                      f"{list(self.model.parameters)}", name)
     if not self.converged:
         raise ValueError("the orbit did not converge: it has no sensitivity")
-    prob, u, p = orbit_problem(self)
+    prob, u, p = _orbit_problem(self)
     if self.autonomous:
         return prob.sensitivity(u, p, name, x_ref=self.x0, phase_normal=self.phase_normal)
     return prob.sensitivity(u, p, name, t0=self.t0)
 
 
-orbit_problem.__name__ = "problem"
-orbit_problem.__qualname__ = "PeriodicOrbit.problem"
-orbit_sensitivity.__name__ = "sensitivity"
-orbit_sensitivity.__qualname__ = "PeriodicOrbit.sensitivity"
-PeriodicOrbit.problem = orbit_problem
-PeriodicOrbit.sensitivity = orbit_sensitivity
+_orbit_problem.__name__ = "problem"
+_orbit_problem.__qualname__ = "PeriodicOrbit.problem"
+_orbit_sensitivity.__name__ = "sensitivity"
+_orbit_sensitivity.__qualname__ = "PeriodicOrbit.sensitivity"
+PeriodicOrbit.problem = _orbit_problem
+PeriodicOrbit.sensitivity = _orbit_sensitivity

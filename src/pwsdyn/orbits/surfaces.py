@@ -21,10 +21,6 @@ from ..model.codegen import W_GUARD, W_HD, W_HDT, W_HDX
 from ..stability._context import KernelState, ModelContext
 from ._segments import FieldKey as FieldKey
 
-__all__ = ["FieldKey", "ScalarFunction", "guard_holds", "model_context", "normal_acceleration",
-           "normal_velocity", "normal_velocity_rate", "sliding_boundary_rate", "state_field",
-           "surface"]
-
 
 def model_context(model, params: dict, sliding: str = "convex") -> ModelContext:
     """The model's compiled point evaluations at the parameter values ``params`` (a dict of
