@@ -113,7 +113,7 @@ def _mode_by_name(model, name: str) -> int:
     return model.mode_index(name)
 
 
-class OrbitProblemBase:
+class _OrbitProblemBase:
     """The orbit problem ``F(u, p) = 0`` on a fixed signature: the segments of the signature,
     the layout of ``u``, the evaluation of ``F`` with its Jacobians and Newton's method on it
     (see the module docstring). :class:`~pwsdyn.orbits.OrbitProblem` adds what is computed

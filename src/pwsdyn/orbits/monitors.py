@@ -1,10 +1,11 @@
 """Monitors of discontinuity-induced bifurcations of a periodic orbit: for a solution of an
 orbit problem (:class:`~pwsdyn.orbits.OrbitProblem`), signed distances from a grazing, a
 sliding bifurcation or a corner collision, each zero at the bifurcation and positive on the
-side where the orbit keeps its signature (:func:`dib_monitors`).
+side where the orbit keeps its signature
+(:func:`~pwsdyn.orbits.monitors.dib_monitors`).
 
-A monitor is named by a :class:`~pwsdyn.orbits.MonitorKey` (its kind, the surface, event or switch it
-watches, the segment and where on it); its string form ``"GR/impact/0"``,
+A monitor is named by a :class:`~pwsdyn.orbits.MonitorKey` (its kind, the surface, event
+or switch it watches, the segment and where on it); its string form ``"GR/impact/0"``,
 ``"GR/impact@0"``, ``"GR/x/2/arc"``, ``"AS/vrel:above/2"`` is the name a branch's column, a
 special point and a saved file carry (:meth:`~pwsdyn.orbits.MonitorKey.parse` reads it
 back).
@@ -21,8 +22,9 @@ from ._sampling import interior_minimum
 from .surfaces import (model_context, normal_acceleration, normal_velocity,
                        sliding_boundary_rate, state_field, surface)
 
-#: Kinds of the monitors of :func:`dib_monitors` (discontinuity-induced bifurcations of an
-#: orbit): grazing, grazing-, switching-, crossing- and adding-sliding, corner collision.
+#: Kinds of the monitors of :func:`~pwsdyn.orbits.monitors.dib_monitors` (discontinuity-induced
+#: bifurcations of an orbit): grazing, grazing-, switching-, crossing- and adding-sliding,
+#: corner collision.
 DIB_KINDS = ("GR", "GS", "SS", "CS", "AS", "CC")
 #: Where on its segment a monitor is evaluated: along it (an interior minimum), at the
 #: boundary that ends it, or over the whole of it (the duration of an arc).
@@ -30,10 +32,11 @@ MONITOR_PLACES = ("interior", "boundary", "arc")
 
 
 class MonitorKey(NamedTuple):
-    """The name of a monitor: its ``kind`` (one of :data:`~pwsdyn.orbits.monitors.DIB_KINDS`), the ``name`` of the
-    surface, event or switch it watches, its ``segment``, where on it (``at``, one of
-    :data:`~pwsdyn.orbits.monitors.MONITOR_PLACES`) and, for a sliding segment's adding-sliding monitor, the
-    ``side`` (``'above'`` or ``'below'``) whose field it watches.
+    """The name of a monitor: its ``kind`` (one of
+    :data:`~pwsdyn.orbits.monitors.DIB_KINDS`), the ``name`` of the surface, event or switch it
+    watches, its ``segment``, where on it (``at``, one of
+    :data:`~pwsdyn.orbits.monitors.MONITOR_PLACES`) and, for a sliding segment's
+    adding-sliding monitor, the ``side`` (``'above'`` or ``'below'``) whose field it watches.
 
     ``str(key)`` is its string form (``"GR/impact/0"``, ``"GR/impact@0"``,
     ``"GR/x/2/arc"``, ``"AS/vrel:above/2"``); :meth:`parse` the inverse.

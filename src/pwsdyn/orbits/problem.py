@@ -67,7 +67,7 @@ from ._admissibility import Admissibility as Admissibility
 from ._base import ADMISSIBILITY_RTOL as ADMISSIBILITY_RTOL
 from ._base import OrbitError
 from ._orbit import PeriodicOrbit
-from ._residual import OrbitProblemBase as OrbitProblemBase
+from ._residual import _OrbitProblemBase
 from ._residual import ProblemEvaluation as ProblemEvaluation
 from ._residual import SegmentFailed as SegmentFailed
 from ._results import OrbitSensitivity as OrbitSensitivity
@@ -86,13 +86,14 @@ def _same_doc(fn):
     return take
 
 
-class OrbitProblem(OrbitProblemBase):
+class OrbitProblem(_OrbitProblemBase):
     """A periodic orbit of a hybrid model on a fixed signature: ``F(u, p) = 0``.
 
-    See the module docstring for the unknowns ``u`` and the residual. The problem, its layout
-    and evaluation are those of ``OrbitProblemBase`` (:mod:`pwsdyn.orbits.problem`); the methods below are the functions of a
-    problem and a solution in the modules of their own (guesses, admissibility, monitors,
-    results), which import the problem and not the reverse.
+    See the module docstring for the unknowns ``u`` and the residual. The problem, the layout
+    of ``u``, the evaluation of ``F`` with its Jacobians and Newton's method are defined in
+    ``pwsdyn.orbits._residual``; the methods computed from a solution (guesses, admissibility,
+    monitors, results) are functions of the problem in modules of their own, which import it
+    and are not imported by it.
 
     Parameters
     ----------
@@ -130,20 +131,20 @@ class OrbitProblem(OrbitProblemBase):
     # ---- the problem's own interface: its definition, the layout of u, the evaluation of F
     # and its Jacobians, Newton (pwsdyn.orbits._residual), named here so that it is this
     # class's interface (and documented with it)
-    replace = vars(OrbitProblemBase)["replace"]
-    from_orbit = vars(OrbitProblemBase)["from_orbit"]
-    pack = vars(OrbitProblemBase)["pack"]
-    unpack = vars(OrbitProblemBase)["unpack"]
-    param_dict = vars(OrbitProblemBase)["param_dict"]
-    period_value = vars(OrbitProblemBase)["period_value"]
-    evaluate = vars(OrbitProblemBase)["evaluate"]
-    residual = vars(OrbitProblemBase)["residual"]
-    jacobian = vars(OrbitProblemBase)["jacobian"]
-    norm = vars(OrbitProblemBase)["norm"]
-    solve = vars(OrbitProblemBase)["solve"]
-    segment_options = vars(OrbitProblemBase)["segment_options"]
-    flow = vars(OrbitProblemBase)["flow"]
-    dense_segment = vars(OrbitProblemBase)["dense_segment"]
+    replace = vars(_OrbitProblemBase)["replace"]
+    from_orbit = vars(_OrbitProblemBase)["from_orbit"]
+    pack = vars(_OrbitProblemBase)["pack"]
+    unpack = vars(_OrbitProblemBase)["unpack"]
+    param_dict = vars(_OrbitProblemBase)["param_dict"]
+    period_value = vars(_OrbitProblemBase)["period_value"]
+    evaluate = vars(_OrbitProblemBase)["evaluate"]
+    residual = vars(_OrbitProblemBase)["residual"]
+    jacobian = vars(_OrbitProblemBase)["jacobian"]
+    norm = vars(_OrbitProblemBase)["norm"]
+    solve = vars(_OrbitProblemBase)["solve"]
+    segment_options = vars(_OrbitProblemBase)["segment_options"]
+    flow = vars(_OrbitProblemBase)["flow"]
+    dense_segment = vars(_OrbitProblemBase)["dense_segment"]
 
     # ---- guesses that follow the signature (pwsdyn.orbits._guesses) ----------------------
     @_same_doc(_guesses.follow)
