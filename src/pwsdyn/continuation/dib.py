@@ -63,11 +63,12 @@ def _segment_mode(op, seg):
 def _old_segment(op, u, lam, seg):
     """``(p, segment, dense trajectory, context)`` of segment ``seg`` of the old signature's
     solution ``u`` at ``lam``."""
-    from ..orbits.problem import _context
+    from ..orbits.surfaces import model_context
 
     p = np.array([lam])
     s = op.evaluate(u, p, jacobian=False).segs[seg]
-    return p, s, op._dense_segment(seg, s, p), _context(op.model, op.param_dict(p), op.sliding)
+    return (p, s, op.dense_segment(seg, s, p),
+            model_context(op.model, op.param_dict(p), op.sliding))
 
 
 def insert_impact(op, u, lam, seg: int, surface_name: str):
@@ -214,8 +215,8 @@ def insert_crossing(op, u, lam, seg: int):
     from the other side; the arc's guessed duration is the parabola's return time
     ``2 |hdot / hddot|`` of the other mode's normal velocity and acceleration there:
     ``(problem, u)`` or a reason string."""
-    from ..orbits.problem import _acc, _context, _hd
     from ..orbits.signature import SignatureEvent
+    from ..orbits.surfaces import model_context, normal_acceleration, normal_velocity
 
     m = op.model
     b = op.bounds[seg]
@@ -228,9 +229,9 @@ def insert_crossing(op, u, lam, seg: int):
     ev = op.evaluate(u, p, jacobian=False)
     s = ev.segs[seg]
     te, y = float(s.te), np.asarray(s.y[:op.n], dtype=float)
-    ctx = _context(m, op.param_dict(p), op.sliding)
-    hd = _hd(ctx, b.surface, other)(te, y)
-    acc = _acc(ctx, b.surface, other)(te, y)
+    ctx = model_context(m, op.param_dict(p), op.sliding)
+    hd = normal_velocity(ctx, b.surface, other)(te, y)
+    acc = normal_acceleration(ctx, b.surface, other)(te, y)
     if hd * acc >= 0.0 or acc == 0.0:
         return "the other mode's arc does not come back to the surface"
     tau = 2.0 * abs(hd / acc)
@@ -277,9 +278,9 @@ def slide_at_crossing(op, u, lam, seg: int):
     guessed duration is the time for the field beyond's normal velocity ``hdot`` to reach zero
     at its rate along the sliding field, ``|hdot / (d hdot / dt)|``: ``(problem, u)`` or a
     reason string."""
-    from ..orbits._segments import FieldKey
-    from ..orbits.problem import _boundary_rate, _context, _hd, _state_field
     from ..orbits.signature import SignatureEvent
+    from ..orbits.surfaces import (FieldKey, model_context, normal_velocity,
+                                   sliding_boundary_rate, state_field)
 
     m = op.model
     b = op.bounds[seg]
@@ -291,10 +292,10 @@ def slide_at_crossing(op, u, lam, seg: int):
     p = np.array([lam])
     s = op.evaluate(u, p, jacobian=False).segs[seg]
     te, y = float(s.te), np.asarray(s.y[:op.n], dtype=float)
-    ctx = _context(m, op.param_dict(p), op.sliding)
-    fs = _state_field(ctx, FieldKey("slide", b.ref), te, y)
-    hd = _hd(ctx, b.surface, beyond)(te, y)
-    rate = _boundary_rate(ctx, b.ref, beyond, te, y)
+    ctx = model_context(m, op.param_dict(p), op.sliding)
+    fs = state_field(ctx, FieldKey("slide", b.ref), te, y)
+    hd = normal_velocity(ctx, b.surface, beyond)(te, y)
+    rate = sliding_boundary_rate(ctx, b.ref, beyond, te, y)
     if hd * rate >= 0.0:
         return "the sliding flow does not carry the crossing point to the region's boundary"
     tau = abs(hd / rate)
@@ -342,8 +343,8 @@ def split_sliding(op, u, lam, seg: int, side: str):
     away there). The orbit leaves at ``ta`` into that side's mode, runs a short arc and slides
     again: the segment is split by an exit, an arc (guessed as lasting ``tb - ta``) and an
     entry: ``(problem, u)`` or a reason string."""
-    from ..orbits.problem import _hd
     from ..orbits.signature import SignatureEvent
+    from ..orbits.surfaces import normal_velocity
 
     m = op.model
     fk = op.fields[seg]
@@ -353,7 +354,7 @@ def split_sliding(op, u, lam, seg: int, side: str):
     mode, sign = (sw.above, -1.0) if side == "above" else (sw.below, 1.0)
     p, s, tr, ctx = _old_segment(op, u, lam, seg)
     n = op.n
-    hd = _hd(ctx, sw.surface, mode)
+    hd = normal_velocity(ctx, sw.surface, mode)
 
     def g(t):                      # positive inside the sliding region
         return sign * hd(t, tr(t)[:n])
@@ -490,15 +491,15 @@ def resimulated(op, u, lam):
     new orbit, a short step past the bifurcation), and that simulation as the start of
     Newton on it: ``(problem, u)`` or a reason string."""
     from ..integrate.simulate import _simulate_compiled
-    from ..orbits.problem import _context
     from ..orbits.signature import Signature
+    from ..orbits.surfaces import model_context
 
     if not op.forced or len(op.bounds) != len(op.signature):
         return "only forced orbits whose boundaries are single events are re-simulated"
     p = np.array([lam])
     t0, xs, _ = op.unpack(u)
     x0 = np.asarray(xs[0], dtype=float)
-    ctx = _context(op.model, op.param_dict(p), op.sliding)
+    ctx = model_context(op.model, op.param_dict(p), op.sliding)
     st = ctx.state(str(op.state_names[0]))
     P = op.period_value(p)
     opts = dict(op.opts, variational=False, dense=False, throw=False, mode=None)
@@ -528,38 +529,38 @@ def past_graze(op, key: str, u, lam, solve_at=None):
     """The new signature's problem and solution just past the graze ``key`` at ``lam``:
     ``(problem, u)``, or a reason string. ``u`` solves the old signature at ``lam``; with
     ``solve_at`` the new problem is built there and solved at ``solve_at``."""
-    kind, body = key.split("/", 1)
-    if kind not in ("GR", "GS", "SS", "CS", "AS", "CC"):
+    from ..orbits.monitors import MonitorKey
+
+    try:
+        k = MonitorKey.parse(key)
+    except ValueError:
+        kind = str(key).split("/", 1)[0]
         return (f"the orbit's new event sequence past a {kind} is not built yet (the branch "
                 f"stops here; on_dib='continue' follows the old one, not admissible beyond)")
+    kind, seg = k.kind, k.segment
     try:
         if kind == "CC":
             made = resimulated(op, u, lam)
         elif kind == "AS":
-            where, seg = body.rsplit("/", 1) if "/" in body else (body, "")
-            if ":" in where:
-                made = split_sliding(op, u, lam, int(seg), where.rsplit(":", 1)[1])
+            if k.side:
+                made = split_sliding(op, u, lam, seg, k.side)
             else:
-                made = join_sliding(op, u, lam, int(body.rsplit("@", 1)[1]))
+                made = join_sliding(op, u, lam, seg)
         elif kind in ("SS", "CS"):
-            seg = int(body.rsplit("@", 1)[1])
             at_crossing = op.bounds[seg].kind == "crossing"
             if kind == "SS":
                 made = (slide_instead_of_arc if at_crossing else insert_crossing)(op, u, lam, seg)
             else:
                 made = (slide_at_crossing if at_crossing else cross_instead_of_sliding)(
                     op, u, lam, seg)
-        elif "@" in body:
-            seg = int(body.rsplit("@", 1)[1])
+        elif k.at == "boundary":
             made = (remove_sliding if kind == "GS" else remove_impact)(op, u, lam, seg)
-        elif body.endswith("/arc"):
-            made = remove_arc(op, u, lam, int(body[:-len("/arc")].rsplit("/", 1)[1]))
+        elif k.at == "arc":
+            made = remove_arc(op, u, lam, seg)
         elif kind == "GS":
-            surface, seg = body.rsplit("/", 1)
-            made = insert_sliding(op, u, lam, int(seg), surface)
+            made = insert_sliding(op, u, lam, seg, k.name)
         else:
-            surface, seg = body.rsplit("/", 1)
-            made = insert_impact(op, u, lam, int(seg), surface)
+            made = insert_impact(op, u, lam, seg, k.name)
     except TrialRejected as exc:
         return f"no orbit past the {kind}: {exc.message}"
     if isinstance(made, str):

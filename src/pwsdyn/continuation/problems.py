@@ -24,7 +24,7 @@ import numpy as np
 
 from ..errors import ArgumentError
 from ..newton import TrialRejected
-from ..orbits.problem import DIB_KINDS
+from ..orbits.monitors import DIB_KINDS
 
 #: A located zero is the bifurcation its test function stands for when the critical
 #: multipliers (eigenvalues) are this close to the critical set.

@@ -109,7 +109,7 @@ def design_control(point, *, t_c: float = 0.0, c0_values=None, max_gain: float =
     from scipy.optimize import linprog
 
     from .. import _validate as V
-    from ..orbits.problem import _context
+    from ..orbits.surfaces import model_context
     from .discontinuity import _tangency, discontinuity_map
 
     dm = discontinuity_map(point)
@@ -129,7 +129,7 @@ def design_control(point, *, t_c: float = 0.0, c0_values=None, max_gain: float =
     k = m.events[[j for j, e in enumerate(m.events)
                   if e.kind == "impact" and m.surfaces[e.surface].name == mon.surface][0]].surface
     p = np.array([point.value])
-    ctx = _context(m, prob.param_dict(p), prob.sliding)
+    ctx = model_context(m, prob.param_dict(p), prob.sliding)
     # dh/d(delta): the surface's derivative in the controlled parameter
     h_delta = _surface_parameter_derivative(m, k, param, ctx, mon.t, mon.x)
     if h_delta == 0.0:
@@ -144,7 +144,7 @@ def design_control(point, *, t_c: float = 0.0, c0_values=None, max_gain: float =
         raise ArgumentError("the control section must lie in the grazing segment (between "
                             "the graze and the segment's end)")
     z = np.append(mon.x, p)
-    x_c, Phi, _ = prob._flow(seg, mon.t, z, dt, prob._seg_opts(p))
+    x_c, Phi, _ = prob.flow(seg, mon.t, z, dt, prob.segment_options(p))
     Phi = Phi[:n, :n]
     f_star = ctx.mode_field(prob.fields[seg].index, mon.t, mon.x)
     J_C = np.hstack([Phi, -(Phi @ f_star)[:, None]])       # d x_C / d (x, t) at the graze

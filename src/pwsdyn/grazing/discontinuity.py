@@ -173,7 +173,8 @@ def _kink_graze(point):
     saltation matrix (equal fields). So the graze is analysed on the segment that starts at
     the kink, at its start.
     """
-    from ..orbits.problem import Monitor, _context
+    from ..orbits.monitors import Monitor
+    from ..orbits.surfaces import model_context
 
     mon = point.monitor
     prob = point.problem.orbit_problem
@@ -192,7 +193,7 @@ def _kink_graze(point):
     fa, fb = prob.fields[i], prob.fields[j]
     if fa.kind != "mode" or fb.kind != "mode":
         raise ArgumentError("the corner collision is not between two modes")
-    ctx = _context(m, prob.param_dict(p), prob.sliding)
+    ctx = model_context(m, prob.param_dict(p), prob.sliding)
     t, x = float(mon.t), np.asarray(mon.x, dtype=float)
     f_in = ctx.mode_field(fa.index, t, x)
     f_out = ctx.mode_field(fb.index, t, x)
@@ -238,7 +239,7 @@ def discontinuity_map(point) -> DiscontinuityMap:
         sequence (eq. 2.35) and the predicted ``scenario``.
     """
     from ..model.codegen import W_HDT, W_HDX
-    from ..orbits.problem import _context
+    from ..orbits.surfaces import model_context
 
     prob, u, p, mon = _tangency(point)
     m, n = prob.model, prob.n
@@ -254,7 +255,7 @@ def discontinuity_map(point) -> DiscontinuityMap:
                             f"is that of an impact")
     j, e = events[0]
     k = e.surface
-    ctx = _context(m, prob.param_dict(p), prob.sliding)
+    ctx = model_context(m, prob.param_dict(p), prob.sliding)
     ts, xs = float(mon.t), np.asarray(mon.x, dtype=float)
     f = ctx.mode_field(mode, ts, xs)
     nm = ctx.nm
@@ -310,11 +311,11 @@ def _monodromy_at(prob, u, p, seg, t_star):
     for i, s in enumerate(ev.segs):
         A = s.Phi[:n, :n]
         if i < len(prob.bounds):
-            A = prob._saltation(i, s) @ A
+            A = prob.boundary_saltation(i, s) @ A
         T.append(A)
     s = ev.segs[seg]
-    opts = prob._seg_opts(p)
-    _, Phi_a, _ = prob._flow(seg, s.t, s.z, t_star - s.t, opts)
+    opts = prob.segment_options(p)
+    _, Phi_a, _ = prob.flow(seg, s.t, s.z, t_star - s.t, opts)
     Pa = Phi_a[:n, :n]
     # from x*: the rest of segment seg, then the others, then segment seg up to t*
     rest = T[seg] @ np.linalg.inv(Pa)

@@ -22,6 +22,9 @@ MAX_PERIODS = 1_000_000
 #: Default of ``max_periods`` of :meth:`PeriodicOrbit.from_trajectory`: the most forcing
 #: periods searched for a recurrence of the trajectory.
 RECURRENCE_MAX_PERIODS = 16
+#: Relative size below which a surface value, normal velocity or acceleration counts as zero
+#: in the admissibility checks (the orbit is at a grazing, a sliding or sticking boundary).
+ADMISSIBILITY_RTOL = 1e-8
 #: An orbit is reported stable when every multiplier has modulus below ``1 - STABILITY_MARGIN``
 #: (a multiplier on the unit circle within the accuracy of the monodromy is not asymptotic
 #: stability).

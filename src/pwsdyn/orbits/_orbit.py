@@ -2,16 +2,14 @@
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .._version import __version__
 from ..errors import Status
 from ..integrate.trajectory import Trajectory
-from ._base import MAX_PERIODS, RECURRENCE_MAX_PERIODS, OrbitError
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -199,56 +197,9 @@ class PeriodicOrbit:
 
         return Signature.from_events(self.events)
 
-    def problem(self, parameters=None):
-        """The orbit problem of this orbit's signature and the orbit's unknowns:
-        ``(OrbitProblem, u, p)`` (see :class:`~pwsdyn.orbits.OrbitProblem`; ``parameters``
-        default all of the model's)."""
-        from .problem import OrbitProblem
-
-        if self._source is not None and (parameters is None or tuple(parameters)
-                                         == self._source[0].parameters):
-            return self._source
-        prob, u = OrbitProblem.from_orbit(self, parameters=parameters)
-        p = prob.p0.copy()
-        # the orbit's events give u to the Newton tolerance; solve once more on the segments
-        res = prob.solve(u, p)
-        if res.converged:
-            u = res.x
-        src = (prob, u, p)
-        if parameters is None:
-            self._source = src
-        return src
-
-    def sensitivity(self, name: str):
-        """Derivatives of the orbit with respect to parameter ``name`` along its branch.
-
-        Returns an :class:`~pwsdyn.orbits.OrbitSensitivity`: ``x0`` (``d x0/d p``; forced
-        orbits at the fixed time ``t0``, autonomous ones in the fixed section through ``x0``
-        with normal ``phase_normal``), ``period`` (``d period/d p``), ``multipliers``
-        (``d mu/d p`` of each of :attr:`multipliers`), and the derivatives of the events' times
-        and states. They come from the orbit problem on the orbit's signature:
-        ``du/dp = -F_u^-1 F_p`` (exact Jacobians), the multipliers by a central difference of
-        the monodromy along that tangent (:meth:`~pwsdyn.orbits.OrbitProblem.sensitivity`).
-
-        Examples
-        --------
-        >>> import pwsdyn
-        >>> orbit = pwsdyn.find_periodic_orbit("impact-oscillator", [0.0, -0.5])
-        >>> d = orbit.sensitivity("sigma")
-        >>> d.x0.shape
-        (2,)
-        """
-        from .. import _validate as V
-
-        if not isinstance(name, str) or name not in self.model.parameters:
-            raise V.fail("name", f"a parameter of model {self.model.name!r} "
-                         f"{list(self.model.parameters)}", name)
-        if not self.converged:
-            raise ValueError("the orbit did not converge: it has no sensitivity")
-        prob, u, p = self.problem()
-        if self.autonomous:
-            return prob.sensitivity(u, p, name, x_ref=self.x0, phase_normal=self.phase_normal)
-        return prob.sensitivity(u, p, name, t0=self.t0)
+    # problem() and sensitivity() are given to this class by pwsdyn.orbits.problem, and
+    # from_trajectory() by the shooting code (pwsdyn.orbits._shooting): they run a solver,
+    # and the result type does not import its solvers (they import it)
 
     @property
     def transfer_matrices(self) -> list | None:
@@ -338,113 +289,6 @@ class PeriodicOrbit:
                      + " ".join(f"{r:.2e}" for r in self.history)
                      + ("" if self.converged else "  NOT CONVERGED"))
         return "\n".join(lines)
-
-    # ------------------------------------------------------------------------------------
-    @classmethod
-    def from_trajectory(cls, traj: Trajectory, *, t0: float | None = None,
-                        period: float | None = None,
-                        periods: int | None = None, refine: bool = True,
-                        recurrence_tol: float = 1e-3,
-                        max_periods: int = RECURRENCE_MAX_PERIODS,
-                        **kwargs: Any) -> "PeriodicOrbit":
-        """A periodic orbit from a simulated trajectory that has settled on it.
-
-        The period is that of the motion at the end of the run, found by its recurrence (the
-        guess is then the state one period before the end, at ``t0 = t_end - period`` unless
-        ``t0`` is given):
-
-        * forced model, neither ``periods`` nor ``period`` given: the smallest ``k`` (up to
-          ``max_periods``) such that the state and the discrete state (mode, sticking or
-          sliding constraint) ``k`` forcing periods before the end of the run agree with those
-          at the end, to ``recurrence_tol`` relative to ``1 + max|x|``. They are compared at the
-          middle of the longest event-free stretch of the last forcing period, through the dense
-          output. ``k = 1`` for a period-1 motion (unchanged from before). A larger ``k`` -- a
-          period-doubled motion, say -- is used, and a :class:`RecurrenceWarning` says so: the
-          orbit's ``period`` is then ``k * forcing_period`` (``orbit.periods == k``), where one
-          might have expected one forcing period. If the run does not recur at all (a
-          transient, a quasi-periodic or chaotic motion) the guess of one forcing period is
-          refined as before, with a :class:`RecurrenceWarning`: Newton may converge (from a
-          rough guess near a stable orbit it does) but nothing says the orbit is the one the
-          run approaches.
-        * forced model, ``periods`` or ``period`` given: that period is used, as asked; when
-          the run does not recur after it a :class:`RecurrenceWarning` says so and names the
-          period it does recur at. An explicit request is never replaced: ``periods=1`` on a
-          period-doubled run is how one finds the (unstable) period-1 orbit near it, as a
-          continuation code (AUTO, COCO) would start from the period it is given.
-        * autonomous model: the period is the time between the last event and the most recent
-          earlier event of the same kind, name and modes whose post-event state agrees with it
-          to ``recurrence_tol`` (relative), unless ``period`` (a guess) is given. No recurrence
-          is an :class:`~pwsdyn.errors.ArgumentError`.
-
-        ``orbit.recurrence`` (a :class:`~pwsdyn.orbits.Recurrence`) records what was found. With
-        ``refine`` (default) the guess is refined by :func:`pwsdyn.find_periodic_orbit` (``kwargs``
-        go there); otherwise one period is re-simulated from the guess and its monodromy reported
-        as is (``converged`` then says whether it closed to ``tol``).
-
-        Parameters
-        ----------
-        traj : Trajectory
-            A run with dense output (the default of :func:`pwsdyn.simulate`).
-        t0, period : float, optional
-        periods : int, optional
-            Forced models: the period in forcing periods (default: from the recurrence).
-        refine : bool
-        recurrence_tol : float
-        max_periods : int
-            Forced models: the most forcing periods searched for a recurrence.
-        **kwargs
-            Options of :func:`pwsdyn.find_periodic_orbit`.
-
-        Returns
-        -------
-        PeriodicOrbit
-
-        Warns
-        -----
-        RecurrenceWarning
-            The run does not recur after one forcing period but after ``k`` (the orbit has
-            period ``k``), or not after the period asked for, or not at all.
-
-        Raises
-        ------
-        OrbitError
-            As :func:`pwsdyn.find_periodic_orbit`; its ``result`` carries ``recurrence``.
-        """
-        from .. import _validate as V
-        from ._shooting import _guess_from_trajectory, find_periodic_orbit, orbit_at
-
-        if not isinstance(traj, Trajectory):
-            raise V.fail("traj", "a Trajectory (the result of pwsdyn.simulate)", traj)
-        if getattr(traj.model, "is_map", False) or traj.model is None:
-            raise V.fail("traj", "a Trajectory of a flow", traj)
-        t0 = V.number("t0", t0, allow_none=True)
-        period = V.positive("period", period, allow_none=True)
-        if periods is not None:
-            periods = V.integer("periods", periods, lo=1, hi=MAX_PERIODS)
-        refine = V.flag("refine", refine)
-        recurrence_tol = V.positive("recurrence_tol", recurrence_tol)
-        max_periods = V.integer("max_periods", max_periods, lo=1, hi=MAX_PERIODS)
-        if t0 is not None and not (float(traj.t[0]) <= t0 <= float(traj.t[-1])):
-            raise V.fail("t0", f"a time within the trajectory [{float(traj.t[0])!r}, "
-                         f"{float(traj.t[-1])!r}] or None", t0)
-        t0g, x0g, Tg, state, recurrence = _guess_from_trajectory(
-            traj, t0=t0, period=period, periods=periods, recurrence_tol=recurrence_tol,
-            max_periods=max_periods)
-        if recurrence is not None and recurrence.message:
-            warnings.warn(recurrence.message, RecurrenceWarning, stacklevel=2)
-        try:
-            if refine:
-                orbit = find_periodic_orbit(traj.model, x0g, params=traj.params, period=Tg,
-                                            t0=t0g, mode=state, **kwargs)
-            else:
-                orbit = orbit_at(traj.model, x0g, params=traj.params, period=Tg, t0=t0g,
-                                 mode=state, **kwargs)
-        except OrbitError as exc:
-            if exc.result is not None:
-                exc.result.recurrence = recurrence
-            raise
-        orbit.recurrence = recurrence
-        return orbit
 
     # ------------------------------------------------------------------------------------
     def to_dataset(self) -> xr.Dataset:

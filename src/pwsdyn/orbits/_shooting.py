@@ -30,6 +30,7 @@ naming the reason, with the last iterate as ``result``.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
@@ -40,14 +41,15 @@ from ..errors import ArgumentError
 from ..newton import TrialRejected, newton
 from ..integrate.simulate import _simulate_compiled
 from ..model.spec import as_model
-from ..integrate.trajectory import DiscreteState
+from ..integrate.trajectory import DiscreteState, Trajectory
 from ..stability._context import (KernelState, ModelContext, check_state_name, event_states,
                                   initial_state, trajectory_start_state)
 from ..stability._floquet import floquet_multipliers
 from ._base import (MAX_ITER, MAX_NODES, MAX_PERIODS, RECURRENCE_MAX_PERIODS,
                     STABILITY_MARGIN, OrbitError, shooting_options)
 from ._base import SHOOTING_DEFAULTS as SHOOTING_DEFAULTS  # its old home, still imported
-from ._orbit import PeriodicOrbit, Recurrence, merge_intervals
+from ._orbit import PeriodicOrbit, Recurrence, RecurrenceWarning, merge_intervals
+from .problem import locked_orbit
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -319,8 +321,6 @@ def find_periodic_orbit(model: ModelLike, x0: StateLike, *,
     autonomous = Tf is None
     V.time_window("t0", t0, T, what="one period of the orbit")
     if signature is not None:
-        from .problem import locked_orbit
-
         return locked_orbit(model, x0, params=params, T=T, Tf=Tf, t0=t0, mode=mode,
                             signature=signature, phase=phase, tol=tol, max_iter=max_iter,
                             options=options)
@@ -816,3 +816,115 @@ def _recurrence_period(traj, tol):
     raise ArgumentError(f"no recurrence of the last event ({last!r}) within {tol:g} (relative) in "
                      f"the trajectory: it has not settled on a periodic orbit; simulate longer or "
                      f"give `period`")
+
+
+# ======================================================================================
+# the constructor of a PeriodicOrbit from a trajectory: it runs the shooting above, so it is
+# defined here and given to the result type, which imports no solver
+# ======================================================================================
+
+def from_trajectory(cls, traj: Trajectory, *, t0: float | None = None,
+                    period: float | None = None,
+                    periods: int | None = None, refine: bool = True,
+                    recurrence_tol: float = 1e-3,
+                    max_periods: int = RECURRENCE_MAX_PERIODS,
+                    **kwargs: Any) -> "PeriodicOrbit":
+    """A periodic orbit from a simulated trajectory that has settled on it.
+
+    The period is that of the motion at the end of the run, found by its recurrence (the
+    guess is then the state one period before the end, at ``t0 = t_end - period`` unless
+    ``t0`` is given):
+
+    * forced model, neither ``periods`` nor ``period`` given: the smallest ``k`` (up to
+      ``max_periods``) such that the state and the discrete state (mode, sticking or
+      sliding constraint) ``k`` forcing periods before the end of the run agree with those
+      at the end, to ``recurrence_tol`` relative to ``1 + max|x|``. They are compared at the
+      middle of the longest event-free stretch of the last forcing period, through the dense
+      output. ``k = 1`` for a period-1 motion (unchanged from before). A larger ``k`` -- a
+      period-doubled motion, say -- is used, and a :class:`RecurrenceWarning` says so: the
+      orbit's ``period`` is then ``k * forcing_period`` (``orbit.periods == k``), where one
+      might have expected one forcing period. If the run does not recur at all (a
+      transient, a quasi-periodic or chaotic motion) the guess of one forcing period is
+      refined as before, with a :class:`RecurrenceWarning`: Newton may converge (from a
+      rough guess near a stable orbit it does) but nothing says the orbit is the one the
+      run approaches.
+    * forced model, ``periods`` or ``period`` given: that period is used, as asked; when
+      the run does not recur after it a :class:`RecurrenceWarning` says so and names the
+      period it does recur at. An explicit request is never replaced: ``periods=1`` on a
+      period-doubled run is how one finds the (unstable) period-1 orbit near it, as a
+      continuation code (AUTO, COCO) would start from the period it is given.
+    * autonomous model: the period is the time between the last event and the most recent
+      earlier event of the same kind, name and modes whose post-event state agrees with it
+      to ``recurrence_tol`` (relative), unless ``period`` (a guess) is given. No recurrence
+      is an :class:`~pwsdyn.errors.ArgumentError`.
+
+    ``orbit.recurrence`` (a :class:`~pwsdyn.orbits.Recurrence`) records what was found. With
+    ``refine`` (default) the guess is refined by :func:`pwsdyn.find_periodic_orbit` (``kwargs``
+    go there); otherwise one period is re-simulated from the guess and its monodromy reported
+    as is (``converged`` then says whether it closed to ``tol``).
+
+    Parameters
+    ----------
+    traj : Trajectory
+        A run with dense output (the default of :func:`pwsdyn.simulate`).
+    t0, period : float, optional
+    periods : int, optional
+        Forced models: the period in forcing periods (default: from the recurrence).
+    refine : bool
+    recurrence_tol : float
+    max_periods : int
+        Forced models: the most forcing periods searched for a recurrence.
+    **kwargs
+        Options of :func:`pwsdyn.find_periodic_orbit`.
+
+    Returns
+    -------
+    PeriodicOrbit
+
+    Warns
+    -----
+    RecurrenceWarning
+        The run does not recur after one forcing period but after ``k`` (the orbit has
+        period ``k``), or not after the period asked for, or not at all.
+
+    Raises
+    ------
+    OrbitError
+        As :func:`pwsdyn.find_periodic_orbit`; its ``result`` carries ``recurrence``.
+    """
+    if not isinstance(traj, Trajectory):
+        raise V.fail("traj", "a Trajectory (the result of pwsdyn.simulate)", traj)
+    if getattr(traj.model, "is_map", False) or traj.model is None:
+        raise V.fail("traj", "a Trajectory of a flow", traj)
+    t0 = V.number("t0", t0, allow_none=True)
+    period = V.positive("period", period, allow_none=True)
+    if periods is not None:
+        periods = V.integer("periods", periods, lo=1, hi=MAX_PERIODS)
+    refine = V.flag("refine", refine)
+    recurrence_tol = V.positive("recurrence_tol", recurrence_tol)
+    max_periods = V.integer("max_periods", max_periods, lo=1, hi=MAX_PERIODS)
+    if t0 is not None and not (float(traj.t[0]) <= t0 <= float(traj.t[-1])):
+        raise V.fail("t0", f"a time within the trajectory [{float(traj.t[0])!r}, "
+                     f"{float(traj.t[-1])!r}] or None", t0)
+    t0g, x0g, Tg, state, recurrence = _guess_from_trajectory(
+        traj, t0=t0, period=period, periods=periods, recurrence_tol=recurrence_tol,
+        max_periods=max_periods)
+    if recurrence is not None and recurrence.message:
+        warnings.warn(recurrence.message, RecurrenceWarning, stacklevel=2)
+    try:
+        if refine:
+            orbit = find_periodic_orbit(traj.model, x0g, params=traj.params, period=Tg,
+                                        t0=t0g, mode=state, **kwargs)
+        else:
+            orbit = orbit_at(traj.model, x0g, params=traj.params, period=Tg, t0=t0g,
+                             mode=state, **kwargs)
+    except OrbitError as exc:
+        if exc.result is not None:
+            exc.result.recurrence = recurrence
+        raise
+    orbit.recurrence = recurrence
+    return orbit
+
+
+from_trajectory.__qualname__ = "PeriodicOrbit.from_trajectory"
+PeriodicOrbit.from_trajectory = classmethod(from_trajectory)

@@ -1,0 +1,791 @@
+"""The orbit problem ``F(u, p) = 0`` of a hybrid periodic orbit on a fixed signature: its
+segments and boundaries, the layout of the unknowns ``u``, the evaluation of ``F`` with the
+exact Jacobians ``F_u``, ``F_p`` (forward mode through the segments' variational equations,
+the boundaries' conditions and maps) and Newton's method on it. The formulation is written
+out in :mod:`pwsdyn.orbits.problem`; what is computed from a solution lives in the modules
+that import this one (guesses, admissibility, monitors, results).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import sympy as sp
+
+from .. import _validate as V
+from ..errors import ArgumentError
+from ..integrate.simulate import _simulate_compiled
+from ..integrate.trajectory import DiscreteState
+from ..model.spec import as_model
+from ..newton import TrialRejected, newton
+from ._base import shooting_options
+from ._sampling import sample_times
+from ._segments import FieldKey, SegmentSystem
+from .signature import Signature
+
+_SYSTEMS: dict = {}
+
+
+class SegmentFailed(Exception):
+    """A segment could not be integrated (the kernel stopped)."""
+
+    def __init__(self, index: int, message: str):
+        super().__init__(message)
+        self.index = index
+        self.message = message
+
+
+
+@dataclass(frozen=True)
+class _Boundary:
+    kind: str            # impact, transition, chatter, crossing, slide_start, slide_end, release
+    events: tuple        # the SignatureEvents of the boundary (an event, or event + stick)
+    ref: int             # event or switch index
+    surface: int         # surface index of the model
+    mode: int            # regular mode of the segment before (the field's mode)
+    cond: tuple          # scalar key of the condition
+    direction: int       # the condition's crossing direction at the end (-1, 0, +1)
+
+
+@dataclass
+class _Seg:
+    """One segment of an evaluation (extended states ``z = (x, p)``; ``D*``: derivatives over
+    ``w = (u, p)``)."""
+
+    t: float
+    z: np.ndarray
+    T: float
+    te: float
+    y: np.ndarray
+    tau: float
+    X: np.ndarray
+    Phi: np.ndarray
+    f_start: np.ndarray
+    f_end: np.ndarray
+    c: float = 0.0
+    Dt: np.ndarray | None = None
+    Dz: np.ndarray | None = None
+    Dte: np.ndarray | None = None
+    Dy: np.ndarray | None = None
+    Dtau: np.ndarray | None = None
+    DX: np.ndarray | None = None
+    # partial derivatives of the boundary at (te, y): condition, map, jump
+    c_z: np.ndarray | None = None
+    c_t: float = 0.0
+    X_y: np.ndarray | None = None
+    X_t: np.ndarray | None = None
+    tau_y: np.ndarray | None = None
+    tau_t: float = 1.0
+
+
+@dataclass
+class ProblemEvaluation:
+    """``F``, ``F_u``, ``F_p`` of an :class:`~pwsdyn.orbits.OrbitProblem` at ``(u, p)`` and what the
+    segments computed on the way.
+
+    Attributes
+    ----------
+    u, p : numpy.ndarray
+    F : numpy.ndarray
+    F_u : numpy.ndarray or None
+        ``dF/du`` (square).
+    F_p : numpy.ndarray or None
+        ``dF/dp``, one column per parameter of the problem.
+    period : float
+        ``t_m - t_0``.
+    """
+
+    u: np.ndarray
+    p: np.ndarray
+    F: np.ndarray
+    F_u: np.ndarray | None
+    F_p: np.ndarray | None
+    period: float
+    segs: list = field(default_factory=list, repr=False)
+    Dperiod: np.ndarray | None = field(default=None, repr=False)
+
+
+def _mode_by_name(model, name: str) -> int:
+    if name in model.mode_names:
+        return model.mode_names.index(name)
+    return model.mode_index(name)
+
+
+class _OrbitProblemBase:
+    """The orbit problem ``F(u, p) = 0`` on a fixed signature: the segments of the signature,
+    the layout of ``u``, the evaluation of ``F`` with its Jacobians and Newton's method on it
+    (see the module docstring). :class:`~pwsdyn.orbits.OrbitProblem` adds what is computed
+    from a solution (guesses, admissibility, monitors, the reported orbit); its arguments are
+    this class's."""
+
+    def __init__(self, model, signature, *, params=None, parameters=None, periods: int = 1,
+                 t_ref: float = 0.0, state: str | None = None, phase_ref=None,
+                 phase_normal=None, sliding: str = "convex", **options):
+        self.opts = shooting_options(options, "OrbitProblem()")
+        self.model = as_model(model, kind="flow", caller="OrbitProblem()")
+        self.sliding = V.choice("sliding", sliding, ("convex", "utkin"))
+        self.opts["sliding"] = self.sliding
+        m = self.model
+        p_all = m.parameter_vector(params)
+        self.params = dict(zip(m.parameters, (float(v) for v in p_all)))
+        if parameters is None:
+            parameters = list(m.parameters)
+        if isinstance(parameters, str):
+            parameters = [parameters]
+        parameters = list(parameters)
+        bad = [k for k in parameters if k not in m.parameters]
+        if bad or len(set(parameters)) != len(parameters):
+            raise ArgumentError(f"`parameters` must be distinct parameters of model {m.name!r} "
+                                f"{list(m.parameters)}, got {parameters}")
+        self.parameters = tuple(parameters)
+        self.p0 = np.array([self.params[k] for k in self.parameters], dtype=float)
+        if isinstance(signature, str):
+            signature = Signature.parse(signature)
+        self.signature = Signature(signature)
+        if self.signature and not self.signature.closed:
+            raise ArgumentError(f"the signature {self.signature} is not closed: each event must "
+                                f"start in the discrete state the previous one ends in")
+        self.n = m.n_states
+        self.q = len(self.parameters)
+        self.forced = m.forcing_period is not None
+        self.periods = V.integer("periods", periods, lo=1)
+        self.t_ref = V.number("t_ref", t_ref)
+        self._plan(state)
+        self.m = len(self.bounds)
+        if self.forced:
+            self.size = 1 + self.m * (self.n + 1) if self.m else self.n
+        else:
+            self.size = self.m * (self.n + 1) if self.m else self.n + 1
+        if not self.forced and not self.m:
+            if phase_ref is None or phase_normal is None:
+                raise ArgumentError("an autonomous orbit without events needs `phase_ref` and "
+                                    "`phase_normal` (its phase condition)")
+        self.phase_ref = None if phase_ref is None else V.vector("phase_ref", phase_ref,
+                                                                  size=self.n)
+        self.phase_normal = None if phase_normal is None else V.vector(
+            "phase_normal", phase_normal, size=self.n)
+        self._build_system()
+        if self.forced:
+            syms = m.parameter_symbols
+            fp = m.forcing_period
+            # the period itself is the model's (Model.forcing_period_at); its derivatives
+            # with respect to the problem's parameters are the problem's own
+            self._Tf_p = [sp.lambdify(syms, sp.diff(fp, sp.Symbol(k, real=True)), modules="math")
+                          for k in self.parameters]
+
+    def replace(self, *, signature=None, params=None, parameters=None, periods=None,
+                t_ref=None, state=None, **options):
+        """The same problem (model, integrator options, sliding method, phase condition) with
+        some of its definition changed: another signature (an event added or removed, the
+        period doubled), other parameter values or continued parameters, another period or
+        start time, integrator ``options`` over its own. An orbit without events keeps its
+        discrete state unless ``state`` is given."""
+        from ..integrate.simulate import DEFAULTS
+
+        opts = {k: v for k, v in self.opts.items() if k in DEFAULTS
+                and k not in ("variational", "dense", "throw", "mode", "sliding")}
+        opts.update(options)
+        sig = self.signature if signature is None else Signature(signature)
+        kw = {}
+        if not sig:
+            kw["state"] = state if state is not None else str(self.state_names[0])
+        return type(self)(self.model, sig, params=self.params if params is None else params,
+                            parameters=list(self.parameters if parameters is None
+                                            else parameters),
+                            periods=self.periods if periods is None else periods,
+                            t_ref=self.t_ref if t_ref is None else t_ref,
+                            phase_ref=self.phase_ref, phase_normal=self.phase_normal,
+                            sliding=self.sliding, **kw, **opts)
+
+    @classmethod
+    def from_orbit(cls, orbit, *, parameters=None, params=None):
+        """The problem of an orbit's signature and the ``u`` of that orbit.
+
+        Parameters
+        ----------
+        orbit : PeriodicOrbit
+            A converged orbit (of :func:`pwsdyn.find_periodic_orbit` or of this class).
+        parameters : sequence of str, optional
+            The problem's parameters (default all).
+        params : dict, optional
+            Parameter values overriding the orbit's (``u`` is still the orbit's).
+
+        Returns
+        -------
+        (OrbitProblem, numpy.ndarray)
+        """
+        sig = Signature(orbit.signature)
+        opts = {k: v for k, v in (orbit.options or {}).items()
+                if k not in ("variational", "dense", "throw", "mode")}
+        sliding = opts.pop("sliding", "convex")
+        allp = dict(orbit.params)
+        allp.update(params or {})
+        P = float(orbit.period)
+        evs = list(orbit.events)
+        if not evs:
+            kw = {}
+            if orbit.autonomous:
+                kw = dict(phase_ref=orbit.x0, phase_normal=orbit.phase_normal)
+            prob = cls(orbit.model, sig, params=allp, parameters=parameters,
+                       periods=orbit.periods or 1, t_ref=orbit.t0, state=orbit.state0,
+                       sliding=sliding, **kw, **opts)
+            return prob, prob.pack(orbit.t0, [orbit.x0], [P])
+        groups = _groups(sig)
+        te = [float(evs[g[0]].t) for g in groups]
+        tau = [float(evs[g[-1]].t_after) for g in groups]
+        X = [np.asarray(evs[g[-1]].x_after, dtype=float) for g in groups]
+        t_start = [tau[-1] - P] + tau[:-1]
+        x_start = [X[-1]] + X[:-1]
+        durs = [a - b for a, b in zip(te, t_start)]
+        prob = cls(orbit.model, sig, params=allp, parameters=parameters,
+                   periods=orbit.periods or 1, t_ref=t_start[0], sliding=sliding, **opts)
+        return prob, prob.pack(t_start[0], x_start, durs)
+
+    # ==================================================================================
+    # the signature as segments
+    # ==================================================================================
+    def _plan(self, state):
+        m = self.model
+        sig = self.signature
+        if not sig:
+            if state is None:
+                state = m.mode_names[m.initial_mode]
+            if not (isinstance(state, str) and _is_mode(state)):
+                raise ArgumentError(f"an orbit without events runs in a mode of model "
+                                    f"{m.name!r} {list(m.mode_names)}, got {state!r}")
+            self.fields = [FieldKey("mode", _mode_by_name(m, state))]
+            self.bounds = []
+            self.state_names = [state]
+            return
+        if sig[0].kind == "stick":
+            raise ArgumentError(f"the signature {sig} starts with the start of sticking, which "
+                                f"follows an impact or chattering at the same instant: rotate it "
+                                f"(Signature.rotated) to start after that")
+        groups = [[sig[k] for k in g] for g in _groups(sig)]
+        nev = len(sig)
+        # the regular mode before each event (sticking constrains it)
+        regular = [None] * nev
+        for k in range(nev):
+            for back in range(1, nev + 1):
+                e = sig[(k - back) % nev]
+                if _is_mode(e.mode_after):
+                    regular[k] = e.mode_after
+                    break
+                if _is_mode(e.mode_before):
+                    regular[k] = e.mode_before
+                    break
+        fields, bounds, names = [], [], []
+        pos = 0
+        for g in groups:
+            e0 = g[0]
+            name = e0.mode_before
+            names.append(name)
+            try:
+                st = DiscreteState.parse(name)
+            except ValueError:
+                raise ArgumentError(f"unknown discrete state {name!r} in the signature") \
+                    from None
+            kind, ref = st.kind, st.name
+            if kind == "mode":
+                fk = FieldKey("mode", _mode_by_name(m, name))
+                mode = fk.index
+            elif kind == "stick":
+                if regular[pos] is None:
+                    raise ArgumentError(f"no regular mode precedes the sticking in {sig}")
+                mode = _mode_by_name(m, regular[pos])
+                fk = FieldKey("stick", m.event_index(ref), mode)
+            elif kind == "slide":
+                s = self._switch(ref)
+                fk = FieldKey("slide", s)
+                mode = int(m.switches[s].above)
+            else:
+                raise ArgumentError(f"unknown discrete state {name!r} in the signature")
+            fields.append(fk)
+            bounds.append(self._boundary(g, fk, mode))
+            pos += len(g)
+        self.fields = fields
+        self.bounds = bounds
+        self.state_names = names
+
+    def _switch(self, name):
+        for i, s in enumerate(self.model.switches):
+            if s.name == name:
+                return i
+        raise ArgumentError(f"unknown switch {name!r} in the signature; switches are "
+                            f"{[s.name for s in self.model.switches]}")
+
+    def _boundary(self, g, fk: FieldKey, mode: int) -> _Boundary:
+        m = self.model
+        e = g[0]
+        if e.kind in ("impact", "transition", "chatter"):
+            j = m.event_index(e.name)
+            ev = m.events[j]
+            if e.kind == "chatter" and fk.kind != "mode":
+                raise ArgumentError("a chattering sequence must start from a regular mode")
+            k = ev.surface
+            d = -1 if e.kind == "chatter" else int(ev.direction)
+            return _Boundary(e.kind, tuple(g), j, k, mode, ("h", k), d)
+        if e.kind in ("crossing", "slide_start"):
+            s = self._switch(e.name)
+            sw = m.switches[s]
+            k = sw.surface
+            d = 0
+            if fk.kind == "mode":
+                d = -1 if fk.index == sw.above else 1
+            return _Boundary(e.kind, tuple(g), s, k, mode, ("h", k), d)
+        if e.kind == "slide_end":
+            s = self._switch(e.name)
+            sw = m.switches[s]
+            out = _mode_by_name(m, e.mode_after)
+            if fk.kind != "slide" or fk.index != s:
+                raise ArgumentError(f"a slide_end on {e.name!r} must end sliding on it")
+            if out == sw.above:
+                return _Boundary(e.kind, tuple(g), s, sw.surface, sw.above,
+                                 ("hd", sw.surface, sw.above), 1)
+            return _Boundary(e.kind, tuple(g), s, sw.surface, sw.below,
+                             ("hd", sw.surface, sw.below), -1)
+        if e.kind == "release":
+            j = m.event_index(e.name)
+            if fk.kind != "stick":
+                raise ArgumentError("a release must end sticking")
+            k = m.events[j].surface
+            return _Boundary(e.kind, tuple(g), j, k, fk.mode, ("acc", k, fk.mode), 1)
+        raise ArgumentError(f"a {e.kind!r} event cannot end a segment here")
+
+    def _build_system(self):
+        scalars, vectors = [], []
+        for b in self.bounds:
+            scalars.append(b.cond)
+            if b.kind in ("impact", "transition"):
+                vectors.append(("reset", b.ref))
+            elif b.kind == "chatter":
+                scalars += [("chat_dt", b.ref, b.mode), ("h", b.surface),
+                            ("hd", b.surface, b.mode)]
+                vectors += [("chat_z", b.ref, b.mode), ("hx", b.surface),
+                            ("hdx", b.surface, b.mode)]
+        key = (self.model.digest, self.parameters, self.sliding, tuple(self.fields),
+               tuple(scalars), tuple(vectors))
+        sysm = _SYSTEMS.get(key)
+        if sysm is None:
+            sysm = SegmentSystem(self.model, self.parameters, self.sliding, self.fields,
+                                 scalars, vectors)
+            _SYSTEMS[key] = sysm
+        self.sys = sysm
+        self._pv = np.ascontiguousarray(
+            [self.params[k] for k in sysm.rest] or [0.0], dtype=float)
+        self._fidx = [sysm.field_index(f) for f in self.fields]
+        self._cidx = [sysm.scalar_index(b.cond) for b in self.bounds]
+
+    # ==================================================================================
+    # layout of u
+    # ==================================================================================
+    def _xcol(self, i: int) -> int:
+        if not self.m:
+            return 0
+        return (1 if self.forced else 0) + i * (self.n + 1)
+
+    def _Tcol(self, i: int) -> int:
+        if not self.m:
+            return self.n
+        return self._xcol(i) + self.n
+
+    def pack(self, t0, states, durations) -> np.ndarray:
+        """``u`` from the start time of segment 0 (forced models), the segments' start states
+        and durations (orbits without events: the state, and the period of an autonomous
+        one)."""
+        states = [np.asarray(x, dtype=float).reshape(self.n) for x in states]
+        if not self.m:
+            u = states[0]
+            return np.append(u, float(durations[0])) if not self.forced else u.copy()
+        parts = [[float(t0)]] if self.forced else []
+        for x, T in zip(states, durations):
+            parts += [x, [float(T)]]
+        return np.concatenate([np.asarray(v, dtype=float) for v in parts])
+
+    def unpack(self, u):
+        """``(t0, states, durations)`` of ``u`` (the inverse of :meth:`pack`)."""
+        u = np.asarray(u, dtype=float)
+        if u.shape != (self.size,):
+            raise ArgumentError(f"`u` must have {self.size} entries, got shape {u.shape}")
+        if not self.m:
+            return (self.t_ref, [u[:self.n].copy()],
+                    [self.period_value(self.p0) if self.forced else float(u[self.n])])
+        t0 = float(u[0]) if self.forced else self.t_ref
+        xs = [u[self._xcol(i):self._xcol(i) + self.n].copy() for i in range(self.m)]
+        Ts = [float(u[self._Tcol(i)]) for i in range(self.m)]
+        return t0, xs, Ts
+
+    # ==================================================================================
+    # parameters
+    # ==================================================================================
+    def _p(self, p):
+        if p is None:
+            return self.p0.copy()
+        p = np.asarray(p, dtype=float).reshape(-1)
+        if p.shape != (self.q,) or not np.isfinite(p).all():
+            raise ArgumentError(f"`p` must hold {self.q} finite values {list(self.parameters)}")
+        return p
+
+    def param_dict(self, p=None) -> dict:
+        """All parameter values of the model at the problem's ``p``."""
+        out = dict(self.params)
+        out.update(zip(self.parameters, (float(v) for v in self._p(p))))
+        return out
+
+    def period_value(self, p=None) -> float:
+        """The period: ``periods * forcing_period`` (forced models)."""
+        return self._period_at(p)[0]
+
+    def _period_grad(self, p) -> np.ndarray:
+        return self._period_at(p)[1].copy()
+
+    def _period_at(self, p):
+        """``(period, its gradient over p)`` at ``p``, kept for the last few ``p``: a
+        continuation step asks for them at each Newton iterate and check at one ``p``."""
+        key = self._p(p).tobytes()
+        cache = self.__dict__.setdefault("_period_cache", {})
+        got = cache.get(key)
+        if got is None:
+            if len(cache) > 16:
+                cache.clear()
+            d = self.param_dict(p)
+            args = [d[k] for k in self.model.parameters]
+            value = self.periods * self.model.forcing_period_at(args)
+            grad = (self.periods * np.array([float(g(*args)) for g in self._Tf_p])
+                    if self.forced else None)
+            got = cache[key] = (value, grad)
+        return got
+
+    def _seg_opts(self, p, dense=False, variational=True):
+        o = dict(self.opts, variational=variational, dense=dense, throw=False, chatter=False,
+                 exact=False, mode=None)
+        if self.forced and not math.isfinite(o["max_step"]):
+            o["max_step"] = self.period_value(p) / self.periods / 4.0
+        return o
+
+    # ==================================================================================
+    # evaluation
+    # ==================================================================================
+    def segment_options(self, p, dense=False, variational=True) -> dict:
+        """The integrator options of a segment's run at ``p`` (with or without dense output
+        and variational equations)."""
+        return self._seg_opts(p, dense=dense, variational=variational)
+
+    def flow(self, i: int, t: float, z, T: float, opts: dict):
+        """``(y, Phi, run)`` of segment ``i``'s discrete state from ``(t, z)`` (extended state
+        ``z = (x, p)``) for a duration ``T``: the end state, its Jacobian (with
+        ``opts['variational']``) and the kernel's run (``None`` for no time)."""
+        return self._flow(i, t, z, T, opts)
+
+    def dense_segment(self, i: int, s, p):
+        """Segment ``s`` of an evaluation (its ``segs[i]``) integrated again with dense output
+        and no variational equations; the last few are kept."""
+        return self._dense_segment(i, s, p)
+
+    def _dense_segment(self, i, s, p):
+        """Segment ``i`` of an evaluation integrated again with dense output (no variational
+        equations), for the checks along it; the last few are kept, so that the
+        admissibility check and the monitors of one point integrate each segment once."""
+        return self._dense_entry(i, s, p)[0]
+
+    def _dense_entry(self, i, s, p) -> list:
+        key = (i, float(s.t), np.asarray(s.z).tobytes(), float(s.T),
+               np.asarray(p, dtype=float).tobytes())
+        cache = self.__dict__.setdefault("_dense_cache", {})
+        if key not in cache:
+            if len(cache) > 4 * max(self.m, 1):
+                cache.clear()
+            cache[key] = [self._flow(i, s.t, s.z, s.T,
+                                     self._seg_opts(p, dense=True, variational=False))[2], None]
+        return cache[key]
+
+    def _dense_samples(self, i, s, p):
+        """``(run, ts, Y)``: the run of :meth:`_dense_segment`, the sample times inside it
+        (``sample_times(run)[1:-1]``) and the model states there, evaluated once for the
+        admissibility check and the monitors of a point (``(None, None, None)`` for a
+        segment of no time). Read them, do not write into them."""
+        entry = self._dense_entry(i, s, p)
+        tr = entry[0]
+        if tr is None:
+            return None, None, None
+        if entry[1] is None:
+            ts = sample_times(tr)[1:-1]
+            Y = np.asarray(tr(ts))[:, :self.n] if len(ts) else np.zeros((0, self.n))
+            entry[1] = (ts, Y)
+        return (tr,) + entry[1]
+
+    def _flow(self, i, t, z, T, opts, dense=False):
+        """``(y, Phi, traj)`` of segment field ``i`` from ``(t, z)`` for duration ``T``."""
+        fidx = self._fidx[i]
+        n = self.sys.naug
+        if T == 0.0 or abs(T) <= 4 * np.spacing(max(1.0, abs(t))):
+            return z.copy(), np.eye(n), None
+        if T > 0:
+            tr = _simulate_compiled(self.sys.cm, z, t, t + T, self._pv, opts, mode0=fidx,
+                                    admit=False)
+        else:
+            tr = _simulate_compiled(self.sys.cm, z, -t, -t - T, self._pv, opts,
+                                    mode0=self.sys.field_index(self.fields[i], reverse=True),
+                                    admit=False)
+        if tr.status.failed or not np.all(np.isfinite(tr.x_final)) or (
+                tr.jacobian is not None and not np.all(np.isfinite(tr.jacobian))):
+            raise SegmentFailed(i, f"segment {i} ({self.state_names[i]}) could not be "
+                                f"integrated over {T:.6g} from t = {t:.10g}: {tr.message}")
+        return np.array(tr.x_final, dtype=float), tr.jacobian, tr
+
+    def _map(self, b: _Boundary, te, y, sysm):
+        """``(tau, X, tau_t, tau_y, X_t, X_y)`` of boundary ``b`` at the event point."""
+        n, na = self.n, sysm.naug
+        pv = self._pv
+        if b.kind in ("impact", "transition"):
+            g, gz, gt = sysm.vector(sysm.vector_index(("reset", b.ref)), te, y, pv)
+            return te, g, 1.0, np.zeros(na), gt, gz
+        if b.kind != "chatter":
+            return te, y.copy(), 1.0, np.zeros(na), np.zeros(na), np.eye(na)
+        j, mode, k = b.ref, b.mode, b.surface
+        Zv, Zz, Zt = sysm.vector(sysm.vector_index(("chat_z", j, mode)), te, y, pv)
+        d, dz, dt = sysm.scalar(sysm.scalar_index(("chat_dt", j, mode)), te, y, pv)
+        tau = te + d
+        tau_t, tau_y = 1.0 + dt, dz
+        X, Xtau, XZ = self._project(b, tau, Zv, sysm)
+        # X(tau(te, y), Z(te, y))
+        X_y = XZ @ Zz + np.outer(Xtau, tau_y)
+        X_t = XZ @ Zt + Xtau * tau_t
+        return tau, X, tau_t, tau_y, X_t, X_y
+
+    def _project(self, b, tau, Z, sysm):
+        """The kernel's projection of the chattering map onto the sticking manifold, as the
+        solution of ``X = Z + N(tau, X) mu``, ``h(tau, X) = 0``, ``hd(tau, X) = 0`` with
+        ``N = (h_x, hd_x)`` over the model's states; returns ``X`` (extended) and its
+        derivatives with respect to ``tau`` and the extended ``Z`` (implicit function
+        theorem)."""
+        n, na = self.n, sysm.naug
+        pv = self._pv
+        ih, ihd = sysm.scalar_index(("h", b.surface)), sysm.scalar_index(("hd", b.surface,
+                                                                          b.mode))
+        i1, i2 = sysm.vector_index(("hx", b.surface)), sysm.vector_index(("hdx", b.surface,
+                                                                          b.mode))
+        X = Z.copy()
+        mu = np.zeros(2)
+
+        def parts(X):
+            h, hz, ht = sysm.scalar(ih, tau, X, pv)
+            hd, hdz, hdt = sysm.scalar(ihd, tau, X, pv)
+            N1, J1, N1t = sysm.vector(i1, tau, X, pv)
+            N2, J2, N2t = sysm.vector(i2, tau, X, pv)
+            return h, hz, ht, hd, hdz, hdt, N1, J1, N1t, N2, J2, N2t
+
+        for _ in range(8):
+            h, hz, ht, hd, hdz, hdt, N1, J1, N1t, N2, J2, N2t = parts(X)
+            R = np.concatenate([X[:n] - Z[:n] - N1[:n] * mu[0] - N2[:n] * mu[1], [h, hd]])
+            A = self._proj_matrix(n, mu, hz, hdz, N1, J1, N2, J2)
+            step = np.linalg.solve(A, -R)
+            X[:n] += step[:n]
+            mu += step[n:]
+            if np.max(np.abs(step[:n])) <= 4 * np.finfo(float).eps * (1 + np.max(np.abs(X))):
+                break
+        h, hz, ht, hd, hdz, hdt, N1, J1, N1t, N2, J2, N2t = parts(X)
+        A = self._proj_matrix(n, mu, hz, hdz, N1, J1, N2, J2)
+        # G(X, mu; tau, Z) = 0: dG/dtau, dG/dZ (Z extended: its parameter part is p, which
+        # also enters through the extended X)
+        Gt = np.concatenate([-(N1t[:n] * mu[0] + N2t[:n] * mu[1]), [ht, hdt]])
+        GZ = np.zeros((n + 2, na))
+        GZ[:n, :n] = -np.eye(n)
+        # parameter columns: through X's parameter part, which equals Z's
+        GZ[:n, n:] = -(mu[0] * J1[:n, n:] + mu[1] * J2[:n, n:])
+        GZ[n, n:] = hz[n:]
+        GZ[n + 1, n:] = hdz[n:]
+        Ainv = np.linalg.inv(A)
+        Xtau = np.zeros(na)
+        Xtau[:n] = -(Ainv @ Gt)[:n]
+        XZ = np.zeros((na, na))
+        XZ[:n, :] = -(Ainv @ GZ)[:n]
+        XZ[n:, n:] = np.eye(na - n)
+        return X, Xtau, XZ
+
+    @staticmethod
+    def _proj_matrix(n, mu, hz, hdz, N1, J1, N2, J2):
+        A = np.zeros((n + 2, n + 2))
+        A[:n, :n] = np.eye(n) - (mu[0] * J1[:n, :n] + mu[1] * J2[:n, :n])
+        A[:n, n] = -N1[:n]
+        A[:n, n + 1] = -N2[:n]
+        A[n, :n] = hz[:n]
+        A[n + 1, :n] = hdz[:n]
+        return A
+
+    def evaluate(self, u, p=None, *, jacobian: bool = True) -> ProblemEvaluation:
+        """``F`` and (with ``jacobian``) ``F_u``, ``F_p`` at ``(u, p)``.
+
+        Raises :class:`~pwsdyn.orbits.SegmentFailed` when a segment cannot be integrated.
+        """
+        p = self._p(p)
+        t0, xs, Ts = self.unpack(u)
+        n, q, sysm = self.n, self.q, self.sys
+        na = sysm.naug
+        N = self.size
+        Nw = N + q
+        opts = self._seg_opts(p)
+        pv = self._pv
+        F = np.zeros(N)
+        J = np.zeros((N, Nw))
+        Dp = np.zeros((q, Nw))
+        Dp[:, N:] = np.eye(q)
+
+        def Dz_of(i):
+            D = np.zeros((na, Nw))
+            c = self._xcol(i)
+            D[:n, c:c + n] = np.eye(n)
+            D[n:] = Dp
+            return D
+
+        if not self.m:
+            T = self.period_value(p) if self.forced else Ts[0]
+            return self._evaluate_smooth(u, p, t0, xs[0], T, opts, Dz_of(0), jacobian)
+        t = t0
+        Dt = np.zeros(Nw)
+        if self.forced:
+            Dt[0] = 1.0
+        segs = []
+        for i, b in enumerate(self.bounds):
+            z = np.concatenate([xs[i], p])
+            T = Ts[i]
+            y, Phi, _ = self._flow(i, t, z, T, opts)
+            te = t + T
+            fi = self._fidx[i]
+            f_start = sysm.field(fi, t, z, pv)
+            f_end = sysm.field(fi, te, y, pv)
+            c, cz, ct = sysm.scalar(self._cidx[i], te, y, pv)
+            tau, X, tau_t, tau_y, X_t, X_y = self._map(b, te, y, sysm)
+            s = _Seg(t=t, z=z, T=T, te=te, y=y, tau=tau, X=X, Phi=Phi, f_start=f_start,
+                     f_end=f_end, c=c, c_z=cz, c_t=ct, X_y=X_y, X_t=X_t, tau_y=tau_y,
+                     tau_t=tau_t)
+            r0 = i * (n + 1)
+            k = (i + 1) % self.m
+            F[r0:r0 + n] = xs[k] - X[:n]
+            F[r0 + n] = c
+            if jacobian:
+                Dz = Dz_of(i)
+                Dte = Dt.copy()
+                Dte[self._Tcol(i)] += 1.0
+                Dy = Phi @ Dz + np.outer(f_end, Dte) - np.outer(Phi @ f_start, Dt)
+                Dtau = tau_t * Dte + tau_y @ Dy
+                DX = np.outer(X_t, Dte) + X_y @ Dy
+                J[r0 + n] = ct * Dte + cz @ Dy
+                J[r0:r0 + n] = -DX[:n]
+                c1 = self._xcol(k)
+                J[r0:r0 + n, c1:c1 + n] += np.eye(n)
+                s.Dt, s.Dz, s.Dte, s.Dy, s.Dtau, s.DX = Dt, Dz, Dte, Dy, Dtau, DX
+                Dt = Dtau
+            segs.append(s)
+            t = tau
+        period = t - t0
+        Dper = None
+        if jacobian:
+            Dper = Dt.copy()
+            if self.forced:
+                Dper[0] -= 1.0
+        if self.forced:
+            F[-1] = period - self.period_value(p)
+            if jacobian:
+                J[-1] = Dper
+                J[-1, N:] -= self._period_grad(p)
+        return ProblemEvaluation(np.asarray(u, dtype=float).copy(), p, F,
+                                 J[:, :N] if jacobian else None,
+                                 J[:, N:] if jacobian else None, period, segs, Dper)
+
+    def _evaluate_smooth(self, u, p, t0, x0, T, opts, Dz, jacobian):
+        """No events: single shooting over the period (autonomous: with a phase condition)."""
+        n, q, sysm = self.n, self.q, self.sys
+        N = self.size
+        z = np.concatenate([x0, p])
+        y, Phi, _ = self._flow(0, t0, z, T, opts)
+        f_end = sysm.field(self._fidx[0], t0 + T, y, self._pv)
+        f_start = sysm.field(self._fidx[0], t0, z, self._pv)
+        F = np.zeros(N)
+        F[:n] = y[:n] - x0
+        J = np.zeros((N, N + q))
+        Dt = np.zeros(N + q)
+        DT = np.zeros(N + q)
+        if self.forced:
+            DT[N:] = self._period_grad(p)
+        else:
+            DT[n] = 1.0
+            F[n] = self.phase_normal @ (x0 - self.phase_ref)
+            J[n, :n] = self.phase_normal
+        Dy = Phi @ Dz + np.outer(f_end, DT)
+        J[:n] = Dy[:n]
+        J[:n, :n] -= np.eye(n)
+        s = _Seg(t=t0, z=z, T=T, te=t0 + T, y=y, tau=t0 + T, X=y, Phi=Phi, f_start=f_start,
+                 f_end=f_end, Dt=Dt, Dz=Dz, Dte=DT, Dy=Dy, Dtau=DT, DX=Dy)
+        return ProblemEvaluation(np.asarray(u, dtype=float).copy(), p, F,
+                                 J[:, :N] if jacobian else None, J[:, N:] if jacobian else None,
+                                 T, [s], DT)
+
+    def residual(self, u, p=None) -> np.ndarray:
+        """``F(u, p)``."""
+        return self.evaluate(u, p, jacobian=False).F
+
+    def jacobian(self, u, p=None):
+        """``(F_u, F_p)`` at ``(u, p)``."""
+        ev = self.evaluate(u, p)
+        return ev.F_u, ev.F_p
+
+    def norm(self, F, u) -> float:
+        """Size of a residual: ``max|F| / (1 + max|x_i|)`` (the states, not the times)."""
+        _, xs, _ = self.unpack(u)
+        return float(np.max(np.abs(F)) / (1.0 + max(float(np.max(np.abs(x))) for x in xs)))
+
+    # ==================================================================================
+    # Newton
+    # ==================================================================================
+    def solve(self, u0, p=None, *, tol: float = 1e-10, max_iter: int = 30, history=None):
+        """Newton's method on ``F(., p) = 0`` from ``u0`` (:func:`pwsdyn.newton.newton`).
+
+        Returns the :class:`~pwsdyn.newton.NewtonResult` (its ``x`` is ``u``); a segment that
+        cannot be integrated rejects the trial (reason ``'simulation'`` at the start).
+        """
+        p = self._p(p)
+        cache: dict = {}
+
+        def fun(u):
+            try:
+                ev = self.evaluate(u, p)
+            except SegmentFailed as exc:
+                raise TrialRejected(exc.message, "simulation") from None
+            cache["ev"] = ev
+            return ev.F
+
+        def jac(u):
+            return cache["ev"].F_u
+
+        res = newton(fun, u0, jac=jac, tol=tol, max_iter=max_iter, norm=self.norm,
+                     history=history)
+        res.evaluation = cache.get("ev")
+        return res
+
+
+def _is_mode(text) -> bool:
+    """``text`` is a regular mode's state (not sticking, sliding or unreadable)."""
+    try:
+        return DiscreteState.parse(text).is_mode
+    except ValueError:
+        return False
+
+
+def _groups(sig) -> list:
+    """Indices of the events of each boundary: an event, or an impact, transition or
+    chattering sequence followed by the start of sticking at the same instant."""
+    groups: list = []
+    for k, e in enumerate(sig):
+        if e.kind == "stick":
+            if not groups or sig[groups[-1][-1]].kind not in ("impact", "chatter",
+                                                                "transition"):
+                raise ArgumentError(f"sticking starts after a "
+                                    f"{sig[groups[-1][-1]].kind if groups else 'no'} event in "
+                                    f"{sig}: not supported")
+            groups[-1].append(k)
+        else:
+            groups.append([k])
+    return groups

@@ -1,0 +1,104 @@
+"""Point evaluations on a model at parameter values, for the checks and monitors of an orbit.
+
+The functions an admissibility check, a monitor of a discontinuity-induced bifurcation or a
+discontinuity map evaluates at a point ``(t, x)`` of an orbit: a surface ``h``, the normal
+velocity ``h_t + h_x f`` of a mode's field on it, its normal acceleration
+``d/dt (h_t + h_x f)`` (thesis conditions 2.30-2.31 at a graze), the rate at which a sliding
+flow crosses the sliding region's boundary, an event's guard and the field of a discrete
+state. Each takes the model's compiled evaluation at the parameter values
+(:func:`model_context`) and the model's own surface, mode, event or switch indices.
+
+The analyses above the orbits (continuation past a bifurcation, the discontinuity map of a
+grazing orbit) use these and no private name of :mod:`pwsdyn.orbits`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..integrate._codes import REGULAR, SLIDE, STICK
+from ..model.codegen import W_GUARD, W_HD, W_HDT, W_HDX
+from ..stability._context import KernelState, ModelContext
+from ._segments import FieldKey as FieldKey
+
+
+def model_context(model, params: dict, sliding: str = "convex") -> ModelContext:
+    """The model's compiled point evaluations at the parameter values ``params`` (a dict of
+    all of them), with the sliding method of its Filippov switches."""
+    return ModelContext(model, params, sliding)
+
+
+class ScalarFunction:
+    """A scalar function of ``(t, x)`` with the size of its gradient (for its zero band), and
+    optionally a compiled evaluation at many points (:meth:`rows`)."""
+
+    def __init__(self, fn, gscale=1.0, rows=None):
+        self.fn = fn
+        self.gscale = gscale
+        self._rows = rows
+
+    def __call__(self, t, x):
+        return self.fn(t, x)
+
+    def rows(self, ts, X) -> np.ndarray:
+        """The function at the points ``(ts[i], X[i])``."""
+        if self._rows is not None:
+            return self._rows(ts, X)
+        return np.array([self.fn(t, x) for t, x in zip(ts, X)])
+
+
+def surface(ctx, k: int) -> ScalarFunction:
+    """Surface ``k``: ``h_k(t, x)``."""
+    def fn(t, x):
+        return ctx.h(k, t, x)
+    return ScalarFunction(fn, rows=lambda ts, X: ctx.h_rows(k, ts, X))
+
+
+def normal_velocity(ctx, k: int, mode: int) -> ScalarFunction:
+    """The normal velocity of mode ``mode``'s field on surface ``k``: ``h_t + h_x f_mode``."""
+    nm = ctx.nm
+
+    def fn(t, x):
+        return float(ctx._eval(W_HD, k * nm + mode, t, x, 1)[0])
+    return ScalarFunction(fn)
+
+
+def normal_velocity_rate(ctx, k: int, mode: int, t, x, f) -> float:
+    """``d/dt (h_t + h_x f_mode)`` on surface ``k`` at ``(t, x)`` along the field ``f``."""
+    i = k * ctx.nm + mode
+    return float(ctx._eval(W_HDT, i, t, x, 1)[0] + ctx._eval(W_HDX, i, t, x, ctx.n) @ f)
+
+
+def normal_acceleration(ctx, k: int, mode: int) -> ScalarFunction:
+    """The normal acceleration of mode ``mode`` on surface ``k``: the rate of its normal
+    velocity along its own field (zero with the velocity at a graze, thesis 2.30-2.31; the
+    free normal acceleration of sticking)."""
+    def fn(t, x):
+        return normal_velocity_rate(ctx, k, mode, t, x, ctx.mode_field(mode, t, x))
+    return ScalarFunction(fn)
+
+
+def sliding_boundary_rate(ctx, j: int, mode: int, t, x) -> float:
+    """``d/dt (h_x f_mode)`` along the sliding field of switch ``j`` at ``(t, x)`` (its
+    convex combination extended smoothly where the point is not in the sliding region): the
+    rate at which the sliding flow crosses the sliding region's boundary ``h_x f_mode = 0``."""
+    k = ctx.model.switches[j].surface
+    return normal_velocity_rate(ctx, k, mode, t, x, state_field(ctx, FieldKey("slide", j), t, x))
+
+
+def guard_holds(ctx, j: int, t, x) -> bool:
+    """Whether the guard of event ``j`` holds at ``(t, x)`` (an event without one: always)."""
+    if ctx.model.events[j].guard is None:
+        return True
+    return bool(ctx._eval(W_GUARD, j, t, x, 1)[0] != 0.0)
+
+
+def state_field(ctx, fk: FieldKey, t, x):
+    """The field of the discrete state ``fk`` (a mode, sticking, sliding) at ``(t, x)``."""
+    if fk.kind == "mode":
+        st = KernelState(REGULAR, -1, fk.index)
+    elif fk.kind == "stick":
+        st = KernelState(STICK, fk.index, fk.mode)
+    else:
+        st = KernelState(SLIDE, fk.index, int(ctx.stab[fk.index]["above"]))
+    return ctx.field(t, x, st)
