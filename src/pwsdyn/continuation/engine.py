@@ -265,8 +265,12 @@ class Continuation:
     # ------------------------------------------------------------------------------
     def _eval(self, X):
         X = np.asarray(X, dtype=float)
-        if self._ev is not None and np.array_equal(self._ev[0], X):
-            return self._ev[1]
+        # the last evaluation again (the corrector's last iterate is the point, its tangent
+        # and its data): compared as numpy.array_equal does, without its wrapper's cost
+        if self._ev is not None:
+            X0 = self._ev[0]
+            if X0.shape == X.shape and bool((X0 == X).all()):
+                return self._ev[1]
         F, F_u, F_lam = self.problem.evaluate(X[:-1], float(X[-1]))
         out = (np.asarray(F, dtype=float), np.asarray(F_u, dtype=float),
                np.asarray(F_lam, dtype=float).reshape(-1))
@@ -274,8 +278,14 @@ class Continuation:
         return out
 
     def _bordered(self, X, v):
+        """``[[F_u, F_lam], [v^T]]`` at ``X``."""
         _, F_u, F_lam = self._eval(X)
-        return np.vstack([np.column_stack([F_u, F_lam]), v[None, :]])
+        N = F_u.shape[0]
+        B = np.empty((N + 1, N + 1))
+        B[:N, :N] = F_u
+        B[:N, N] = F_lam
+        B[N] = v
+        return B
 
     def _tangent(self, X, v_prev):
         """Unit tangent at ``X`` oriented along ``v_prev``: the solution of the bordered
@@ -296,9 +306,12 @@ class Continuation:
         """Newton on ``F(X) = 0``, ``v . X = c`` from ``Xp``: (X, iterations) or None."""
         def fun(X):
             F, _, _ = self._eval(X)
-            if not np.all(np.isfinite(F)):
+            if not np.isfinite(F).all():
                 raise TrialRejected("the residual is not finite", "nonfinite")
-            return np.append(F, v @ X - c)
+            G = np.empty(F.size + 1)
+            G[:-1] = F
+            G[-1] = v @ X - c
+            return G
 
         def jac(X):
             return self._bordered(X, v)
