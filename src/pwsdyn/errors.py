@@ -53,8 +53,8 @@ class Status(enum.IntEnum):
     analysis can be read as an outcome of the integrator: -1 diverged, -3 section missed (the
     values sweeps and basins always wrote), -4 no applicable map piece, and from -10 down the
     ways a periodic-orbit solve fails (:attr:`reason` gives the text :class:`OrbitError` has
-    always used), and from -20 down the ways a continued branch ends (:attr:`Branch.stop_status
-    <pwsdyn.Branch.stop_status>`; :data:`BRANCH_ENDS`).
+    always used), and from -20 down the ways a continued branch ends (a branch's
+    ``stop_status``; :data:`pwsdyn.errors.BRANCH_ENDS`).
     """
 
     # the compiled integrator (pwsdyn.integrate._kernel returns these codes)

@@ -214,9 +214,9 @@ class _Columns:
 
 
 class BranchPoint:
-    """One point of a :class:`Branch`: a view of the branch's columns at one index, with the
-    attributes of a :class:`~pwsdyn.continuation.engine.Point` (``u``, ``lam``, ``tangent``,
-    ``ds``, ``iterations``, ``arclength``, ``data``, ``tests``, ``special``,
+    """One point of a :class:`~pwsdyn.Branch`: a view of the branch's columns at one index,
+    with the attributes of a :class:`~pwsdyn.continuation.engine.Point` (``u``, ``lam``,
+    ``tangent``, ``ds``, ``iterations``, ``arclength``, ``data``, ``tests``, ``special``,
     ``signature_index``, ``X``). ``u`` and ``tangent`` are views of the columns; assigning an
     attribute writes the column (the branch sees it). ``copy.copy`` gives a detached
     :class:`~pwsdyn.continuation.engine.Point`."""
@@ -305,8 +305,9 @@ class BranchPoint:
 
 
 class BranchPoints(Sequence):
-    """The points of a :class:`Branch` as a sequence of :class:`BranchPoint` views (a slice
-    is a list of them); assigning ``points[i] = point`` writes row ``i`` of the columns."""
+    """The points of a :class:`~pwsdyn.Branch` as a sequence of
+    :class:`~pwsdyn.continuation.branch.BranchPoint` views (a slice is a list of them);
+    assigning ``points[i] = point`` writes row ``i`` of the columns."""
 
     __slots__ = ("_c",)
 
@@ -350,9 +351,9 @@ class Branch:
     :func:`pwsdyn.continue_equilibrium`.
 
     The points are stored as columns (one array per attribute); ``points[i]`` and
-    iteration give :class:`BranchPoint` views of them with the attributes of a
-    :class:`~pwsdyn.continuation.engine.Point`, and :attr:`values`, :attr:`stable`,
-    :attr:`admissible` are the columns themselves (copies).
+    iteration give :class:`~pwsdyn.continuation.branch.BranchPoint` views of them with the
+    attributes of a :class:`~pwsdyn.continuation.engine.Point`, and ``values``, ``stable``,
+    ``admissible`` are the columns themselves (copies).
 
     Attributes
     ----------

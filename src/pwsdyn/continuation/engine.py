@@ -197,8 +197,7 @@ class ContinuationError(ArgumentError):
     Attributes
     ----------
     status : Status
-        :attr:`Status.START_FAILED <pwsdyn.Status.START_FAILED>` or
-        :attr:`Status.SWITCH_FAILED <pwsdyn.Status.SWITCH_FAILED>`.
+        ``Status.START_FAILED`` or ``Status.SWITCH_FAILED``.
     """
 
     def __init__(self, message: str, status: Status = Status.START_FAILED):
