@@ -21,9 +21,33 @@ Reported: time per point (wall and CPU, best of ``--repeats``), the ratio scipy 
 the largest error of each against the closed form (orbit state and multipliers). Timings are
 never asserted; exit status 2 if an accuracy check fails (1e-8 pwsdyn, 1e-6 scipy).
 
+Then the breakdown of a pwsdyn point's cost, from one more run with timers around (here only,
+never in the library):
+
+* ``kernel``: the compiled integrator's entry points called from Python (``run_kernel``,
+  ``dense_coefficients``, ``state_field``, ``chatter_saltation``);
+* ``linalg``: ``numpy.linalg`` calls (solves, SVDs, determinants, eigenvalues, norms);
+* ``monitors``: the test functions, the orbit's discontinuity-induced-bifurcation monitors and
+  its admissibility (their own Python; the kernel runs and linear algebra inside them are
+  counted as those);
+* ``python``: the rest (the engine, the orbit problem's residual and Jacobian assembly, the
+  multipliers' bookkeeping, argument checks, the model's point evaluations from Python).
+
+Each interval of CPU time (``time.process_time``: the machine may be shared, and waiting for
+a core is nobody's cost) is charged to the innermost timer open (exclusive times). The timers
+cost a little themselves, so the breakdown's total exceeds the plain run's; ``total /
+kernel`` is reported both from the timed run alone (``timed_over_kernel``, the steadier
+figure: both from one run) and as the plain run's CPU time per point over the timed kernel
+time (``total_over_kernel``).
+
 Run::
 
     python benchmarks/bench_continuation.py [--repeats 3] [--points 200] [--save]
+        [--label after]
+
+``--save`` writes ``results/continuation.json``, keeping the rows of other labels (so that a
+run of the code before a change and one after sit side by side, each with its own scipy
+baseline, ratios compared).
 """
 
 from __future__ import annotations
@@ -34,6 +58,7 @@ import os
 import platform
 import sys
 import time
+from collections import defaultdict
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -113,11 +138,77 @@ def timed(fn, repeats):
     return out, best_w, best_c
 
 
+class Breakdown:
+    """Exclusive CPU time per category: wrappers push their category on entry and pop it on
+    exit; the time between two such moments goes to the category on top."""
+
+    def __init__(self):
+        self.time = defaultdict(float)
+        self.calls = defaultdict(int)
+        self._stack = ["python"]
+        self._mark = 0.0
+        self._undo = []
+
+    def _switch(self):
+        now = time.process_time()
+        self.time[self._stack[-1]] += now - self._mark
+        self._mark = now
+
+    def wrap(self, owner, name, category):
+        fn = getattr(owner, name)
+
+        def timed(*args, **kwargs):
+            self._switch()
+            self._stack.append(category)
+            self.calls[category] += 1
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                self._switch()
+                self._stack.pop()
+        self._undo.append((owner, name, fn))
+        setattr(owner, name, timed)
+
+    def run(self, fn):
+        self._mark = time.process_time()
+        try:
+            return fn()
+        finally:
+            self._switch()
+            for owner, name, fn_ in reversed(self._undo):
+                setattr(owner, name, fn_)
+            self._undo.clear()
+
+
+def breakdown(run):
+    """One run of ``run`` with the timers of the module docstring around."""
+    from pwsdyn.continuation import engine, problems
+    from pwsdyn.integrate._load import kernel
+    from pwsdyn.orbits.problem import OrbitProblem
+
+    b = Breakdown()
+    K = kernel()
+    for name in ("run_kernel", "dense_coefficients", "state_field", "chatter_saltation"):
+        if hasattr(K, name):
+            b.wrap(K, name, "kernel")
+    for name in ("solve", "lstsq", "svd", "slogdet", "det", "eig", "eigvals", "norm", "inv",
+                 "qr", "cond"):
+        b.wrap(np.linalg, name, "linalg")
+    for owner, name in ((OrbitProblem, "dib_monitors"), (OrbitProblem, "admissibility"),
+                        (engine.Continuation, "_tests"),
+                        (problems.OrbitBranchProblem, "test_functions")):
+        b.wrap(owner, name, "monitors")
+    br = b.run(run)
+    return br, dict(b.time), dict(b.calls)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--points", type=int, default=200)
     ap.add_argument("--save", action="store_true", help="write results/continuation.json")
+    ap.add_argument("--label", default="current",
+                    help="name of this run's row in the saved file (e.g. before, after)")
     args = ap.parse_args(argv)
     model = pwsdyn.load_model("impact-oscillator")
     orb = io_orbit("stable")
@@ -145,12 +236,24 @@ def main(argv=None):
         mult_sc = max(mult_sc, float(np.max(np.abs(np.sort_complex(mu) -
                                                    np.sort_complex(mref)))))
     n = len(br)
-    row = dict(points=n, omega_range=[float(omegas.min()), float(omegas.max())],
+    br2, parts, calls = breakdown(run_pwsdyn)
+    assert len(br2) == n
+    per = {k: 1e3 * v / n for k, v in parts.items()}
+    row_parts = {f"{k}_ms_per_point": per.get(k, 0.0) for k in
+                 ("kernel", "linalg", "monitors", "python")}
+    row_calls = {f"{k}_calls_per_point": calls.get(k, 0) / n for k in
+                 ("kernel", "linalg", "monitors")}
+    kern = per.get("kernel", 0.0)
+    row = dict(label=args.label, points=n, omega_range=[float(omegas.min()), float(omegas.max())],
                special_points=[f"{s.kind} {s.value:.12g}" for s in br.special_points],
                pwsdyn_wall_s=wp, pwsdyn_cpu_s=cp, scipy_wall_s=ws, scipy_cpu_s=cs,
                pwsdyn_ms_per_point=1e3 * wp / n, scipy_ms_per_point=1e3 * ws / n,
                ratio_wall=ws / wp, ratio_cpu=cs / cp, orbit_err_pwsdyn=err_pw,
-               mult_err_pwsdyn=mult_pw, orbit_err_scipy=err_sc, mult_err_scipy=mult_sc)
+               mult_err_pwsdyn=mult_pw, orbit_err_scipy=err_sc, mult_err_scipy=mult_sc,
+               **row_parts, **row_calls,
+               timed_ms_per_point=sum(per.values()),
+               timed_over_kernel=sum(per.values()) / kern if kern else None,
+               total_over_kernel=(1e3 * cp / n) / kern if kern else None)
     print(f"{n} points, omega in [{omegas.min():.4f}, {omegas.max():.4f}], special points: "
           f"{', '.join(row['special_points'])}")
     print(f"{'':<8} {'ms/point':>9} {'ms/point CPU':>13} {'orbit err':>10} {'mult err':>9}")
@@ -159,14 +262,26 @@ def main(argv=None):
     print(f"{'scipy':<8} {1e3 * ws / n:>9.2f} {1e3 * cs / n:>13.2f} {err_sc:>10.1e} "
           f"{mult_sc:>9.1e}")
     print(f"ratio scipy / pwsdyn: {ws / wp:.1f} (wall), {cs / cp:.1f} (CPU)")
+    print(f"a point's cost (CPU ms, with timers: {sum(per.values()):.3f} per point; calls per "
+          f"point in brackets):")
+    for k in ("kernel", "linalg", "monitors", "python"):
+        c = f" ({calls.get(k, 0) / n:.1f})" if k != "python" else ""
+        print(f"  {k:<9} {per.get(k, 0.0):>7.3f}{c}")
+    if kern:
+        print(f"total / kernel: {sum(per.values()) / kern:.1f} (timed run), "
+              f"{(1e3 * cp / n) / kern:.1f} (plain run's CPU time)")
     meta = dict(date=datetime.now(timezone.utc).isoformat(timespec="seconds"),
                 machine=platform.machine(), python=platform.python_version(),
                 numpy=np.__version__, scipy=scipy.__version__, pwsdyn=pwsdyn.__version__,
                 cpus=os.cpu_count(), load=os.getloadavg(), repeats=args.repeats)
     if args.save:
         (HERE / "results").mkdir(exist_ok=True)
-        with open(HERE / "results" / "continuation.json", "w") as fh:
-            json.dump(dict(meta=meta, rows=[row]), fh, indent=1, default=str)
+        path = HERE / "results" / "continuation.json"
+        old = json.loads(path.read_text()) if path.exists() else {}
+        rows = [r for r in old.get("rows", []) if r.get("label", "") not in ("", args.label)]
+        row["meta"] = meta
+        with open(path, "w") as fh:
+            json.dump(dict(meta=meta, rows=rows + [row]), fh, indent=1, default=str)
     ok = err_pw < 1e-8 and mult_pw < 1e-6 and err_sc < 1e-6 and mult_sc < 1e-4
     if not ok:
         print("accuracy check FAILED", file=sys.stderr)

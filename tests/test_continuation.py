@@ -205,6 +205,7 @@ def test_branch_file_round_trip_and_resume(io_up, tmp_path):
     back = load_branch(path)
     assert isinstance(back, Branch) and len(back) == len(io_up)
     assert np.array_equal(back.values, io_up.values)
+    assert back.stop_status is io_up.stop_status is pwsdyn.Status.SPAN_END
     assert np.allclose(back.states, io_up.states, rtol=0, atol=0)
     assert [(s.kind, s.index) for s in back.special_points] == \
         [(s.kind, s.index) for s in io_up.special_points]
@@ -371,6 +372,7 @@ def test_two_parameter_fold_and_period_doubling_curves(io_up, io_down, tmp_path)
             assert abs(w - ref) < 1e-7, (kind, s_, w, ref)
     back = load_branch(pd.save(tmp_path / "pd.nc"))
     assert back.curve == "PD" and np.array_equal(back.values_of("omega"), pd.values_of("omega"))
+    assert back.stop_status is pd.stop_status is not None
     with pytest.raises(ArgumentError, match="one of `params`"):
         pwsdyn.continue_bifurcation(IO_MODEL, io_up.special("PD")[0], ("sigma", "eps"))
 
@@ -523,6 +525,7 @@ def test_impact_velocity_to_zero_ends_the_impacting_branch_once(ds):
     stop = pwsdyn.continue_orbit(IO_MODEL, io_orbit("stable"), "sigma", span=(-0.6, 0.4),
                                  ds=ds, on_dib="stop")
     assert stop.points[-1].special == "GR" and "GR located" in stop.stop_reason
+    assert stop.stop_status is pwsdyn.Status.STOP_AT_SPECIAL_POINT
 
 
 def test_boundary_equilibrium_bifurcations():

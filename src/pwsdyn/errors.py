@@ -53,7 +53,8 @@ class Status(enum.IntEnum):
     analysis can be read as an outcome of the integrator: -1 diverged, -3 section missed (the
     values sweeps and basins always wrote), -4 no applicable map piece, and from -10 down the
     ways a periodic-orbit solve fails (:attr:`reason` gives the text :class:`OrbitError` has
-    always used).
+    always used), and from -20 down the ways a continued branch ends (a branch's
+    ``stop_status``; :data:`pwsdyn.errors.BRANCH_ENDS`).
     """
 
     # the compiled integrator (pwsdyn.integrate._kernel returns these codes)
@@ -78,6 +79,17 @@ class Status(enum.IntEnum):
     NO_PROGRESS = -15
     NEWTON_DIVERGED = -16
     SIMULATION_FAILED = -17
+    # continued branches (continue_orbit, continue_equilibrium, continue_bifurcation): why a
+    # branch ended; the branch also keeps the text (stop_reason), which names the values
+    MAX_POINTS = -20
+    MAX_ARCLENGTH = -21
+    STEP_BELOW_DS_MIN = -22
+    SPAN_END = -23
+    BRANCH_NONFINITE = -24
+    STOP_AT_SPECIAL_POINT = -25
+    SPAN2_LEFT = -26
+    SWITCH_FAILED = -27
+    START_FAILED = -28
 
     # An IntEnum prints as its value (``0``) since Python 3.11; a status is read by people
     # far more often than it is parsed, so it prints by name. The value is still the int
@@ -101,7 +113,9 @@ class Status(enum.IntEnum):
 
     @property
     def failed(self) -> bool:
-        return self not in (Status.SUCCESS, Status.TERMINAL_EVENT)
+        # a branch that ended where its settings said (a budget of points or arclength, the
+        # end of a span, a special point it was told to stop at) did what was asked
+        return self not in (Status.SUCCESS, Status.TERMINAL_EVENT, *_BRANCH_ENDS_ASKED)
 
     @property
     def meaning(self) -> str:
@@ -132,6 +146,23 @@ class Status(enum.IntEnum):
         return cls[word.upper()]
 
     @classmethod
+    def of_branch_stop(cls, text: str) -> "Status | None":
+        """The member of a branch's end from its ``stop_reason`` text (a file written before
+        branches kept their status); ``None`` for an empty or unknown text. Where a switch past
+        a graze failed the text is ``"<why the first part ended>; <why the switch failed>"``."""
+        if not text:
+            return None
+        first = text.split("; ", 1)[0]
+        for member, words in _BRANCH_STOP_WORDS:
+            if words in first:
+                # a switch is tried only from a special point the branch stopped at: what
+                # follows it is why the switch failed
+                if member is cls.STOP_AT_SPECIAL_POINT and "; " in text:
+                    return cls.SWITCH_FAILED
+                return member
+        return None
+
+    @classmethod
     def integrator_outcomes(cls) -> tuple:
         """The members the compiled integrator returns (a trajectory's status)."""
         return tuple(s for s in cls if s >= 0)
@@ -144,6 +175,22 @@ ORBIT_FAILURES = (Status.SINGULAR, Status.PHASE, Status.EQUILIBRIUM, Status.SIGN
 _ORBIT_REASONS = {s: s.name.lower() for s in ORBIT_FAILURES}
 _ORBIT_REASONS[Status.NEWTON_DIVERGED] = "diverged"
 _ORBIT_REASONS[Status.SIMULATION_FAILED] = "simulation"
+
+#: How a continued branch can end, in the order of :attr:`Status.value` (-20 down).
+BRANCH_ENDS = (Status.MAX_POINTS, Status.MAX_ARCLENGTH, Status.STEP_BELOW_DS_MIN,
+               Status.SPAN_END, Status.BRANCH_NONFINITE, Status.STOP_AT_SPECIAL_POINT,
+               Status.SPAN2_LEFT, Status.SWITCH_FAILED, Status.START_FAILED)
+_BRANCH_ENDS_ASKED = (Status.MAX_POINTS, Status.MAX_ARCLENGTH, Status.SPAN_END,
+                      Status.STOP_AT_SPECIAL_POINT, Status.SPAN2_LEFT)
+#: Words of the ``stop_reason`` text that name each end (the texts the engine has always
+#: written; used only for files that hold the text without the status).
+_BRANCH_STOP_WORDS = ((Status.MAX_POINTS, "max_points = "),
+                      (Status.MAX_ARCLENGTH, "max_arclength = "),
+                      (Status.STEP_BELOW_DS_MIN, "fell below ds_min"),
+                      (Status.SPAN_END, "reached the end of span"),
+                      (Status.BRANCH_NONFINITE, "left the finite numbers"),
+                      (Status.SPAN2_LEFT, "left span2"),
+                      (Status.STOP_AT_SPECIAL_POINT, " located at "))
 
 _STATUS_MESSAGES = {
     Status.SUCCESS: "The integration reached the end of the time span.",
@@ -183,6 +230,27 @@ _STATUS_MESSAGES = {
                             "periodic orbit.",
     Status.SIMULATION_FAILED: "An interval of the orbit could not be integrated (see the "
                               "integrator's status in the message).",
+    Status.MAX_POINTS: "The branch holds `max_points` points: raise it to follow the branch "
+                       "further (or continue from the branch).",
+    Status.MAX_ARCLENGTH: "The branch reached `max_arclength`: raise it to follow the branch "
+                          "further.",
+    Status.STEP_BELOW_DS_MIN: "The step fell below `ds_min`: the corrector could not pass a "
+                              "singular or nonsmooth point of the branch (a graze, a corner); "
+                              "lower `ds_min`, or continue past it with another signature "
+                              "(`on_dib`).",
+    Status.SPAN_END: "The parameter reached the end of `span`: the last point lies on its "
+                     "boundary.",
+    Status.BRANCH_NONFINITE: "The branch left the finite numbers (a solution grew without "
+                             "bound): narrow `span`.",
+    Status.STOP_AT_SPECIAL_POINT: "A special point at which the branch was asked to end "
+                                  "(`on_dib='stop'`) was located: it is the branch's last "
+                                  "point; continue from it to go on.",
+    Status.SPAN2_LEFT: "The second parameter of the curve left `span2`.",
+    Status.SWITCH_FAILED: "The orbit past a discontinuity-induced bifurcation (its new event "
+                          "sequence) could not be found or followed; the branch ends at the "
+                          "bifurcation.",
+    Status.START_FAILED: "The branch could not be started: the start is not a solution at the "
+                         "parameter value, or the problem is singular there.",
 }
 
 

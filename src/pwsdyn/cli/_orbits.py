@@ -230,7 +230,8 @@ def continue_cmd(model, params, sets, start, stop, x0, t0, periods, period, tran
     _print_special_points(branch, param)
     if len(branch.problems) > 1:
         _echo("signatures  " + "  ->  ".join(str(s_) for s_ in branch.signatures))
-    _echo(f"stopped     {branch.stop_reason}")
+    why = f"{branch.stop_status}: " if branch.stop_status is not None else ""
+    _echo(f"stopped     {why}{branch.stop_reason}")
 
     def draw():
         from ..plot import plot_branch

@@ -8,11 +8,12 @@ result.
 """
 
 from .api import continue_bifurcation, continue_equilibrium, continue_orbit, load_branch
-from .branch import KINDS, Branch, SpecialPoint
+from .branch import KINDS, Branch, BranchPoint, SpecialPoint
 from .engine import Continuation, ContinuationError, ContinuationSettings, Point
 from .problems import (BifurcationCurveProblem, EquilibriumProblem, OrbitBranchProblem,
                        PseudoEquilibriumProblem)
 
-__all__ = ["BifurcationCurveProblem", "Branch", "Continuation", "ContinuationError", "ContinuationSettings",
-           "EquilibriumProblem", "KINDS", "OrbitBranchProblem", "Point", "PseudoEquilibriumProblem", "SpecialPoint",
-           "continue_bifurcation", "continue_equilibrium", "continue_orbit", "load_branch"]
+__all__ = ["BifurcationCurveProblem", "Branch", "BranchPoint", "Continuation", "ContinuationError",
+           "ContinuationSettings", "EquilibriumProblem", "KINDS", "OrbitBranchProblem", "Point",
+           "PseudoEquilibriumProblem", "SpecialPoint", "continue_bifurcation",
+           "continue_equilibrium", "continue_orbit", "load_branch"]

@@ -10,7 +10,7 @@ import math
 import numpy as np
 
 from .. import _validate as V
-from ..errors import ArgumentError
+from ..errors import ArgumentError, Status
 from ..model.spec import as_model
 from .branch import Branch, SpecialPoint
 from .engine import Continuation, ContinuationError, ContinuationSettings, null_space
@@ -67,12 +67,12 @@ def _run(problem, u0, lam0, settings, *, tangent=None, correct_start=True, progr
                         progress=progress, start_kind=start_kind)
     cont.run()
     points, problems = list(cont.points), [problem]
-    reason = cont.stop_reason
+    reason, status = cont.stop_reason, cont.stop_status
     while (orbit and on_dib == "switch" and cont.stop_point is not None
            and len(points) < settings.max_points):
         nxt = _after_graze(problems[-1], cont.stop_point, st, options or {}, points)
         if isinstance(nxt, str):
-            reason = f"{reason}; {nxt}"
+            reason, status = f"{reason}; {nxt}", Status.SWITCH_FAILED
             break
         prob2, u1, lam1, ds = nxt
         problems.append(prob2)
@@ -83,13 +83,14 @@ def _run(problem, u0, lam0, settings, *, tangent=None, correct_start=True, progr
             cont.run()
         except ContinuationError as exc:
             reason = f"{reason}; the orbit past the graze could not be followed: {exc}"
+            status = Status.SWITCH_FAILED
             break
         for q in cont.points:
             q.signature_index = len(problems) - 1
         points += cont.points
-        reason = cont.stop_reason
-    return Branch(problem, points, stop_reason=reason, settings=settings, model=model,
-                  problems=problems, origin=origin)
+        reason, status = cont.stop_reason, cont.stop_status
+    return Branch(problem, points, stop_reason=reason, stop_status=status, settings=settings,
+                  model=model, problems=problems, origin=origin)
 
 
 def _after_graze(bp, pt, settings, options, points=()):
@@ -271,7 +272,7 @@ def _from_special(sp: SpecialPoint, model, param, settings, progress, params, op
                                  if settings.ds > 0 else settings.ds)
         nxt = _after_graze(base, pt, st, options)
         if isinstance(nxt, str):
-            raise ContinuationError(nxt)
+            raise ContinuationError(nxt, Status.SWITCH_FAILED)
         prob1, u1, lam1, ds1 = nxt
         return _run(prob1, u1, lam1, dataclasses.replace(settings, ds=ds1),
                     progress=progress, model=model, on_dib=on_dib, options=options,
@@ -351,8 +352,8 @@ def _resume(branch: Branch, model, param, settings, progress):
     for q in cont.points:
         q.signature_index = last.signature_index
     return Branch(branch.problem, branch.points[:-1] + cont.points,
-                  stop_reason=cont.stop_reason, settings=st, model=model,
-                  problems=branch.problems, origin=branch.origin)
+                  stop_reason=cont.stop_reason, stop_status=cont.stop_status, settings=st,
+                  model=model, problems=branch.problems, origin=branch.origin)
 
 
 def continue_equilibrium(model, x0, param: str, *, span=None, ds: float | None = None,
@@ -483,7 +484,11 @@ def load_branch(path) -> Branch:
                             arclength=float(ds["arclength"].values[i]), data=data,
                             tests=tests, special=str(ds["special"].values[i]),
                             signature_index=k))
+    # files written before branches kept their status hold the text only: the member is then
+    # read from its words (Status.of_branch_stop)
+    word = str(ds.attrs.get("stop_status", ""))
     return Branch(problem, points, stop_reason=ds.attrs.get("stop_reason", ""),
+                  stop_status=Status.from_meaning(word) if word else None,
                   settings=settings, model=model, problems=problems,
                   origin=str(ds.attrs.get("origin", "")))
 
@@ -556,7 +561,7 @@ def continue_bifurcation(model, special_point: SpecialPoint, params, *, span=Non
     lo2, hi2 = (-math.inf, math.inf) if span2 is None else span2
     for pt in cont:
         if not lo2 <= pt.u[-1] <= hi2:
-            cont.stop_reason = f"{p2} left span2 ({lo2:.10g}, {hi2:.10g})"
+            cont._stop(Status.SPAN2_LEFT, f"{p2} left span2 ({lo2:.10g}, {hi2:.10g})")
             break
-    return Branch(curve, cont.points, stop_reason=cont.stop_reason, settings=settings,
-                  model=model)
+    return Branch(curve, cont.points, stop_reason=cont.stop_reason,
+                  stop_status=cont.stop_status, settings=settings, model=model)

@@ -1,14 +1,16 @@
-"""A continued branch: its points as an xarray Dataset, its special points, its figure."""
+"""A continued branch: its points as columns (one array per attribute, the points views of
+them), its special points, its NetCDF file and its figure."""
 
 from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ArgumentError
+from ..errors import ArgumentError, Status
 
 #: Kinds of special points, in words (the labels of AUTO, MatCont and BifurcationKit).
 KINDS = {
@@ -116,14 +118,248 @@ class SpecialPoint:
                 f"index {self.index}{extra})")
 
 
+class _Columns:
+    """The points of a branch, one column per attribute of a
+    :class:`~pwsdyn.continuation.engine.Point`: the parameter, the step, the arclength, the
+    Newton iterations and the signature index as arrays; ``u`` and the tangent as rows of
+    two-dimensional arrays padded with NaN beyond each point's size (the problems of a branch
+    that switched signature differ in size); the problem's data, the test functions and the
+    special kind as lists (their entries are dicts and words). ``stable`` and ``admissible``
+    are columns of their own, read from a point's data when it is stored.
+
+    Arrays are allocated with room to spare and doubled when full, so that appending a point
+    costs amortised constant time; the first ``n`` rows are the points."""
+
+    __slots__ = ("n", "lam", "ds", "arclength", "iterations", "signature_index", "usize",
+                 "u", "tangent", "data", "tests", "special", "stable", "admissible")
+
+    def __init__(self, capacity: int = 0, width: int = 0):
+        cap = max(int(capacity), 1)
+        self.n = 0
+        self.lam = np.empty(cap)
+        self.ds = np.empty(cap)
+        self.arclength = np.empty(cap)
+        self.iterations = np.empty(cap, dtype=np.int64)
+        self.signature_index = np.empty(cap, dtype=np.int64)
+        self.usize = np.empty(cap, dtype=np.int64)
+        self.u = np.full((cap, width), np.nan)
+        self.tangent = np.full((cap, width + 1), np.nan)
+        self.stable = np.empty(cap, dtype=bool)
+        self.admissible = np.empty(cap, dtype=bool)
+        self.data: list = []
+        self.tests: list = []
+        self.special: list = []
+
+    @classmethod
+    def of(cls, points) -> "_Columns":
+        points = list(points)
+        width = max((np.size(p.u) for p in points), default=0)
+        out = cls(len(points), width)
+        for p in points:
+            out.append(p)
+        return out
+
+    def _room(self, width: int) -> None:
+        """Room for one more row of ``width`` unknowns (doubling the rows when full)."""
+        cap, w = self.lam.shape[0], self.u.shape[1]
+        rows = cap if self.n < cap else 2 * cap
+        if rows == cap and width <= w:
+            return
+        width = max(width, w)
+        for name in ("lam", "ds", "arclength", "iterations", "signature_index", "usize",
+                     "stable", "admissible"):
+            old = getattr(self, name)
+            new = np.empty(rows, dtype=old.dtype)
+            new[:self.n] = old[:self.n]
+            setattr(self, name, new)
+        for name, extra in (("u", 0), ("tangent", 1)):
+            old = getattr(self, name)
+            new = np.full((rows, width + extra), np.nan)
+            new[:self.n, :old.shape[1]] = old[:self.n]
+            setattr(self, name, new)
+
+    def append(self, p) -> None:
+        u = np.asarray(p.u, dtype=float).reshape(-1)
+        self._room(u.size)
+        self.n += 1
+        self.data.append(None)
+        self.tests.append(None)
+        self.special.append("")
+        self.put(self.n - 1, p)
+
+    def put(self, i: int, p) -> None:
+        """Row ``i`` from the attributes of ``p`` (a Point or a view)."""
+        u = np.asarray(p.u, dtype=float).reshape(-1)
+        t = np.asarray(p.tangent, dtype=float).reshape(-1)
+        if u.size > self.u.shape[1]:
+            self._room(u.size)
+        self.u[i] = np.nan
+        self.u[i, :u.size] = u
+        self.tangent[i] = np.nan
+        self.tangent[i, :t.size] = t
+        self.usize[i] = u.size
+        self.lam[i] = p.lam
+        self.ds[i] = p.ds
+        self.arclength[i] = p.arclength
+        self.iterations[i] = p.iterations
+        self.signature_index[i] = getattr(p, "signature_index", 0)
+        self.special[i] = p.special
+        self.tests[i] = p.tests
+        self.set_data(i, p.data)
+
+    def set_data(self, i: int, data: dict) -> None:
+        self.data[i] = data
+        self.stable[i] = bool(data.get("stable", False))
+        self.admissible[i] = bool(data.get("admissible", True))
+
+
+class BranchPoint:
+    """One point of a :class:`~pwsdyn.Branch`: a view of the branch's columns at one index,
+    with the attributes of a :class:`~pwsdyn.continuation.engine.Point` (``u``, ``lam``,
+    ``tangent``, ``ds``, ``iterations``, ``arclength``, ``data``, ``tests``, ``special``,
+    ``signature_index``, ``X``). ``u`` and ``tangent`` are views of the columns; assigning an
+    attribute writes the column (the branch sees it). ``copy.copy`` gives a detached
+    :class:`~pwsdyn.continuation.engine.Point`."""
+
+    __slots__ = ("_c", "_i")
+
+    def __init__(self, columns: _Columns, index: int):
+        self._c = columns
+        self._i = index
+
+    @property
+    def u(self) -> np.ndarray:
+        return self._c.u[self._i, :self._c.usize[self._i]]
+
+    @property
+    def tangent(self) -> np.ndarray:
+        return self._c.tangent[self._i, :self._c.usize[self._i] + 1]
+
+    @property
+    def lam(self) -> float:
+        return float(self._c.lam[self._i])
+
+    @property
+    def ds(self) -> float:
+        return float(self._c.ds[self._i])
+
+    @property
+    def arclength(self) -> float:
+        return float(self._c.arclength[self._i])
+
+    @property
+    def iterations(self) -> int:
+        return int(self._c.iterations[self._i])
+
+    @property
+    def signature_index(self) -> int:
+        return int(self._c.signature_index[self._i])
+
+    @property
+    def data(self) -> dict:
+        return self._c.data[self._i]
+
+    @property
+    def tests(self) -> dict:
+        return self._c.tests[self._i]
+
+    @property
+    def special(self) -> str:
+        return self._c.special[self._i]
+
+    @property
+    def X(self) -> np.ndarray:
+        return np.append(self.u, self.lam)
+
+    def __setattr__(self, name, value):
+        if name in ("_c", "_i"):
+            object.__setattr__(self, name, value)
+        elif name == "data":
+            self._c.set_data(self._i, value)
+        elif name in ("tests", "special"):
+            getattr(self._c, name)[self._i] = value
+        elif name in ("lam", "ds", "arclength", "iterations", "signature_index"):
+            getattr(self._c, name)[self._i] = value
+        elif name in ("u", "tangent"):
+            p = self.to_point()
+            setattr(p, name, np.asarray(value, dtype=float))
+            self._c.put(self._i, p)
+        else:
+            raise AttributeError(f"a branch point has no attribute {name!r}")
+
+    def to_point(self):
+        """The point as a detached :class:`~pwsdyn.continuation.engine.Point` (its arrays
+        copied; its data and tests the same dicts)."""
+        from .engine import Point
+
+        return Point(u=self.u.copy(), lam=self.lam, tangent=self.tangent.copy(), ds=self.ds,
+                     iterations=self.iterations, arclength=self.arclength, data=self.data,
+                     tests=self.tests, special=self.special,
+                     signature_index=self.signature_index)
+
+    __copy__ = to_point
+
+    def __repr__(self):
+        return (f"BranchPoint(index={self._i}, lam={self.lam!r}, special={self.special!r}, "
+                f"arclength={self.arclength!r}, signature_index={self.signature_index})")
+
+
+class BranchPoints(Sequence):
+    """The points of a :class:`~pwsdyn.Branch` as a sequence of
+    :class:`~pwsdyn.continuation.branch.BranchPoint` views (a slice is a list of them);
+    assigning ``points[i] = point`` writes row ``i`` of the columns."""
+
+    __slots__ = ("_c",)
+
+    def __init__(self, columns: _Columns):
+        self._c = columns
+
+    def __len__(self):
+        return self._c.n
+
+    def __getitem__(self, i):
+        n = self._c.n
+        if isinstance(i, slice):
+            return [BranchPoint(self._c, k) for k in range(*i.indices(n))]
+        i = int(i)
+        if i < 0:
+            i += n
+        if not 0 <= i < n:
+            raise IndexError("branch point index out of range")
+        return BranchPoint(self._c, i)
+
+    def __setitem__(self, i, point):
+        i = int(i)
+        self._c.put(i + self._c.n if i < 0 else i, point)
+
+    def __iter__(self):
+        c = self._c
+        return (BranchPoint(c, k) for k in range(c.n))
+
+    def __add__(self, other):
+        return list(self) + list(other)
+
+    def __radd__(self, other):
+        return list(other) + list(self)
+
+    def __repr__(self):
+        return repr(list(self))
+
+
 class Branch:
     """A branch followed by :func:`pwsdyn.continue_orbit` or
     :func:`pwsdyn.continue_equilibrium`.
 
+    The points are stored as columns (one array per attribute); ``points[i]`` and
+    iteration give :class:`~pwsdyn.continuation.branch.BranchPoint` views of them with the
+    attributes of a :class:`~pwsdyn.continuation.engine.Point`, and ``values``, ``stable``,
+    ``admissible`` are the columns themselves (copies).
+
     Attributes
     ----------
-    points : list of Point
+    points : sequence of BranchPoint
         In the order of the arclength; located special points are points of their own.
+        Assigning a list of points (``Point`` or views) stores them as the new columns.
     parameter : str
     kind : str
         ``"orbit"`` or ``"equilibrium"``.
@@ -135,7 +371,10 @@ class Branch:
         Every problem of the branch: after a graze the branch goes on with the orbit's new
         signature (``Point.signature_index`` says which problem a point solves).
     stop_reason : str
-        Why the branch ended.
+        Why the branch ended, in words that name the values.
+    stop_status : Status or None
+        The same as a member of :class:`~pwsdyn.Status` (``MAX_POINTS``, ``SPAN_END``,
+        ``STEP_BELOW_DS_MIN``, ... :data:`pwsdyn.errors.BRANCH_ENDS`); ``None`` where unknown.
     settings : ContinuationSettings
     origin : str
         For a branch switched from a special point of another branch, that point's kind
@@ -145,20 +384,35 @@ class Branch:
     """
 
     def __init__(self, problem, points, *, stop_reason="", settings=None, model=None,
-                 problems=None, origin: str = ""):
+                 problems=None, origin: str = "", stop_status: Status | None = None):
         self.problem = problem
         self.problems = list(problems) if problems else [problem]
-        self.points = list(points)
+        self.points = points
         self.parameter = problem.parameter
         self.kind = problem.kind
         self.stop_reason = stop_reason
+        self.stop_status = (Status(stop_status) if stop_status is not None
+                            else Status.of_branch_stop(stop_reason))
         self.settings = settings
         self.origin = str(origin)
         self.model = model if model is not None else getattr(
             getattr(problem, "orbit_problem", problem), "model", None)
 
+    @property
+    def points(self) -> BranchPoints:
+        return BranchPoints(self._cols)
+
+    @points.setter
+    def points(self, points) -> None:
+        # read every point before the columns are replaced (they may be views of them)
+        self._cols = _Columns.of(points)
+
+    def append(self, point) -> None:
+        """Add a point at the end (amortised constant time: the columns grow by doubling)."""
+        self._cols.append(point)
+
     def __len__(self):
-        return len(self.points)
+        return self._cols.n
 
     def __repr__(self):
         sp = ", ".join(f"{p.kind} {p.value:.6g}" for p in self.special_points
@@ -197,7 +451,8 @@ class Branch:
     @property
     def values(self) -> np.ndarray:
         """The parameter at each point."""
-        return np.array([p.lam for p in self.points])
+        c = self._cols
+        return c.lam[:c.n].copy()
 
     @property
     def curve(self) -> str:
@@ -215,7 +470,8 @@ class Branch:
         if name == self.parameter:
             return self.values
         if name == self.parameter2:
-            return np.array([p.u[-1] for p in self.points])
+            c = self._cols
+            return c.u[np.arange(c.n), c.usize[:c.n] - 1].copy()
         raise ArgumentError(f"the branch varies {self.parameter!r}"
                             + (f" and {self.parameter2!r}" if self.parameter2 else "")
                             + f", not {name!r}")
@@ -237,16 +493,19 @@ class Branch:
 
     @property
     def stable(self) -> np.ndarray:
-        return np.array([bool(p.data.get("stable", False)) for p in self.points])
+        c = self._cols
+        return c.stable[:c.n].copy()
 
     @property
     def admissible(self) -> np.ndarray:
-        return np.array([bool(p.data.get("admissible", True)) for p in self.points])
+        c = self._cols
+        return c.admissible[:c.n].copy()
 
     @property
     def special_points(self) -> list[SpecialPoint]:
-        return [SpecialPoint(p.special, i, p.lam, self) for i, p in enumerate(self.points)
-                if p.special]
+        c = self._cols
+        return [SpecialPoint(k, i, float(c.lam[i]), self) for i, k in enumerate(c.special)
+                if k]
 
     def special(self, kind: str) -> list[SpecialPoint]:
         """The special points of one kind."""
@@ -261,25 +520,22 @@ class Branch:
 
         m = self.model
         names = list(self.problem.state_names)
-        pts = self.points
+        c = self._cols
+        n = c.n
         spectrum = "multipliers" if self.kind == "orbit" else "eigenvalues"
-        nm = max((len(p.data.get(spectrum, ())) for p in pts), default=0)
-        mu = np.full((len(pts), nm), np.nan + 0j)
-        for i, p in enumerate(pts):
-            z = np.asarray(p.data.get(spectrum, ()), dtype=complex)
+        spectra = [np.asarray(d.get(spectrum, ()), dtype=complex) for d in c.data]
+        nm = max((z.size for z in spectra), default=0)
+        mu = np.full((n, nm), np.nan + 0j)
+        for i, z in enumerate(spectra):
             mu[i, :z.size] = z
-        nu = max((p.u.size for p in pts), default=0)
-
-        def padded(vectors, size):
-            out = np.full((len(vectors), size), np.nan)
-            for i, v in enumerate(vectors):
-                out[i, :v.size] = v
-            return out
-        kinds = sorted({k for p in pts for k in p.tests})
+        nu = int(c.usize[:n].max()) if n else 0
+        # the columns are padded with NaN to their widest problem: the file's to this branch's
+        u_cols, t_cols = c.u[:n, :nu], c.tangent[:n, :nu + 1]
+        kinds = sorted({k for t in c.tests for k in t})
         ds = xr.Dataset(
             {
                 self.parameter: ("point", self.values, quantity_attrs(m, self.parameter)),
-                "x": (("point", "state"), self.states if pts else np.zeros((0, len(names))),
+                "x": (("point", "state"), self.states if n else np.zeros((0, len(names))),
                       state_attrs(m, "state at the Poincare section (start of segment 0)"
                                   if self.kind == "orbit" else "equilibrium")),
                 f"{spectrum}_real": (("point", "index"), mu.real),
@@ -290,32 +546,32 @@ class Branch:
                 "admissible": ("point", self.admissible.astype(np.int8),
                                {"flag_values": np.array([0, 1], dtype=np.int8),
                                 "flag_meanings": "not_admissible admissible"}),
-                "reason": ("point", _str_array(p.data.get("reason", "") for p in pts),
+                "reason": ("point", _str_array(d.get("reason", "") for d in c.data),
                            {"long_name": "why the point is not admissible (empty: it is)"}),
-                "special": ("point", _str_array(p.special for p in pts),
+                "special": ("point", _str_array(c.special),
                             {"long_name": "kind of special point (empty: regular)"}),
-                "ds": ("point", np.array([p.ds for p in pts]),
+                "ds": ("point", c.ds[:n].copy(),
                        {"long_name": "arclength step that reached the point"}),
-                "arclength": ("point", np.array([p.arclength for p in pts])),
-                "iterations": ("point", np.array([p.iterations for p in pts], dtype=np.int32)),
-                "u": (("point", "unknown"), padded([p.u for p in pts], nu),
+                "arclength": ("point", c.arclength[:n].copy()),
+                "iterations": ("point", c.iterations[:n].astype(np.int32)),
+                "u": (("point", "unknown"), u_cols.copy(),
                       {"long_name": "unknowns of the problem (NaN beyond its size)"}),
                 "tangent": (("point", "unknown_and_parameter"),
-                            padded([p.tangent for p in pts], nu + 1)),
-                "signature_index": ("point", np.array([p.signature_index for p in pts],
-                                                      dtype=np.int32),
+                            t_cols.copy()),
+                "signature_index": ("point", c.signature_index[:n].astype(np.int32),
                                     {"long_name": "index of the point's signature in the "
                                                   "signatures attribute"}),
             },
-            coords={"point": np.arange(len(pts)), **state_coords(m)},
+            coords={"point": np.arange(n), **state_coords(m)},
         )
         for k in kinds:
             # "GR/<surface>/<segment>": '/' is not allowed in a NetCDF name
             ds[f"test_{k.replace('/', ':')}"] = (
-                "point", np.array([p.tests.get(k, np.nan) for p in pts]),
+                "point", np.array([t.get(k, np.nan) for t in c.tests], dtype=float),
                 {"long_name": KINDS.get(k.split("/")[0], k) + f" (test function {k})"})
         if self.kind == "orbit":
-            ds["period"] = ("point", np.array([p.data.get("period", np.nan) for p in pts]))
+            ds["period"] = ("point", np.array([d.get("period", np.nan) for d in c.data],
+                                              dtype=float))
         if self.curve:
             ds[self.parameter2] = ("point", self.values_of(self.parameter2),
                                    quantity_attrs(m, self.parameter2))
@@ -325,6 +581,8 @@ class Branch:
             "kind": self.kind,
             "parameter": self.parameter,
             "stop_reason": self.stop_reason,
+            # the member's word (flag_meanings style); "" where unknown
+            "stop_status": self.stop_status.meaning if self.stop_status is not None else "",
             "origin": self.origin,
             "params": json.dumps(getattr(self.problem, "params", None) or
                                  getattr(self.problem.orbit_problem, "params", {})),

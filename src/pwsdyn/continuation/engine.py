@@ -46,7 +46,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..errors import ArgumentError
+from ..errors import ArgumentError, Status
 from ..newton import TrialRejected, newton
 
 
@@ -192,7 +192,17 @@ class Point:
 
 class ContinuationError(ArgumentError):
     """A branch cannot be started (the start is not a solution, or the problem is singular
-    there)."""
+    there), or cannot go on past a discontinuity-induced bifurcation.
+
+    Attributes
+    ----------
+    status : Status
+        ``Status.START_FAILED`` or ``Status.SWITCH_FAILED``.
+    """
+
+    def __init__(self, message: str, status: Status = Status.START_FAILED):
+        super().__init__(message)
+        self.status = status
 
 
 class Continuation:
@@ -200,7 +210,8 @@ class Continuation:
 
     Iterate over it (``for point in cont``) to take one step at a time -- each accepted point
     and each located special point is yielded -- or call :meth:`run`. ``points`` holds the
-    branch so far, ``stop_reason`` why it ended.
+    branch so far, ``stop_reason`` why it ended (``stop_status`` the same as a
+    :class:`~pwsdyn.Status` member).
 
     Parameters
     ----------
@@ -231,6 +242,7 @@ class Continuation:
         self.settings = settings or ContinuationSettings()
         self.points: list[Point] = []
         self.stop_reason = ""
+        self.stop_status: Status | None = None
         self._progress = progress
         self._bar = None
         self._started = False
@@ -252,8 +264,12 @@ class Continuation:
     # ------------------------------------------------------------------------------
     def _eval(self, X):
         X = np.asarray(X, dtype=float)
-        if self._ev is not None and np.array_equal(self._ev[0], X):
-            return self._ev[1]
+        # the last evaluation again (the corrector's last iterate is the point, its tangent
+        # and its data): compared as numpy.array_equal does, without its wrapper's cost
+        if self._ev is not None:
+            X0 = self._ev[0]
+            if X0.shape == X.shape and bool((X0 == X).all()):
+                return self._ev[1]
         F, F_u, F_lam = self.problem.evaluate(X[:-1], float(X[-1]))
         out = (np.asarray(F, dtype=float), np.asarray(F_u, dtype=float),
                np.asarray(F_lam, dtype=float).reshape(-1))
@@ -261,8 +277,14 @@ class Continuation:
         return out
 
     def _bordered(self, X, v):
+        """``[[F_u, F_lam], [v^T]]`` at ``X``."""
         _, F_u, F_lam = self._eval(X)
-        return np.vstack([np.column_stack([F_u, F_lam]), v[None, :]])
+        N = F_u.shape[0]
+        B = np.empty((N + 1, N + 1))
+        B[:N, :N] = F_u
+        B[:N, N] = F_lam
+        B[N] = v
+        return B
 
     def _tangent(self, X, v_prev):
         """Unit tangent at ``X`` oriented along ``v_prev``: the solution of the bordered
@@ -283,9 +305,12 @@ class Continuation:
         """Newton on ``F(X) = 0``, ``v . X = c`` from ``Xp``: (X, iterations) or None."""
         def fun(X):
             F, _, _ = self._eval(X)
-            if not np.all(np.isfinite(F)):
+            if not np.isfinite(F).all():
                 raise TrialRejected("the residual is not finite", "nonfinite")
-            return np.append(F, v @ X - c)
+            G = np.empty(F.size + 1)
+            G[:-1] = F
+            G[-1] = v @ X - c
+            return G
 
         def jac(X):
             return self._bordered(X, v)
@@ -438,7 +463,10 @@ class Continuation:
             pass
         return self.points
 
-    def _stop(self, reason):
+    def _stop(self, status: Status, reason: str):
+        """End the branch: why as a member (``stop_status``) and as the text that names the
+        values (``stop_reason``)."""
+        self.stop_status = status
         self.stop_reason = reason
         return []
 
@@ -446,17 +474,19 @@ class Continuation:
         st = self.settings
         prev = self.points[-1]
         if len(self.points) >= st.max_points:
-            return self._stop(f"max_points = {st.max_points} reached")
+            return self._stop(Status.MAX_POINTS, f"max_points = {st.max_points} reached")
         if prev.arclength - self._s0 >= st.max_arclength:
-            return self._stop(f"max_arclength = {st.max_arclength} reached")
+            return self._stop(Status.MAX_ARCLENGTH,
+                              f"max_arclength = {st.max_arclength} reached")
         Xk, vk = prev.X, prev.tangent
         ds = self._ds
         last_failure = ""
         while True:
             if ds < st.ds_min:
-                return self._stop(f"the step fell below ds_min = {st.ds_min:g} at "
-                                  f"{self._lam_name()} = {prev.lam:.12g} ({last_failure}): a "
-                                  f"singular or nonsmooth point of the branch")
+                return self._stop(Status.STEP_BELOW_DS_MIN,
+                                  f"the step fell below ds_min = {st.ds_min:g} at "
+                                  f"{self._lam_name()} = {prev.lam:.12g} ({last_failure}): "
+                                  f"a singular or nonsmooth point of the branch")
             d = vk
             if st.predictor == "secant" and len(self.points) >= 2 and not prev.special:
                 sec = Xk - self.points[-2].X
@@ -496,8 +526,8 @@ class Continuation:
                     return out[:self._stops_at(out)]
                 end.special = "EP"
                 out.append(end)
-            return out + self._stop(f"the parameter reached the end of span "
-                                    f"({lo:.10g}, {hi:.10g})")
+            return out + self._stop(Status.SPAN_END, f"the parameter reached the end of "
+                                    f"span ({lo:.10g}, {hi:.10g})")
         arc = prev.arclength + ds
         new = self._point(X, v, ds=ds, iterations=res.iterations, arclength=arc)
         if not (len(self.points) == 1 and prev.special):
@@ -514,7 +544,7 @@ class Continuation:
             factor = min(factor, 0.8)
         self._ds = min(st.ds_max, max(st.ds_min, ds * factor))
         if not np.all(np.isfinite(X)):
-            return self._stop("the branch left the finite numbers")
+            return self._stop(Status.BRANCH_NONFINITE, "the branch left the finite numbers")
         return out
 
     def _stops_at(self, located) -> int:
@@ -524,7 +554,8 @@ class Continuation:
         for k, q in enumerate(located):
             if q.special in self.settings.stop_at:
                 self.stop_point = q
-                self._stop(f"{q.special} located at {self._lam_name()} = {q.lam:.12g}")
+                self._stop(Status.STOP_AT_SPECIAL_POINT,
+                           f"{q.special} located at {self._lam_name()} = {q.lam:.12g}")
                 return k + 1
         return 0
 

@@ -83,11 +83,16 @@ class OrbitBranchProblem:
     def analyse(self, u, lam, _evaluation=None) -> dict:
         prob = self.orbit_problem
         ev = self._evaluation(u, lam)
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            M = prob.monodromy(ev)
-        if np.all(np.isfinite(M)):
-            mu = np.asarray(prob.multipliers(ev), dtype=complex)
-        else:
+        # the multipliers build the monodromy matrix once (it used to be built a second time
+        # only to see whether it is finite: the multipliers refuse a matrix that is not)
+        try:
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                mu = np.asarray(prob.multipliers(ev), dtype=complex)
+        except ArgumentError:
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                M = prob.monodromy(ev)
+            if np.all(np.isfinite(M)):
+                raise
             # an event of the orbit at zero normal velocity (the orbit grazes the surface:
             # its saltation matrix is infinite): no multipliers, and the point counts as
             # unstable; the test functions built on them are NaN (never a sign change)
