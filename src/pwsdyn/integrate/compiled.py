@@ -482,7 +482,11 @@ _CONTEXTS_LOCK = threading.RLock()
 
 
 class ModelContext:
-    """A compiled model with parameter values: point evaluations for the analyses.
+    """A compiled model with parameter values: point evaluations and runs for the analyses.
+
+    The evaluations (``h``, ``h_x``, ``h_t``, ``hdot``, ``acceleration``, ``field``, ``g``,
+    ``g_x``, ``g_t``, ``saltation``, ...) are named methods; :meth:`run` is the one way to
+    integrate (:func:`run_compiled` at this context's parameters, or another vector ``p``).
 
     Parameters
     ----------
