@@ -582,7 +582,7 @@ class ModelContext:
 
     def h_rows(self, k: int, ts, X) -> np.ndarray:
         """Surface ``k`` at the points ``(ts[i], X[i])``, in one compiled loop."""
-        from ..model._rows import first_of_rows
+        from ._rows import first_of_rows
 
         ts = np.ascontiguousarray(ts, dtype=float)
         X = np.ascontiguousarray(X, dtype=float)
