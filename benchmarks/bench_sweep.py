@@ -230,7 +230,7 @@ def main(argv=None):
                            dashboard_address=":0")
     client = Client(cluster)
     # load pwsdyn and the compiled model on both workers (what the first task of a run does)
-    client.run(lambda: __import__("pwsdyn.stability._context", fromlist=["x"]).ModelContext
+    client.run(lambda: __import__("pwsdyn.integrate.compiled", fromlist=["x"]).ModelContext
                .get("impact-oscillator") and None)
     t_start = time.perf_counter() - t0
     same_all = True

@@ -88,7 +88,7 @@ def test_kernel_tables_are_named_records_of_the_compiled_type():
     from numba import typeof
 
     from pwsdyn.integrate._kernel._base import EVENT_TABLE_TYPE, SWITCH_TABLE_TYPE
-    from pwsdyn.stability._context import ModelContext
+    from pwsdyn.integrate.compiled import ModelContext
 
     model = {"name": "tables", "states": ["x", "v"], "parameters": {"w": 2.0},
              "modes": {"up": {"x": "v", "v": "-1"}, "down": {"x": "v", "v": "1"}},

@@ -393,7 +393,7 @@ def test_serial_and_parallel_give_identical_datasets(tmp_path):
 
 
 def _contexts_on_worker():
-    from pwsdyn.stability import _context
+    from pwsdyn.integrate import compiled as _context
 
     return len(_context._CONTEXTS)
 

@@ -561,14 +561,17 @@ def test_event_map_saltation_is_the_derivative_of_an_event_map():
 def test_the_orbit_problem_uses_the_one_saltation_formula(monkeypatch):
     """``saltation_matrix`` (both forms) and the orbit problem's monodromy go through
     ``event_map_saltation``: a stand-in for it is what they answer with, so no second copy
-    of the formula is left."""
+    of the formula is left. Its home is the compiled-model layer (``ModelContext.saltation``
+    calls it there); ``stability._saltation`` keeps it importable."""
+    from pwsdyn.integrate import compiled
     from pwsdyn.orbits import problem as orbit_problem
     from pwsdyn.orbits.problem import OrbitProblem
     from pwsdyn.stability import _saltation
 
     from _orbit_cases import io_orbit
 
-    formula = _saltation.event_map_saltation
+    formula = compiled.event_map_saltation
+    assert _saltation.event_map_saltation is formula
     assert orbit_problem.event_map_saltation is formula
     orbit = io_orbit("stable")
     prob, u = OrbitProblem.from_orbit(orbit)
@@ -586,7 +589,7 @@ def test_the_orbit_problem_uses_the_one_saltation_formula(monkeypatch):
         return 2.0 * formula(*args, **kwargs)
 
     monkeypatch.setattr(orbit_problem, "event_map_saltation", doubled)
-    monkeypatch.setattr(_saltation, "event_map_saltation", doubled)
+    monkeypatch.setattr(compiled, "event_map_saltation", doubled)
     n_events = len(prob.bounds)
     assert n_events >= 1
     np.testing.assert_allclose(prob.monodromy(ev), 2.0 ** n_events * M, rtol=1e-14)

@@ -440,7 +440,7 @@ def test_function_addresses_are_resolved_once_and_right():
 
     from pwsdyn.integrate._load import kernel
     from pwsdyn.model.codegen import EVALUATE_TYPE
-    from pwsdyn.stability._context import ModelContext
+    from pwsdyn.integrate.compiled import ModelContext
 
     kernel()
     in_effect = hasattr(ft, "_get_wrapper_address") and hasattr(ft, "_get_jit_address")

@@ -243,7 +243,9 @@ def _imports(path: Path) -> set:
     ("_validate.py", ("pwsdyn.model", "pwsdyn.integrate")),
     ("_netcdf.py", ("pwsdyn.model", "pwsdyn.integrate", "pwsdyn.orbits", "pwsdyn.explore",
                     "pwsdyn.io")),
-    ("integrate/*.py", ("pwsdyn.io", "pwsdyn.stability", "pwsdyn.orbits", "pwsdyn.explore")),
+    # the kernel, the options and the compiled-model layer below every analysis
+    ("integrate/*.py", ("pwsdyn.io", "pwsdyn.stability", "pwsdyn.orbits", "pwsdyn.explore",
+                        "pwsdyn.continuation", "pwsdyn.grazing", "pwsdyn.plot", "pwsdyn.cli")),
     ("orbits/_base.py", ("pwsdyn.orbits._orbit", "pwsdyn.orbits._shooting",
                          "pwsdyn.orbits.problem")),
     ("orbits/problem.py", ("pwsdyn.orbits._shooting",)),

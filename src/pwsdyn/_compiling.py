@@ -308,3 +308,49 @@ def memoize_function_addresses() -> bool:
         ft._get_jit_address = memoized(originals[1], "jit")
         _ADDRESSES_MEMOIZED = True
         return True
+
+
+# --------------------------------------------------------------------------------------
+# the numba type of a function argument, resolved once
+# --------------------------------------------------------------------------------------
+
+_TYPED_ONCE: dict = {}
+
+
+def type_once(dispatcher):
+    """``dispatcher`` (a numba ``Dispatcher``), made to give its numba type from a memo.
+
+    Numba types each argument of a call to a compiled function; for an argument that is
+    itself a compiled function (the model's ``evaluate``, passed to the kernel on every
+    run) it reads the property ``_numba_type_``, which builds ``types.Dispatcher(f)`` anew
+    each time (its name from ``repr(f)``, then interned): ~7 us, twice per kernel call, the
+    same type every time. The dispatcher's class is replaced by a subclass (same layout,
+    nothing else changed) whose ``_numba_type_`` is built once and kept on the instance (the
+    type refers to its function weakly, so no cycle keeps a model alive). Returns the same
+    object; anything that is not a numba ``Dispatcher``, or one whose class cannot be
+    swapped, is returned as it is and costs what it did."""
+    try:
+        from numba.core import types
+        from numba.core.dispatcher import Dispatcher
+    except ImportError:
+        return dispatcher
+    cls = type(dispatcher)
+    if not isinstance(dispatcher, Dispatcher) or getattr(cls, "_pwsdyn_typed_once", False):
+        return dispatcher
+    sub = _TYPED_ONCE.get(cls)
+    if sub is None:
+        def _numba_type_(self):
+            tp = self.__dict__.get("_pwsdyn_numba_type")
+            if tp is None:
+                tp = self.__dict__["_pwsdyn_numba_type"] = types.Dispatcher(self)
+            return tp
+
+        sub = _TYPED_ONCE[cls] = type(cls.__name__, (cls,), {
+            "_numba_type_": property(_numba_type_), "_pwsdyn_typed_once": True,
+            "__module__": cls.__module__, "__qualname__": cls.__qualname__,
+            "__doc__": cls.__doc__})
+    try:
+        dispatcher.__class__ = sub
+    except TypeError:
+        pass
+    return dispatcher

@@ -32,9 +32,9 @@ from .. import _validate as V
 from ..errors import ArgumentError, Status
 from .._netcdf import (_check_output_path, cf_global_attrs, flag_attrs, quantity_attrs,
                        run_status_codes, state_attrs, state_coords, time_units)
-from ..integrate.simulate import DEFAULTS, check_mode, integrator_options
+from ..integrate.options import DEFAULTS, check_mode, integrator_options
 from ..model.spec import as_model
-from ..stability._context import ModelContext
+from ..integrate.compiled import ModelContext
 from ._common import (check_common, check_section, check_time_unit, DIVERGED,
                       model_payload, period_estimate)
 from ._executor import run_chunks

@@ -3,7 +3,7 @@ of one window of forcing periods with a stroboscopic section, and the period est
 
 Workers receive a model as its *spec* (the dict the TOML file holds), never as compiled
 numba functions. Each worker process loads it once
-(:meth:`pwsdyn.stability._context.ModelContext.get`) and calls ``compile_model``, which finds
+(:meth:`pwsdyn.integrate.compiled.ModelContext.get`) and calls ``compile_model``, which finds
 the generated module in the on-disk cache by the model hash and loads its machine code
 (:mod:`pwsdyn.model.codegen`), so no task recompiles anything.
 
@@ -23,10 +23,7 @@ import numpy as np
 
 from .. import _validate as V
 from ..errors import ArgumentError, Status
-from ..integrate._load import kernel
-from ..integrate._start import ADMIT_BEHIND, REGULAR, Start, start_state
-from ..integrate.simulate import kernel_tables
-from ..stability._context import ModelContext
+from ..integrate.compiled import ModelContext, Start, load_kernel
 
 #: Event kinds counted in "events per period" (state changes -- stick, release, slide start
 #: and end -- are reported as times instead).
@@ -44,12 +41,12 @@ def model_payload(model) -> dict:
     Called once per run in the calling process, after the arguments are checked and before
     any work is handed out: for a flow it also loads the compiled integrator here, so on a
     machine without numba's cache it is compiled once, in this process, with its message
-    (:func:`pwsdyn.integrate._load.kernel`), not at the same time in every worker."""
+    (:func:`pwsdyn.integrate.compiled.load_kernel`), not at the same time in every worker."""
     if not model.spec:
         raise ArgumentError(f"model {model.name!r} has no spec dict (it was not made by "
                          "pwsdyn.load_model); build it with load_model to use it here")
     if not getattr(model, "is_map", False):
-        kernel()
+        load_kernel()
     return {"spec": model.spec, "origin": model.origin, "hash": model.hash}
 
 
@@ -72,14 +69,7 @@ def readmit(ctx: ModelContext, t: float, x, p) -> np.ndarray:
 def start_of(ctx: ModelContext, t: float, x, p) -> Start:
     """The start :func:`readmit` takes: the state and the discrete state (sticking on an
     impact surface, or regular) that a run from ``x`` at ``t`` begins in."""
-    x = np.array(x, dtype=float)
-    model = ctx.model
-    if ctx.is_map or not model.events:
-        return Start(x, REGULAR, -1, int(getattr(model, "initial_mode", 0)))
-    etab, eact, stab = kernel_tables(ctx.cm)
-    scale = 1.0 + float(np.max(np.abs(x))) if x.size else 1.0
-    return start_state(ctx.cm, etab, eact, stab, float(t), x, np.asarray(p, dtype=float),
-                       int(model.initial_mode), behind_tol=ADMIT_BEHIND * scale)
+    return ctx.start(t, x, p)
 
 
 def period_estimate(points: np.ndarray, max_period: int, tol: float) -> int:

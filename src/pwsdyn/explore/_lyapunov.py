@@ -35,11 +35,11 @@ import numpy as np
 from .._version import __version__
 from .. import _validate as V
 from ..errors import ArgumentError, Status
-from ..integrate.simulate import _simulate_compiled, check_mode, integrator_options
+from ..integrate.compiled import AfterEvents, KernelState, ModelContext
+from ..integrate.options import check_mode, integrator_options
 from ..model.spec import as_model
 from ..integrate.trajectory import EVENT_KINDS
-from ..integrate._start import STICK
-from ..stability._context import ModelContext
+from .._codes import STICK
 from ._common import check_bound, failed_status, readmit, start_of
 
 if TYPE_CHECKING:
@@ -328,8 +328,8 @@ def flow_segments(ctx: ModelContext, x, t0: float, seg: float, n_seg: int, p, op
             if ep_start is None:        # stuck from the start (the transient ended stuck)
                 ep_start = st_start = ta
                 episodes += 1
-            traj = _simulate_compiled(ctx.cm, x, ta, ta + seg, p, vopts, mode0=discrete[2],
-                                      dkind0=1, didx0=discrete[1])
+            traj = ctx.run(x, KernelState(1, discrete[1], discrete[2]), ta, ta + seg, vopts,
+                           p=p)
         else:
             start = start_of(ctx, ta, x, p)
             x = start.x
@@ -339,17 +339,17 @@ def flow_segments(ctx: ModelContext, x, t0: float, seg: float, n_seg: int, p, op
                 if ep_start is None:
                     ep_start = st_start = ta
                     episodes += 1
-                traj = _simulate_compiled(ctx.cm, x, ta, ta + seg, p, vopts, mode0=start.mode,
-                                          dkind0=STICK, didx0=start.index)
+                traj = ctx.run(x, KernelState(STICK, start.index, start.mode), ta, ta + seg,
+                               vopts, p=p)
             else:
-                traj = _simulate_compiled(ctx.cm, x, ta, ta + seg, p, vopts)
+                traj = ctx.run(x, None, ta, ta + seg, vopts, p=p)
         starts[k] = x
         status = failed_status(traj)
         if status:
             break
         if keep_events:
             events.extend(traj.events)
-        x = traj.x_final.copy()
+        x = traj.x.copy()
         was_stuck = ep_start is not None
         discrete = traj.final_discrete_state
         if not check_bound(x, bound):
@@ -418,12 +418,12 @@ def flow_segments(ctx: ModelContext, x, t0: float, seg: float, n_seg: int, p, op
         xs, ds = x, discrete
         while te < t_look and not (released or failed):
             t1 = min(te + 100 * seg, t_look)
-            look = _simulate_compiled(ctx.cm, xs, te, t1, p, {**opts, "dense": False,
-                                      "throw": False}, mode0=ds[2], dkind0=ds[0],
-                                      didx0=ds[1], stop=(1 << _RELEASE, -1, 1))
-            released = any(int(c) == _RELEASE for c in look.events.kind_code)
+            look = ctx.run(xs, KernelState(ds[0], ds[1], ds[2]), te, t1,
+                           {**opts, "dense": False, "throw": False},
+                           stop=AfterEvents(1, kind="release"), p=p)
+            released = any(int(c) == _RELEASE for c in look.event_kind)
             failed = bool(failed_status(look))
-            xs, ds, te = look.x_final, look.final_discrete_state, t1
+            xs, ds, te = look.x, look.final_discrete_state, t1
         if not (released or failed):
             ends_stuck = True
             ex = np.full(n, -np.inf)
@@ -532,9 +532,9 @@ def lyapunov_spectrum(model: ModelLike, x0: StateLike | None = None,
     discrete = None
     if transient:
         x = readmit(ctx, t, x, p)
-        tr = _simulate_compiled(ctx.cm, x, t, t + transient * segment, p, opts)
+        tr = ctx.run(x, None, t, t + transient * segment, opts, p=p)
         status = failed_status(tr)
-        x, discrete = tr.x_final.copy(), tr.final_discrete_state
+        x, discrete = tr.x.copy(), tr.final_discrete_state
         t += transient * segment
     if status:
         n = model.n_states

@@ -41,9 +41,9 @@ from ..errors import ArgumentError
 from .._netcdf import (_check_output_path, cf_global_attrs, flag_attrs, inverse_time_units,
                        quantity_attrs, run_status_codes, state_attrs, state_coords, time_units)
 from ..errors import Status
-from ..integrate.simulate import DEFAULTS, check_mode, integrator_options, _simulate_compiled
+from ..integrate.options import DEFAULTS, check_mode, integrator_options
 from ..model.spec import as_model
-from ..stability._context import ModelContext
+from ..integrate.compiled import ModelContext
 from ..integrate.trajectory import DiscreteState, EventLog
 from ._common import (check_common, check_section, check_time_unit, COUNTED_KINDS, DIVERGED,
                       SECTION_MISSED, check_bound, failed_status, model_payload,
@@ -113,9 +113,9 @@ def run_window(ctx: ModelContext, x, p, T: float, phase: float, n_tr: int, n_s: 
     x = readmit(ctx, t_start, x, p)
     if not record:
         if n_tr:
-            tr = _simulate_compiled(ctx.cm, np.asarray(x, float), t_start, t_w, p, opts)
+            tr = ctx.run(np.asarray(x, float), None, t_start, t_w, opts, p=p)
             out["status"] = failed_status(tr)
-            out["x_end"] = tr.x_final.copy()
+            out["x_end"] = tr.x.copy()
         return out
     t_end = t_w + n_s * T
     strobe = section == "stroboscopic"
@@ -128,9 +128,9 @@ def run_window(ctx: ModelContext, x, p, T: float, phase: float, n_tr: int, n_s: 
         status = 0
         xx = np.asarray(x, float)
         if n_tr:
-            tr = _simulate_compiled(ctx.cm, xx, t_start, t_w, p, opts)
+            tr = ctx.run(xx, None, t_start, t_w, opts, p=p)
             status = failed_status(tr)
-            xx = tr.x_final.copy()
+            xx = tr.x.copy()
         events = []
         if not status:
             # exponents of the free motion: sticking episodes are resets (LyapunovSpectrum)
@@ -152,23 +152,23 @@ def run_window(ctx: ModelContext, x, p, T: float, phase: float, n_tr: int, n_s: 
             # Transient and window in one kernel call that records the state at
             # t_w + k T (k = 0 .. n_s) on the dense output (no event, no landing step, so the
             # section costs a few percent; the state sticking or sliding at t_w just goes on).
-            traj = _simulate_compiled(ctx.cm, xx, t_start, t_end, p, opts, sample=(t_w, T))
-            status = failed_status(traj)
-            nsteps = traj.stats.get("steps", 0)
-            events = traj.events
-            ts, xs = traj.samples
+            res = ctx.run(xx, None, t_start, t_end, opts, sample=(t_w, T), p=p)
+            status = failed_status(res)
+            nsteps = res.stats.get("steps", 0)
+            events = res.events
+            ts, xs = res.samples_t, res.samples_x
             j = np.rint((ts - t_w) / T).astype(int)
             keep = (j >= 0) & (j < min(max_points, n_s))
             pts[j[keep]] = xs[keep]
-            x_end = traj.x_final.copy()
+            x_end = res.x.copy()
             if not status and not (len(j) and j[-1] == n_s):
                 status = SECTION_MISSED
         else:
-            traj = _simulate_compiled(ctx.cm, xx, t_start, t_end, p, opts)
-            status = failed_status(traj)
-            x_end = traj.x_final.copy()
-            nsteps = traj.stats.get("steps", 0)
-            events = traj.events
+            res = ctx.run(xx, None, t_start, t_end, opts, p=p)
+            status = failed_status(res)
+            x_end = res.x.copy()
+            nsteps = res.stats.get("steps", 0)
+            events = res.events
     t, kind, name, xb, after = _event_columns(events, n)
     in_window = (t >= t_w) & (t < t_end)
     if not strobe:

@@ -226,7 +226,7 @@ def response_metrics(traj, velocity: str, *, travel: str | None = None,
     (0.672, 1.0)
     """
     from ..integrate.trajectory import DiscreteState, Trajectory
-    from ..stability._context import ModelContext
+    from ..integrate.compiled import ModelContext
 
     if not isinstance(traj, Trajectory):
         raise V.fail("traj", "a Trajectory (pwsdyn.simulate)", traj)

@@ -1,4 +1,8 @@
-"""`simulate`: the one entry point to event-driven simulation."""
+"""`simulate`: the one entry point to event-driven simulation for users.
+
+It checks the arguments, resolves the model, state, time span and parameters, and makes one
+run through the compiled-model layer (:func:`pwsdyn.integrate.compiled.run_compiled`), whose
+lean result becomes the :class:`Trajectory` it returns."""
 
 from __future__ import annotations
 
@@ -8,101 +12,23 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
-from .._version import __version__
 from .. import _validate as V
-from ..errors import ArgumentError, SolveError, Status
+from ..errors import ArgumentError
 from ..model import codegen as _codegen, compile_model
 from ..model.codegen import CompiledModel
-from ..model.affine import affine_structure
 from ..model.spec import as_model, run_defaults
-from ._load import kernel
-from ._codes import (EVENT_TABLE, SAVE_DENSE, SAVE_EVENTS, SAVE_NODES, STATS, SWITCH_TABLE,
-                     VAR_NONE, VAR_SEGMENTS, KernelResult, kernel_options)
-from ._start import ADMIT_BEHIND, STICK, abs_max, start_state
-from ._variational import assemble_segments
-from .tableaus import METHODS
-from .trajectory import DiscreteState, EventLog, LazyDense, Trajectory
-
-if TYPE_CHECKING:
-    from .._typing import ModelLike, StateLike
-
-#: Default options of :func:`~pwsdyn.simulate` (each documented there).
-DEFAULTS = dict(method="auto", exact="auto", rtol=1e-10, atol=1e-12, first_step=None,
-                max_step=math.inf, max_steps=1_000_000, max_events=100_000, chatter=True,
-                chatter_ratio=None, chatter_velocity=None, sliding="convex", sliding_gain=0.0,
-                variational=False, dense=True, mode=None, throw=True)
-
-#: Ratio of the impact speed to the largest of its sequence below which the chattering map
-#: applies by default, where it is accurate (option ``chatter_ratio``).
-DEFAULT_CHATTER_RATIO = 1e-4
-
-#: ``method="auto"`` takes the 8th-order pair below this relative tolerance, RK45 from it on
-#: (measured: ``benchmarks/bench_defaults.py``).
-AUTO_DOP853_BELOW = 1e-7
-
-#: Sliding methods (option ``sliding``) and their kernel codes.
-SLIDING_METHODS = {"convex": 0, "utkin": 1}
-
-
-def integrator_options(options: Mapping, caller: str, reserved=()) -> dict:
-    """``options`` merged over :data:`DEFAULTS` and checked (:func:`check_options`), after
-    rejecting unknown names and those the caller sets itself (``reserved``), with an
-    :class:`~pwsdyn.errors.ArgumentError` (a ``TypeError``) naming ``caller``."""
-    bad = sorted(set(options) & set(reserved)) if reserved else None
-    if bad:
-        raise ArgumentError(f"{caller}: option(s) {bad} are set by {caller} itself; remove them")
-    if not options.keys() <= DEFAULTS.keys():
-        unknown = sorted(set(options) - set(DEFAULTS), key=str)
-        raise ArgumentError(f"{caller} got unexpected keyword argument(s) {unknown}; "
-                            f"integrator options are {sorted(set(DEFAULTS) - set(reserved))}")
-    opts = {**DEFAULTS, **options}
-    _check_options(opts)
-    return opts
-
+from .compiled import _state_name, run_compiled  # noqa: F401 (_state_name: kept importable)
+# the options live in .options; kept importable from here (tests, the command line)
+from .options import (AUTO_DOP853_BELOW, DEFAULT_CHATTER_RATIO, DEFAULTS,  # noqa: F401
+                      MAX_BUDGET, SLIDING_METHODS, _check_exact, _check_options, check_mode,
+                      check_options, integrator_options, kernel_tables, resolve_method)
+from .trajectory import Trajectory
 
 #: Kept importable from here (its home is the argument checks).
 state_vector = V.state_vector
 
-
-def check_mode(model, opts) -> None:
-    """The ``mode`` option names a mode of ``model`` (or is None)."""
-    mode = opts.get("mode")
-    if mode is None:
-        return
-    if not isinstance(mode, str):
-        raise V.fail("mode", f"None or a mode name of model {model.name!r} "
-                     f"{list(model.mode_names)}", mode)
-    try:
-        model.mode_index(mode)
-    except ValueError:
-        raise ArgumentError(f"`mode` must be a mode of model {model.name!r}: unknown mode "
-                            f"{mode!r}; modes are {list(model.mode_names)}") from None
-
-
-def _state_name(model, kind: int, idx: int, mode: int) -> DiscreteState:
-    """The discrete state of the kernel's code ``(kind, index, mode)``."""
-    if kind == 0:
-        return DiscreteState("mode", model.modes[mode].name)
-    if kind == 1:
-        return DiscreteState("stick", model.events[idx].name)
-    return DiscreteState("slide", model.switches[idx].name)
-
-
-#: One-entry arrays of the discrete states' names, by model digest and kernel code.
-_LABELS: dict = {}
-
-
-def _label_array(model, code: tuple) -> np.ndarray:
-    """``np.array([name], dtype=str)`` of the discrete state ``code`` of ``model`` (the
-    names are part of the digest)."""
-    key = (model.digest, code)
-    arr = _LABELS.get(key)
-    if arr is None:
-        if len(_LABELS) >= 4096:
-            _LABELS.clear()
-        arr = _LABELS[key] = np.array([_state_name(model, *code)], dtype=str)
-        arr.flags.writeable = False
-    return arr
+if TYPE_CHECKING:
+    from .._typing import ModelLike, StateLike
 
 
 def simulate(model: ModelLike, x0: StateLike | Trajectory | None = None,
@@ -311,21 +237,6 @@ def _compiled(model) -> CompiledModel:
     return compile_model(model) if cm is None else cm
 
 
-def _lazy_dense(cm, p, etab, stab, kopts, tab, t0, x0, nodes_t, nodes_y, nodes_s, hstep,
-                deg) -> LazyDense:
-    """The dense output of a ``SAVE_NODES`` run, rebuilt from its nodes when it is read
-    (:func:`pwsdyn.integrate._kernel.dense_coefficients`)."""
-    ev = cm.evaluate
-
-    def rebuild(which):
-        return kernel().dense_coefficients(ev, p, etab, stab, kopts, tab.A, tab.C, tab.P,
-                                           tab.n_stages, t0, x0, nodes_t, nodes_y, nodes_s,
-                                           hstep, np.ascontiguousarray(which, dtype=np.int64),
-                                           deg)
-
-    return LazyDense((len(hstep), nodes_y.shape[1], deg), rebuild)
-
-
 def _state(model, x0) -> np.ndarray:
     """:func:`state_vector`, with a shortcut for a tuple or list of finite floats."""
     if (type(x0) is tuple or type(x0) is list) and len(x0) == model.n_states \
@@ -379,259 +290,21 @@ def _time_span(t_span, name: str = "t_span", t0=None):
     return t0, t_end
 
 
-#: Largest step and event budgets (the kernel counts in int64).
-MAX_BUDGET = V.MAX_COUNT
-
-
-def check_options(opts) -> None:
-    """Check every integrator option of a merged option dict (types, ranges, finiteness),
-    raising :class:`~pwsdyn.errors.ArgumentError` naming the option."""
-    if not isinstance(opts["method"], str) or (opts["method"] not in METHODS
-                                                and opts["method"] != "auto"):
-        raise V.fail("method", f"'auto' or one of {sorted(METHODS)}", opts["method"])
-    if "exact" in opts and not (isinstance(opts["exact"], str) and opts["exact"] == "auto"):
-        if not isinstance(opts["exact"], (bool, np.bool_)):
-            raise V.fail("exact", "'auto', True or False", opts["exact"])
-    for k in ("chatter", "variational", "dense", "throw"):
-        if k in opts:
-            V.flag(k, opts[k])
-    for k in ("rtol", "atol"):
-        V.positive(k, opts[k])
-    if opts["rtol"] < 1e-15:
-        raise ArgumentError("`rtol` below 1e-15 cannot be met in double precision, got "
-                            f"{opts['rtol']!r}")
-    if not opts["rtol"] < 1.0:
-        raise V.fail("rtol", "a number in [1e-15, 1) (a relative tolerance)", opts["rtol"])
-    for k in ("max_steps", "max_events"):
-        V.integer(k, opts[k], lo=1, hi=MAX_BUDGET)
-    V.positive("first_step", opts["first_step"], allow_none=True)
-    V.positive("max_step", opts["max_step"], allow_inf=True)
-    # >= 1: the chattering map applies at the first impact (ratio to the largest impact speed)
-    V.positive("chatter_ratio", opts["chatter_ratio"], allow_none=True)
-    V.nonnegative("chatter_velocity", opts["chatter_velocity"], allow_none=True)
-    if not isinstance(opts.get("sliding", "convex"), str) \
-            or opts.get("sliding", "convex") not in SLIDING_METHODS:
-        raise V.fail("sliding", f"one of {sorted(SLIDING_METHODS)}", opts.get("sliding"))
-    V.nonnegative("sliding_gain", opts.get("sliding_gain", 0.0))
-    mode = opts.get("mode")
-    if mode is not None and not isinstance(mode, str):
-        raise V.fail("mode", "None or a mode name", mode)
-
-
-#: Option sets that passed :func:`check_options`, as their items and the values' types: the
-#: check is a function of the values and their types alone, and loops (sweeps, shooting,
-#: continuation) pass the same options on every call.
-_CHECKED: set = set()
-_CHECKED_MAX = 512
-
-
-def _check_options(opts):
-    """:func:`check_options`, once per set of option values."""
-    try:
-        key = (tuple(opts.items()), tuple(map(type, opts.values())))
-        known = key in _CHECKED
-    except TypeError:       # an unhashable value: checked every time
-        key, known = None, False
-    if known:
-        return
-    check_options(opts)
-    if key is not None:
-        if len(_CHECKED) >= _CHECKED_MAX:
-            _CHECKED.clear()
-        _CHECKED.add(key)
-
-
-def resolve_method(opts) -> str:
-    """The Runge-Kutta pair that runs: ``method``, or for ``'auto'`` DOP853 below
-    ``rtol = AUTO_DOP853_BELOW`` and RK45 from it on."""
-    method = opts["method"]
-    if method != "auto":
-        return method
-    return "DOP853" if opts["rtol"] < AUTO_DOP853_BELOW else "RK45"
-
-
-def _exact_code(model, exact) -> int:
-    """The kernel option ``exact``: 1 (the affine modes propagated exactly) for ``exact=True``, after
-    checking that the model has one, and for ``'auto'`` (the kernel finds the affine modes;
-    a model without any runs on the Runge-Kutta pair alone); 0 for False."""
-    if isinstance(exact, str):
-        return 1
-    if exact:
-        _check_exact(model)
-        return 1
-    return 0
-
-
-def _max_step(model, p, max_step) -> float:
-    """The largest step: the user's, else a quarter forcing period for forced models."""
-    if math.isfinite(max_step) or model.forcing_period is None:
-        return min(max_step, 1e300)
-    period = model.forcing_period_function(*p)
-    return period / 4.0 if math.isfinite(period) and period > 0 else 1e300
-
-
-_TABLES: dict = {}
-_AFFINE_CHECKED: set = set()
-
-
-def _check_exact(model) -> None:
-    """``exact=True`` needs at least one affine mode; say why each mode is not one."""
-    if model.hash in _AFFINE_CHECKED:
-        return
-    aff = affine_structure(model)
-    if not aff.any:
-        why = "; ".join(f"mode {m.name!r}: {r}" for m, r in zip(model.modes, aff.reasons))
-        raise ArgumentError(f"`exact=True` needs a mode that is affine in the states with harmonic "
-                         f"forcing; model {model.name!r} has none ({why})")
-    _AFFINE_CHECKED.add(model.hash)
-
-
-def kernel_tables(cm: CompiledModel, sliding: str = "convex"):
-    """The kernel's event table (records of ``EVENT_TABLE``: surface, direction, kind,
-    target, terminal, has_reset, time_dependent), event activity per mode and switch table
-    (records of ``SWITCH_TABLE``: surface, above, below, kind, sliding, time_dependent).
-    Built once per model and sliding method: loops (shooting, sweeps) call the kernel many
-    times."""
-    key = (cm.model.hash, cm.source_path, sliding)
-    if key not in _TABLES:
-        _TABLES[key] = _build_kernel_tables(cm, sliding)
-    return _TABLES[key]
-
-
-def _build_kernel_tables(cm: CompiledModel, sliding: str):
-    model = cm.model
-    ne = len(model.events)
-    tdep = cm.surface_time_dependent
-    if tdep is None:
-        tdep = np.zeros(len(model.surfaces), dtype=np.int64)
-    etab = np.zeros(max(ne, 0), dtype=EVENT_TABLE)
-    for j in range(ne):
-        etab[j] = (cm.event_surface[j], cm.event_direction[j], cm.event_kind[j],
-                   cm.event_target[j], cm.event_terminal[j], cm.event_has_reset[j],
-                   tdep[cm.event_surface[j]])
-    eact = np.ascontiguousarray(cm.event_active[:ne].astype(np.int64)).reshape(ne, len(model.modes))
-    ns = len(model.switches)
-    if sliding not in SLIDING_METHODS:
-        raise ArgumentError(f"`sliding` must be one of {sorted(SLIDING_METHODS)}, got {sliding!r}")
-    stab = np.zeros(ns, dtype=SWITCH_TABLE)
-    kinds = cm.switch_kind if cm.switch_kind is not None else np.zeros(ns, dtype=np.int64)
-    for s in range(ns):
-        stab[s] = (cm.switch_surface[s], cm.switch_above[s], cm.switch_below[s], kinds[s],
-                   SLIDING_METHODS[sliding], tdep[cm.switch_surface[s]])
-    return etab, eact, stab
-
 
 def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dkind0=None,
                        didx0=None, stop=None, sample=None, admit=True, refuse=False,
-                       store_dense=False, model=None, checked=False):
-    """The kernel run behind :func:`simulate`, without re-validating model, state, params.
-
-    ``dkind0``, ``didx0``: initial discrete state (0 mode, 1 sticking on event ``didx0``, 2
-    sliding on switch ``didx0``; default a regular mode). A start in a regular mode goes
-    through :func:`pwsdyn.integrate._start.start_state` (``admit``, default True): a state on
-    an impact constraint (within round-off or the position tolerance ``atol + rtol |x|``)
-    starts sticking, with the impact at ``t0`` or in free motion, and one a little behind it
-    (``ADMIT_BEHIND``) is put on it first; one further behind raises :class:`ArgumentError`
-    with ``refuse`` (the public entry points) and is left alone otherwise. Newton
-    iterations (shooting) pass ``admit=False``: they integrate exactly the state they are
-    given. ``stop = (kind_mask, ref, count)``
-    ends the run (status TERMINAL_EVENT) at the ``count``-th logged event whose kind code
-    (``EVENT_KINDS`` index) has its bit set in ``kind_mask`` and whose event or switch index is
-    ``ref`` (-1: any), so Poincaré maps on event sections run in one kernel call.
-    ``sample = (t_first, dt)`` records the state at ``t_first + k dt`` (``k >= 0``, within the
-    run) from the dense output, without events or landing steps: stroboscopic sections
-    (``traj.samples``). ``store_dense`` stores the dense output of every step as the run
-    goes (as variational runs do) instead of rebuilding it from the nodes when it is read.
-    ``model``: the model the trajectory carries (default ``cm.model``; one with the same
-    digest); ``checked``: ``opts`` passed :func:`check_options` already.
-    """
+                       store_dense=False, model=None, checked=False) -> Trajectory:
+    """:func:`~pwsdyn.integrate.compiled.run_compiled` (the one run entry point, arguments
+    as there) with its result made a :class:`Trajectory`, raising :class:`SolveError` for a
+    failed run with ``opts["throw"]``: the run behind :func:`simulate`."""
     if not checked:
         _check_options(opts)
     if model is None:
         model = cm.model
-    method = resolve_method(opts)
-    tab = METHODS[method]
-    etab, eact, stab = kernel_tables(cm, opts.get("sliding", "convex"))
-    if mode0 is None:
-        mode0 = model.initial_mode if opts["mode"] is None else model.mode_index(opts["mode"])
-    if admit and not dkind0 and len(etab):
-        x = np.asarray(x, dtype=float)
-        xmax = abs_max(x) if x.size else 0.0
-        st = start_state(cm, etab, eact, stab, t0, x, p, int(mode0),
-                         pos_tol=opts["atol"] + opts["rtol"] * xmax,
-                         behind_tol=ADMIT_BEHIND * (1.0 + xmax), refuse=refuse)
-        x = st.x
-        if st.kind == STICK:
-            mode0, dkind0, didx0 = st.mode, st.kind, st.index
-    K = kernel()  # compiled on the first run in this process (see integrate._load)
-    # dense output: rebuilt on demand from the nodes and step lengths (SAVE_NODES), except
-    # with the variational equations, whose nodes are transformed after the run
-    save = (SAVE_EVENTS if not opts["dense"] else
-            SAVE_DENSE if opts["variational"] or store_dense else SAVE_NODES)
-    kopts = kernel_options(
-        mode0=mode0, n_modes=len(model.modes), max_steps=opts["max_steps"],
-        max_events=opts["max_events"], method=tab.code, order=tab.order,
-        variational=VAR_SEGMENTS if opts["variational"] else VAR_NONE, chatter=opts["chatter"],
-        save=save, stop=stop, dkind0=0 if dkind0 is None else dkind0,
-        didx0=-1 if didx0 is None else didx0, exact=_exact_code(model, opts["exact"]),
-        rtol=opts["rtol"], atol=opts["atol"], first_step=opts["first_step"] or 0.0,
-        max_step=_max_step(model, p, opts["max_step"]),
-        # negative: the default ratio, applied where the map is accurate
-        chatter_ratio=(-DEFAULT_CHATTER_RATIO if opts["chatter_ratio"] is None
-                       else opts["chatter_ratio"]),
-        chatter_velocity=-1.0 if opts["chatter_velocity"] is None else opts["chatter_velocity"],
-        sliding_gain=opts["sliding_gain"], sample=sample)
-    pv = np.ascontiguousarray(p if p.size else np.zeros(1), dtype=float)
-    x = np.array(x, dtype=float)
-    res = KernelResult(*K.run_kernel(cm.evaluate, float(t0), float(t_end), x, pv, etab, eact,
-                                     stab, kopts, tab.A, tab.C, tab.E, tab.P, tab.n_stages))
-    (status, t_fin, y_fin, dstate, nodes_t, nodes_y, nodes_s, dense, ikind, ev_t, ev_t2, ev_info,
-     ev_xb, ev_xa, stats, samples, hstep) = res
-    if save == SAVE_NODES:
-        dense = _lazy_dense(cm, pv, etab, stab, kopts, tab, float(t0), x, nodes_t, nodes_y,
-                            nodes_s, hstep, dense.shape[2])
-    n = model.n_states
-    jac = transfer = None
-    if opts["variational"]:
-        # per-segment transfer matrices; Phi made global in nodes, dense output and events
-        transfer, jac = assemble_segments(n, nodes_y, dense, ev_info, ev_xb, ev_xa, y_fin)
-    status = Status(int(status))
-    # discrete state per node, mapped through the few distinct codes (vectorised: runs can
-    # have millions of nodes)
-    N = len(nodes_s)
-    if N and (nodes_s == nodes_s[0]).all():
-        # one discrete state throughout (most short runs): the same array, fewer steps
-        states = np.repeat(_label_array(model, tuple(nodes_s[0].tolist())), N)
-    else:
-        d = nodes_s[1:] != nodes_s[:-1]
-        starts = np.concatenate(([0], np.flatnonzero(d[:, 0] | d[:, 1] | d[:, 2]) + 1))[:N]
-        label: dict = {}
-        for code in map(tuple, nodes_s[starts].tolist()):
-            if code not in label:
-                label[code] = _state_name(model, *code)
-        run_names = np.array([label[c] for c in map(tuple, nodes_s[starts].tolist())],
-                             dtype=str)
-        states = (np.full(N, run_names[0]) if len(starts) == 1 else
-                  np.repeat(run_names, np.diff(np.append(starts, N))))
-    # the event log as arrays; its records are made when it is read (sweeps read columns)
-    events = EventLog(model, ev_t, ev_t2, ev_info, ev_xb[:, :n].copy(), ev_xa[:, :n].copy(),
-                      _state_name)
-    stat = dict(zip(STATS, stats.tolist()))
-    params = dict(zip(model.parameters, pv.tolist()))
-    traj = Trajectory(
-        t=nodes_t, x=nodes_y[:, :n].copy(), state=states, events=events, status=status,
-        message=status.message, stats=stat, model=model, params=params,
-        options={**{k: v for k, v in opts.items() if k != "throw"}, "method": method},
-        t0=t0, t_end=t_end,
-        jacobian=jac, transfer_matrices=transfer,
-        final_discrete_state=tuple(dstate.tolist()),
-        samples=(samples[:, 0].copy(), samples[:, 1:].copy()) if sample is not None else None,
-        _dense=dense if opts["dense"] else None,
-        _ikind=ikind, _y=nodes_y,
-        provenance={"model": model.name, "model_hash": model.hash, "pwsdyn_version": __version__},
-    )
-    if status.failed and opts["throw"]:
-        mode_name = _state_name(model, *dstate)
-        raise SolveError(status, float(t_fin), dict(zip(model.states, y_fin[:n])), mode_name,
-                         result=traj)
+    res = run_compiled(cm, x, t0, t_end, p, opts, mode0=mode0, dkind0=dkind0, didx0=didx0,
+                       stop=stop, sample=sample, admit=admit, refuse=refuse,
+                       store_dense=store_dense, model=model, checked=True)
+    traj = res.trajectory(model, opts, t0, t_end)
+    if res.status.failed and opts["throw"]:
+        raise res.solve_error(model, result=traj)
     return traj

@@ -33,6 +33,7 @@ from numba import types
 from sympy.printing.codeprinter import PrintMethodNotImplementedError
 
 from .._codes import MODEL_EVENT_KINDS
+from .._compiling import type_once
 from ..errors import ModelError
 from .affine import affine_structure
 from .cache import cache_dir as cache_dir, load_module
@@ -320,6 +321,8 @@ def compile_model(model: Model) -> CompiledModel:
 
     evaluate, path = load_module("model", _CODEGEN_VERSION, key, generate, model_name=model.name,
                                  attribute="evaluate", warm_up=warm_up)
+    # passed to the kernel on every run: its numba type is built once, not per call
+    evaluate = type_once(evaluate)
     elapsed = time.perf_counter() - t0
 
     ne, nm = len(model.events), len(model.modes)

@@ -26,11 +26,11 @@ import numpy as np
 
 from .. import _validate as V
 from ..errors import ArgumentError, PwsdynError, SolveError, Status
-from ..integrate.simulate import integrator_options, _simulate_compiled
+from ..integrate.compiled import (AfterEvents, KernelState, ModelContext, check_state_name,
+                                  event_states, initial_state, trajectory_start_state)
+from ..integrate.options import integrator_options
 from ..model.spec import as_model
 from ..integrate.trajectory import EVENT_KINDS
-from ._context import (KernelState, ModelContext, check_state_name, event_states,
-                       initial_state, trajectory_start_state)
 
 if TYPE_CHECKING:
     from .._typing import ModelLike, StateLike
@@ -113,9 +113,12 @@ def _initial_state(ctx: ModelContext, mode) -> KernelState:
 
 
 def _run(ctx, x0, t0, t_end, st0: KernelState, opts, stop=None):
-    return _simulate_compiled(ctx.cm, np.asarray(x0, dtype=float), float(t0), float(t_end),
-                              ctx.p, opts, mode0=st0.mode, dkind0=st0.kind, didx0=st0.index,
-                              stop=stop)
+    """One run of the layer, as the :class:`~pwsdyn.Trajectory` the result keeps."""
+    res = ctx.run(np.asarray(x0, dtype=float), st0, float(t0), float(t_end), opts, stop=stop)
+    traj = res.trajectory(ctx.model, opts, float(t0), float(t_end))
+    if res.failed and opts["throw"]:
+        raise res.solve_error(ctx.model, result=traj)
+    return traj
 
 
 def _options(options: dict, *, dense: bool, variational: bool = True) -> dict:
@@ -241,7 +244,8 @@ def poincare_map(model: ModelLike, x0: StateLike, section: str, *,
         return PoincareResult(section, float(t0), x0, float(traj.t_final), traj.x_final.copy(), J,
                               np.zeros(n), ext, J, "after", int(returns), traj)
     mask, ref, k, kinds = section_spec(ctx, section)
-    traj = _run(ctx, x0, t0, t_max, st0, opts, stop=(mask, ref, int(returns)))
+    traj = _run(ctx, x0, t0, t_max, st0, opts,
+                stop=AfterEvents(int(returns), kind=kinds, name=section))
     hits = [e for e in traj.events if e.kind in kinds and e.name == section]
     if traj.status != Status.TERMINAL_EVENT or len(hits) < returns:
         why = (f"the run stopped early ({traj.status.name}: {traj.message})"

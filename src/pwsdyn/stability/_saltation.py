@@ -39,12 +39,12 @@ import numpy as np
 
 from .. import _validate as V
 from ..errors import ArgumentError
-from ..integrate._load import kernel
-from ..integrate._start import REGULAR, SLIDE
+from .._codes import REGULAR, SLIDE
+# event_map_saltation: the one saltation formula, kept importable from here
+from ..integrate.compiled import (KernelState, ModelContext, check_state_name,  # noqa: F401
+                                  event_map_saltation, event_states, trajectory_start_state)
 from ..integrate.trajectory import DiscreteState
 from ..model.spec import as_model
-from ._context import (KernelState, ModelContext, check_state_name, event_states,
-                       trajectory_start_state)
 
 if TYPE_CHECKING:
     from .._typing import ModelLike, StateLike
@@ -72,90 +72,15 @@ def _check_trajectory(traj, name: str = "traj") -> None:
 
 def _chatter_full(ctx: ModelContext, name: str, t: float, x_before, mode: int,
                   sliding_gain: float = 0.0) -> np.ndarray:
-    """Full saltation matrix of the complete-chattering map of impact event ``name`` entered
-    from mode ``mode`` at ``(t, x_before)``: the kernel's function, the matrix it applies."""
-    S = np.zeros((ctx.n, ctx.n))
-    kernel().chatter_saltation(ctx.cm.evaluate, ctx._pv, ctx.event_index(name), int(mode),
-                               ctx.nm, float(t), np.ascontiguousarray(x_before, dtype=float),
-                               ctx.etab, ctx.stab, float(sliding_gain), S)
-    return S
-
-
-def event_map_saltation(X_x, X_t, f_in, f_out, c_x, den, tau_x=None,
-                        tau_t: float = 1.0) -> np.ndarray:
-    r"""The saltation formula, the one every Python caller uses (the compiled kernel keeps
-    its own copy, ``_event_saltation``, with the same order of operations).
-
-    For an event map ``(t, x) -> (tau, X)`` applied where ``c(t, x) = 0``, with ``f_in`` the
-    field before the event and ``f_out`` the field after it, at ``(tau, X)``:
-
-    .. math::
-
-        S = C + \frac{(f_{out} \tau_t - C f_{in} - X_t)\, c_x}{c_t + c_x f_{in}},
-        \qquad C = X_x - f_{out} \tau_x.
-
-    A reset ``x -> g(t, x)`` (``tau = t``: ``tau_x = 0``, ``tau_t = 1``) gives the full
-    saltation matrix of the slides ("Saltation matrices"; Adolfsson et al. 2001),
-    ``S = g_x + (f_out - g_x f_in - g_t) h_x / (h_t + h_x f_in)``; with ``f_out = 0`` it is
-    the projected form of thesis eq. 2.36,
-    ``S_p = g_x (I - f_in h_x / (h_t + h_x f_in)) - g_t h_x / (h_t + h_x f_in)`` (eq. 2.36
-    exactly for time-independent ``h`` and ``g``; the ``h_t``, ``g_t`` terms are the time
-    components of the same projection in phase-extended state space). The
-    complete-chattering map moves time as well (the kernel's ``_chatter_saltation``).
-
-    Parameters
-    ----------
-    X_x, X_t : numpy.ndarray
-        Derivatives of the new state ``X`` in ``x`` (n x n) and in ``t`` (n).
-    f_in, f_out : numpy.ndarray
-        The fields before and after the event (``f_out = 0`` for the projected form).
-    c_x : numpy.ndarray
-        Gradient of the event function ``c`` in ``x``.
-    den : float
-        ``c_t + c_x f_in``, the rate at which the flow crosses the surface; the caller
-        checks it for grazing (zero gives an infinite matrix, ``inf``/``nan`` entries).
-    tau_x, tau_t : numpy.ndarray or None, float
-        Derivatives of the new time ``tau`` in ``x`` and ``t`` (default: a reset, ``None``
-        for ``tau_x = 0`` and ``tau_t = 1``).
-    """
-    C = X_x if tau_x is None else X_x - np.outer(f_out, tau_x)
-    return C + np.outer(f_out * tau_t - C @ f_in - X_t, c_x) / den
+    """Full saltation matrix of the complete-chattering map (the layer's, the kernel's own)."""
+    return ctx.chatter_saltation(name, t, x_before, mode, sliding_gain)
 
 
 def _saltation_pair(ctx: ModelContext, kind: str, name: str, t: float, x_before, x_after,
                     st_before: KernelState, st_after: KernelState, sliding_gain: float = 0.0):
-    """Full and projected saltation matrices at one event from the model's derivatives
-    (for ``chatter`` the kernel's full matrix and ``None``: it has no projected form)."""
-    n = ctx.n
-    x_before = np.asarray(x_before, dtype=float)
-    x_after = np.asarray(x_after, dtype=float)
-    if kind == "chatter":
-        return _chatter_full(ctx, name, t, x_before, st_before.mode, sliding_gain), None
-    if kind in ("impact", "transition"):
-        j = ctx.event_index(name)
-        k = int(ctx.etab[j]["surface"])
-        gx = ctx.g_x(j, t, x_before)
-        gt = ctx.g_t(j, t, x_before)
-    elif kind in ("crossing", "slide_start"):
-        k = int(ctx.stab[ctx.switch_index(name)]["surface"])
-        gx = np.eye(n)
-        gt = np.zeros(n)
-    else:
-        raise ValueError(f"no saltation formula for a {kind!r} event (its saltation matrix is "
-                         f"the identity)")
-    f_in = ctx.field(t, x_before, st_before, sliding_gain)
-    f_out = ctx.field(t, x_after, st_after, sliding_gain)
-    hx = ctx.h_x(k, t, x_before)
-    den = ctx.h_t(k, t, x_before) + hx @ f_in
-    scale = np.linalg.norm(hx) * max(np.linalg.norm(f_in), 1e-300)
-    if not np.isfinite(den) or abs(den) <= kernel().GRAZING_RTOL * scale:
-        raise ArgumentError(f"{kind} {name!r} at t={t:.17g} is grazing (h_t + h_x f = {den:.3e}, "
-                            f"|h_x| |f| = {scale:.3e}): its saltation matrix is unbounded (a "
-                            f"simulation with variational=True gives NaN there)")
-    full = event_map_saltation(gx, gt, f_in, f_out, hx, den)
-    # the projected form is the full one without the field after the event
-    proj = event_map_saltation(gx, gt, f_in, np.zeros(n), hx, den)
-    return full, proj
+    """Full and projected saltation matrices at one event
+    (:meth:`~pwsdyn.integrate.compiled.ModelContext.saltation`)."""
+    return ctx.saltation(kind, name, t, x_before, x_after, st_before, st_after, sliding_gain)
 
 
 def saltation_matrix(model: ModelLike, event: str, t: float, x: StateLike, *,

@@ -2,14 +2,15 @@
 
 The checks along a computed orbit (admissibility, the monitors of discontinuity-induced
 bifurcations) evaluate a surface at hundreds of dense-output samples per segment; one call
-of the compiled model per sample from Python costs more than the integration itself.
+of the compiled model per sample from Python costs more than the integration itself. Used by
+the compiled-model layer only (:meth:`pwsdyn.integrate.compiled.ModelContext.h_rows`).
 """
 
 from __future__ import annotations
 
 from numba import njit, types as nt
 
-from .codegen import EVALUATE_TYPE
+from ..model.codegen import EVALUATE_TYPE
 
 _f1 = nt.float64[::1]
 
