@@ -212,13 +212,8 @@ def test_stop_codes_are_the_kernel_s_and_checked():
 # one door
 # --------------------------------------------------------------------------------------
 
-#: Modules that still reach the kernel's private modules or ``_eval`` directly, to be moved
-#: onto the layer's methods (``orbits`` and ``continuation/dib.py`` are being split).
-_NOT_YET = {"orbits/problem.py", "orbits/_shooting.py",
-            "continuation/dib.py", "grazing/discontinuity.py"}
 _PRIVATE = ("pwsdyn.integrate._load", "pwsdyn.integrate._start", "pwsdyn.integrate._codes",
-            "pwsdyn.integrate._kernel", "pwsdyn.integrate._variational",
-            "pwsdyn.stability._context")
+            "pwsdyn.integrate._kernel", "pwsdyn.integrate._variational")
 
 
 def _private_uses(path: Path):
@@ -245,7 +240,7 @@ def test_the_analyses_go_through_the_layer():
     bad = {}
     for path in SRC.rglob("*.py"):
         rel = str(path.relative_to(SRC))
-        if rel.startswith("integrate/") or rel in _NOT_YET or rel == "stability/_context.py":
+        if rel.startswith("integrate/"):
             continue
         uses = _private_uses(path)
         if uses:

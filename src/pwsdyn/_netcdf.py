@@ -545,8 +545,3 @@ def open_dataset(path, *, lazy: bool = False) -> xr.Dataset:
         if lazy:
             return xr.open_dataset(path, **kwargs)
         return xr.load_dataset(path, **kwargs)
-
-
-# the former private names, for the modules that move to the public ones in the next change
-_dumps, _str_array = json_text, string_array
-_library_version, _check_output_path = library_version, check_output_path

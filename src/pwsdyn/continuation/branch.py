@@ -516,7 +516,7 @@ class Branch:
         """The branch as an :class:`xarray.Dataset` (dimension ``point``)."""
         import xarray as xr
 
-        from .._netcdf import _str_array, cf_global_attrs, quantity_attrs, state_attrs, state_coords
+        from .._netcdf import string_array, cf_global_attrs, quantity_attrs, state_attrs, state_coords
 
         m = self.model
         names = list(self.problem.state_names)
@@ -546,9 +546,9 @@ class Branch:
                 "admissible": ("point", self.admissible.astype(np.int8),
                                {"flag_values": np.array([0, 1], dtype=np.int8),
                                 "flag_meanings": "not_admissible admissible"}),
-                "reason": ("point", _str_array(d.get("reason", "") for d in c.data),
+                "reason": ("point", string_array(d.get("reason", "") for d in c.data),
                            {"long_name": "why the point is not admissible (empty: it is)"}),
-                "special": ("point", _str_array(c.special),
+                "special": ("point", string_array(c.special),
                             {"long_name": "kind of special point (empty: regular)"}),
                 "ds": ("point", c.ds[:n].copy(),
                        {"long_name": "arclength step that reached the point"}),

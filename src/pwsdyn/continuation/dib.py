@@ -490,7 +490,6 @@ def resimulated(op, u, lam):
     simulation follows over one period from the old solution's start at ``lam`` (close to the
     new orbit, a short step past the bifurcation), and that simulation as the start of
     Newton on it: ``(problem, u)`` or a reason string."""
-    from ..integrate.simulate import _simulate_compiled
     from ..orbits.signature import Signature
     from ..orbits.surfaces import model_context
 
@@ -504,14 +503,13 @@ def resimulated(op, u, lam):
     P = op.period_value(p)
     opts = dict(op.opts, variational=False, dense=False, throw=False, mode=None)
     try:
-        tr = _simulate_compiled(ctx.cm, x0, float(t0), float(t0) + 1.5 * P, ctx.p, opts,
-                                mode0=st.mode, dkind0=st.kind, didx0=st.index, admit=False)
+        run = ctx.run(x0, st, float(t0), float(t0) + 1.5 * P, opts, admit=False)
     except (ValueError, FloatingPointError) as exc:
         return f"the simulation past the bifurcation failed: {exc}"
     # one period: up to the event back into the starting state nearest to t0 + P (the old
     # start lies on the old orbit's last event, which the new orbit passes a little before
     # or after)
-    evs = list(tr.events)
+    evs = list(run.event_log(ctx.model))
     start = str(op.state_names[0])
     ends = [i for i, e in enumerate(evs) if str(e.mode_after) == start]
     if not ends:

@@ -30,7 +30,7 @@ import xarray as xr
 
 from .. import _validate as V
 from ..errors import ArgumentError, Status
-from .._netcdf import (_check_output_path, cf_global_attrs, flag_attrs, quantity_attrs,
+from .._netcdf import (check_output_path, cf_global_attrs, flag_attrs, quantity_attrs,
                        run_status_codes, state_attrs, state_coords, time_units)
 from ..integrate.options import DEFAULTS, check_mode, integrator_options
 from ..model.spec import as_model
@@ -276,7 +276,7 @@ def basins(model: ModelLike, grid: Mapping[str, object], x0: StateLike | None = 
     rows = shape[0]
     if chunk_size is None:
         chunk_size = max(1, math.ceil(rows / 16))
-    out_path = _check_output_path(out, overwrite=overwrite) if out is not None else None
+    out_path = check_output_path(out, overwrite=overwrite) if out is not None else None
 
     idx = [model.states.index(nm_) for nm_, _ in axes]
     mesh = np.meshgrid(*[a for _, a in axes], indexing="ij")

@@ -171,7 +171,7 @@ class LyapunovSpectrum:
 
         import xarray as xr
 
-        from .._netcdf import (_dumps, cf_global_attrs, flag_attrs, inverse_time_units,
+        from .._netcdf import (json_text, cf_global_attrs, flag_attrs, inverse_time_units,
                                run_status_codes, state_attrs, state_coords, time_units)
 
         model = self.model
@@ -219,9 +219,9 @@ class LyapunovSpectrum:
                                    "QR re-orthonormalisation of the tangent dynamics with "
                                    "saltation matrices (pwsdyn.lyapunov_spectrum)"),
                  "events": json.dumps(dict(self.events)),
-                 "provenance": _dumps(dict(self.provenance))}
+                 "provenance": json_text(dict(self.provenance))}
         if "params" in self.provenance:
-            attrs["params"] = _dumps(dict(self.provenance["params"]))
+            attrs["params"] = json_text(dict(self.provenance["params"]))
         return xr.Dataset(data, coords=coords, attrs=attrs)
 
     def save(self, path, overwrite: bool = False):

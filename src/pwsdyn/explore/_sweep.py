@@ -38,7 +38,7 @@ import xarray as xr
 
 from .. import _validate as V
 from ..errors import ArgumentError
-from .._netcdf import (_check_output_path, cf_global_attrs, flag_attrs, inverse_time_units,
+from .._netcdf import (check_output_path, cf_global_attrs, flag_attrs, inverse_time_units,
                        quantity_attrs, run_status_codes, state_attrs, state_coords, time_units)
 from ..errors import Status
 from ..integrate.options import DEFAULTS, check_mode, integrator_options
@@ -486,7 +486,7 @@ def sweep(model: ModelLike, param: str, values: ArrayLike, x0: StateLike | None 
     opts["variational"] = False
     if chunk_size is None:
         chunk_size = max(1, math.ceil(len(vals) / 16))
-    out_path = _check_output_path(out, overwrite=overwrite) if out is not None else None
+    out_path = check_output_path(out, overwrite=overwrite) if out is not None else None
 
     settings = dict(param=param, values=[float(v) for v in vals], x0=[float(v) for v in x0v],
                     transient=int(transient), samples=int(samples), section=section,

@@ -238,7 +238,6 @@ def discontinuity_map(point) -> DiscontinuityMap:
         With ``a_star``, ``beta``, ``x_star``, the map itself (``__call__``), the persistence
         sequence (eq. 2.35) and the predicted ``scenario``.
     """
-    from ..model.codegen import W_HDT, W_HDX
     from ..orbits.surfaces import model_context
 
     prob, u, p, mon = _tangency(point)
@@ -258,9 +257,8 @@ def discontinuity_map(point) -> DiscontinuityMap:
     ctx = model_context(m, prob.param_dict(p), prob.sliding)
     ts, xs = float(mon.t), np.asarray(mon.x, dtype=float)
     f = ctx.mode_field(mode, ts, xs)
-    nm = ctx.nm
-    hT_x = ctx._eval(W_HDX, k * nm + mode, ts, xs, n)        # h_turning = h_t + h_x f
-    hT_t = float(ctx._eval(W_HDT, k * nm + mode, ts, xs, 1)[0])
+    hT_x = ctx.hdot_x(k, mode, ts, xs)        # h_turning = h_t + h_x f
+    hT_t = ctx.hdot_t(k, mode, ts, xs)
     h_x = ctx.h_x(k, ts, xs)
     h_t = ctx.h_t(k, ts, xs)
     g_x = ctx.g_x(j, ts, xs)

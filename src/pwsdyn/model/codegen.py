@@ -78,7 +78,7 @@ _CODEGEN_VERSION = "7"
 MAX_SOURCE_CHARS = 100_000
 
 
-def _clean(e):
+def without_dirac_deltas(e):
     """Replace Dirac deltas (derivatives of sign/Heaviside) by 0: they live on surfaces."""
     if isinstance(e, sp.Basic) and e.has(sp.DiracDelta):
         e = e.replace(sp.DiracDelta, lambda *a: sp.Integer(0))
@@ -101,22 +101,22 @@ def derivatives(model: Model) -> Derivatives:
     for i, mode in enumerate(model.modes):
         f = sp.Matrix(mode.rhs)
         cases[(W_F, i)] = list(f)
-        cases[(W_FX, i)] = [_clean(e) for e in f.jacobian(X)]
-        cases[(W_FT, i)] = [_clean(e) for e in f.diff(t)]
+        cases[(W_FX, i)] = [without_dirac_deltas(e) for e in f.jacobian(X)]
+        cases[(W_FT, i)] = [without_dirac_deltas(e) for e in f.diff(t)]
     nm = len(model.modes)
     for k, surf in enumerate(model.surfaces):
         h = surf.expr
         hx = sp.Matrix([h]).jacobian(X)
         ht = sp.diff(h, t)
         cases[(W_H, k)] = [h]
-        cases[(W_HX, k)] = [_clean(e) for e in hx]
-        cases[(W_HT, k)] = [_clean(ht)]
+        cases[(W_HX, k)] = [without_dirac_deltas(e) for e in hx]
+        cases[(W_HT, k)] = [without_dirac_deltas(ht)]
         for i, mode in enumerate(model.modes):
             f = sp.Matrix(mode.rhs)
-            hd = _clean(ht + (hx * f)[0])
+            hd = without_dirac_deltas(ht + (hx * f)[0])
             cases[(W_HD, k * nm + i)] = [hd]
-            cases[(W_HDX, k * nm + i)] = [_clean(e) for e in sp.Matrix([hd]).jacobian(X)]
-            cases[(W_HDT, k * nm + i)] = [_clean(sp.diff(hd, t))]
+            cases[(W_HDX, k * nm + i)] = [without_dirac_deltas(e) for e in sp.Matrix([hd]).jacobian(X)]
+            cases[(W_HDT, k * nm + i)] = [without_dirac_deltas(sp.diff(hd, t))]
             cases[(W_HHD, k * nm + i)] = [h, hd]
     for s, sw in enumerate(model.switches):
         # family f(t, x, u) of Utkin's equivalent control; affine (the convex combination,
@@ -129,13 +129,13 @@ def derivatives(model: Model) -> Derivatives:
         h = model.surfaces[sw.surface].expr
         hdu = sp.diff(h, t) + (sp.Matrix([h]).jacobian(X) * fu)[0]
         cases[(W_FU, s)] = list(fu)
-        cases[(W_HDU, s)] = [_clean(hdu)]
-        cases[(W_HDUD, s)] = [_clean(sp.diff(hdu, U_SYMBOL))]
+        cases[(W_HDU, s)] = [without_dirac_deltas(hdu)]
+        cases[(W_HDUD, s)] = [without_dirac_deltas(sp.diff(hdu, U_SYMBOL))]
     for j, ev in enumerate(model.events):
         g = sp.Matrix(ev.reset if ev.reset is not None else model.state_symbols)
         cases[(W_G, j)] = list(g)
-        cases[(W_GX, j)] = [_clean(e) for e in g.jacobian(X)]
-        cases[(W_GT, j)] = [_clean(e) for e in g.diff(t)]
+        cases[(W_GX, j)] = [without_dirac_deltas(e) for e in g.jacobian(X)]
+        cases[(W_GT, j)] = [without_dirac_deltas(e) for e in g.diff(t)]
         cases[(W_GUARD, j)] = [ev.guard if ev.guard is not None else sp.true]
     assert all(len(v) in (1, 2, n, n * n) for v in cases.values())
     # derivatives of finite expressions are finite where they exist; refuse a constant that

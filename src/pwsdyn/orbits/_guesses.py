@@ -8,9 +8,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import ArgumentError
-from ..integrate._codes import REGULAR, SLIDE, STICK
-from ..integrate.simulate import _simulate_compiled
-from ..stability._context import KernelState
+from .._codes import REGULAR, SLIDE, STICK
+from ..integrate.compiled import AfterEvents, KernelState, run_compiled
 from ._base import ADMISSIBILITY_RTOL
 from ._residual import _groups
 from ._sampling import sample_times
@@ -85,13 +84,11 @@ def from_simulation(prob, t0: float, x0, p=None, *, horizon: float | None = None
     opts = dict(prob.opts, variational=False, dense=False, throw=False, mode=None)
     nev = len(prob.signature)
     try:
-        tr = _simulate_compiled(ctx.cm, np.asarray(x0, dtype=float), float(t0),
-                                float(t0) + horizon, ctx.p, opts, mode0=st.mode,
-                                dkind0=st.kind, didx0=st.index, admit=False,
-                                stop=((1 << 8) - 1, -1, nev + 1))
+        run = ctx.run(np.asarray(x0, dtype=float), st, float(t0), float(t0) + horizon, opts,
+                      stop=AfterEvents(nev + 1), admit=False)
     except (ValueError, FloatingPointError):
         return None
-    evs = list(tr.events)
+    evs = list(run.event_log(ctx.model))
     if len(evs) < nev + 1 or Signature(evs[:nev]) != prob.signature or \
             (evs[nev].kind, evs[nev].name) != (prob.signature[0].kind,
                                                prob.signature[0].name):
@@ -119,8 +116,9 @@ def _first_zero(prob, i, t, z, horizon, opts):
     side = None
     t_a, z_a = t, z
     for piece in range(8):
-        tr = _simulate_compiled(prob.sys.cm, z_a, t_a, t_a + horizon / 8.0, prob._pv, opts,
-                                mode0=prob._fidx[i], admit=False)
+        t_b = t_a + horizon / 8.0
+        tr = run_compiled(prob.sys.cm, z_a, t_a, t_b, prob._pv, opts, mode0=prob._fidx[i],
+                          admit=False).trajectory(prob.sys.cm.model, opts, t_a, t_b)
         ts = sample_times(tr)
         if len(ts) < 2:
             break

@@ -299,7 +299,7 @@ class PeriodicOrbit:
 
         if self.trajectory is None:
             raise ValueError("this orbit has no trajectory to save")
-        from .._netcdf import _library_version, quantity_attrs
+        from .._netcdf import library_version, quantity_attrs
 
         ds = self.trajectory.to_dataset()
         n = len(self.model.states)
@@ -327,7 +327,7 @@ class PeriodicOrbit:
                                        {"long_name": "Jacobian of the Poincare map"})
         ds.attrs.update({
             "pwsdyn_type": "periodic_orbit",
-            "source": f"pwsdyn {_library_version()}: Newton shooting "
+            "source": f"pwsdyn {library_version()}: Newton shooting "
                       "(pwsdyn.find_periodic_orbit), one period simulated",
             "title": f"pwsdyn periodic orbit of model {self.model.name}",
             "period": float(self.period), "orbit_t0": float(self.t0),

@@ -16,7 +16,7 @@ import sympy as sp
 
 from .. import _validate as V
 from ..errors import ArgumentError
-from ..integrate.simulate import _simulate_compiled
+from ..integrate.compiled import run_compiled
 from ..integrate.trajectory import DiscreteState
 from ..model.spec import as_model
 from ..newton import TrialRejected, newton
@@ -517,23 +517,24 @@ class _OrbitProblemBase:
         return (tr,) + entry[1]
 
     def _flow(self, i, t, z, T, opts, dense=False):
-        """``(y, Phi, traj)`` of segment field ``i`` from ``(t, z)`` for duration ``T``."""
+        """``(y, Phi, traj)`` of segment field ``i`` from ``(t, z)`` for duration ``T``; the
+        :class:`~pwsdyn.Trajectory` only for a run with dense output (the samples of the
+        admissibility check and the monitors), None otherwise."""
         fidx = self._fidx[i]
         n = self.sys.naug
         if T == 0.0 or abs(T) <= 4 * np.spacing(max(1.0, abs(t))):
             return z.copy(), np.eye(n), None
         if T > 0:
-            tr = _simulate_compiled(self.sys.cm, z, t, t + T, self._pv, opts, mode0=fidx,
-                                    admit=False)
+            t0, t1, mode = t, t + T, fidx
         else:
-            tr = _simulate_compiled(self.sys.cm, z, -t, -t - T, self._pv, opts,
-                                    mode0=self.sys.field_index(self.fields[i], reverse=True),
-                                    admit=False)
-        if tr.status.failed or not np.all(np.isfinite(tr.x_final)) or (
-                tr.jacobian is not None and not np.all(np.isfinite(tr.jacobian))):
+            t0, t1, mode = -t, -t - T, self.sys.field_index(self.fields[i], reverse=True)
+        run = run_compiled(self.sys.cm, z, t0, t1, self._pv, opts, mode0=mode, admit=False)
+        if run.status.failed or not np.all(np.isfinite(run.x)) or (
+                run.jacobian is not None and not np.all(np.isfinite(run.jacobian))):
             raise SegmentFailed(i, f"segment {i} ({self.state_names[i]}) could not be "
-                                f"integrated over {T:.6g} from t = {t:.10g}: {tr.message}")
-        return np.array(tr.x_final, dtype=float), tr.jacobian, tr
+                                f"integrated over {T:.6g} from t = {t:.10g}: {run.message}")
+        tr = run.trajectory(self.sys.cm.model, opts, t0, t1) if opts["dense"] else None
+        return np.array(run.x, dtype=float), run.jacobian, tr
 
     def _map(self, b: _Boundary, te, y, sysm):
         """``(tau, X, tau_t, tau_y, X_t, X_y)`` of boundary ``b`` at the event point."""

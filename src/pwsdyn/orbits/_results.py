@@ -13,8 +13,8 @@ import numpy as np
 
 from ..errors import ArgumentError, Status
 from ..integrate.trajectory import EventRecord, Trajectory
-from ..stability import _saltation
-from ..stability._floquet import floquet_multipliers
+from ..integrate import compiled
+from ..stability import floquet_multipliers
 from ._admissibility import admissibility
 from ._base import STABILITY_MARGIN
 from ._orbit import PeriodicOrbit
@@ -34,7 +34,8 @@ def monodromy(prob, ev) -> np.ndarray:
 
 def boundary_saltation(prob, i, s) -> np.ndarray:
     """Full saltation matrix of boundary ``i`` (model states), of its event map
-    ``(t, x) -> (tau, X)`` (``event_map_saltation``, the one formula of :mod:`pwsdyn.stability`)."""
+    ``(t, x) -> (tau, X)`` (``event_map_saltation``, the one formula, in the compiled-model
+    layer :mod:`pwsdyn.integrate.compiled`)."""
     n = prob.n
     k = (i + 1) % prob.m
     zX = np.array(s.X, dtype=float)
@@ -45,8 +46,8 @@ def boundary_saltation(prob, i, s) -> np.ndarray:
     # den = 0 at an event with zero normal velocity (a graze): the matrix is infinite,
     # left to the callers to see (multipliers NaN)
     with np.errstate(divide="ignore", invalid="ignore"):
-        return _saltation.event_map_saltation(s.X_y[:n, :n], s.X_t[:n], fi, Fo, cx, den,
-                                   tau_x=s.tau_y[:n], tau_t=s.tau_t)
+        return compiled.event_map_saltation(s.X_y[:n, :n], s.X_t[:n], fi, Fo, cx, den,
+                                            tau_x=s.tau_y[:n], tau_t=s.tau_t)
 
 
 def multipliers(prob, ev) -> np.ndarray:

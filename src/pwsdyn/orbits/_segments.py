@@ -46,7 +46,7 @@ import sympy as sp
 from ..errors import ArgumentError, ModelError
 from ..model.cache import load_module
 from ..model.codegen import (W_AFFINE, W_F, W_FX, W_G, W_GT, W_GX, W_H,
-                             W_HT, W_HX, CompiledModel, _clean, emit_evaluate)
+                             W_HT, W_HX, CompiledModel, without_dirac_deltas, emit_evaluate)
 from ..model.discontinuities import U_SYMBOL
 from ..model.spec import Mode, Model
 
@@ -186,26 +186,26 @@ class SegmentSystem:
         for i, key in enumerate(self.fields):
             f = sp.Matrix(list(S.field(key)) + [0] * q)
             cases[(W_F, i)] = list(f)
-            cases[(W_FX, i)] = [_clean(e) for e in f.jacobian(Z)]
+            cases[(W_FX, i)] = [without_dirac_deltas(e) for e in f.jacobian(Z)]
             # time-reversed twin: s = -t, dz/ds = -f(-s, z)
             fr = -f.subs(t, -t)
             cases[(W_F, i + nf)] = list(fr)
-            cases[(W_FX, i + nf)] = [_clean(e) for e in fr.jacobian(Z)]
+            cases[(W_FX, i + nf)] = [without_dirac_deltas(e) for e in fr.jacobian(Z)]
         for i, key in enumerate(self.scalars):
-            e = _clean(S.scalar(key))
+            e = without_dirac_deltas(S.scalar(key))
             cases[(W_H, i)] = [e]
-            cases[(W_HX, i)] = [_clean(v) for v in sp.Matrix([e]).jacobian(Z)]
-            cases[(W_HT, i)] = [_clean(sp.diff(e, t))]
+            cases[(W_HX, i)] = [without_dirac_deltas(v) for v in sp.Matrix([e]).jacobian(Z)]
+            cases[(W_HT, i)] = [without_dirac_deltas(sp.diff(e, t))]
         for i, key in enumerate(self.vectors):
             v = S.vector(key)
             if key[0] in ("reset", "chat_z"):
                 v = list(v) + [sp.Symbol(k, real=True) for k in self.free]
             else:
                 v = list(v) + [0] * q
-            vm = sp.Matrix([_clean(e) for e in v])
+            vm = sp.Matrix([without_dirac_deltas(e) for e in v])
             cases[(W_G, i)] = list(vm)
-            cases[(W_GX, i)] = [_clean(e) for e in vm.jacobian(Z)]
-            cases[(W_GT, i)] = [_clean(e) for e in vm.diff(t)]
+            cases[(W_GX, i)] = [without_dirac_deltas(e) for e in vm.jacobian(Z)]
+            cases[(W_GT, i)] = [without_dirac_deltas(e) for e in vm.diff(t)]
         cases[(W_AFFINE, -1)] = [sp.Integer(0)]
         assert all(len(v) in (1, n + q, (n + q) ** 2) for v in cases.values())
         for (which, idx), exprs in cases.items():

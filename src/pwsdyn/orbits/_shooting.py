@@ -39,12 +39,11 @@ import numpy as np
 from .. import _validate as V
 from ..errors import ArgumentError
 from ..newton import TrialRejected, newton
-from ..integrate.simulate import _simulate_compiled
-from ..model.spec import as_model
+from ..integrate.compiled import (KernelState, ModelContext, check_state_name, event_states,
+                                  initial_state, run_compiled, trajectory_start_state)
 from ..integrate.trajectory import DiscreteState, Trajectory
-from ..stability._context import (KernelState, ModelContext, check_state_name, event_states,
-                                  initial_state, trajectory_start_state)
-from ..stability._floquet import floquet_multipliers
+from ..model.spec import as_model
+from ..stability import floquet_multipliers
 from ._base import (MAX_ITER, MAX_NODES, MAX_PERIODS, RECURRENCE_MAX_PERIODS,
                     STABILITY_MARGIN, OrbitError, shooting_options)
 from ._base import SHOOTING_DEFAULTS as SHOOTING_DEFAULTS  # its old home, still imported
@@ -61,6 +60,18 @@ class _SimulationFailed(Exception):
         self.interval = interval
         self.traj = traj
         self.exc = exc
+
+
+def _trajectory(ctx: ModelContext, x0, state: KernelState, t0: float, t_end: float, opts, *,
+                admit: bool = True, refuse: bool = False) -> Trajectory:
+    """One run of the context's model from ``x0`` in ``state``, as a Trajectory (the nodes'
+    events, Jacobians and dense output are what shooting reads). ``admit=False``: the state
+    exactly as given (a Newton iterate); ``refuse``: a guess inside an impact constraint is
+    an error, as in :func:`pwsdyn.simulate`."""
+    run = run_compiled(ctx.cm, np.asarray(x0, dtype=float), float(t0), float(t_end), ctx.p,
+                       opts, mode0=state.mode, dkind0=state.kind, didx0=state.index,
+                       admit=admit, refuse=refuse)
+    return run.trajectory(ctx.cm.model, opts, float(t0), float(t_end))
 
 
 def _signature_of(traj, end: KernelState, ctx: ModelContext) -> tuple:
@@ -104,9 +115,7 @@ class _Shooter:
             try:
                 # the Newton iterate exactly as it is (no start rule: the node's discrete
                 # state is part of the locked signature)
-                tr = _simulate_compiled(self.ctx.cm, np.asarray(X[i], dtype=float), ts[i],
-                                        ts[i + 1], self.ctx.p, opts, mode0=st.mode,
-                                        dkind0=st.kind, didx0=st.index, admit=False)
+                tr = _trajectory(self.ctx, X[i], st, ts[i], ts[i + 1], opts, admit=False)
             except (ValueError, FloatingPointError) as exc:
                 raise _SimulationFailed(i, exc=exc) from None
             if tr.status.failed or not np.all(np.isfinite(tr.jacobian)):
@@ -334,8 +343,7 @@ def find_periodic_orbit(model: ModelLike, x0: StateLike, *,
     ref_opts = dict(opts, variational=False, dense=True, throw=False)
     # a guess on an impact constraint (the end of a run that sticks) starts sticking, with an
     # impact or in free motion, as simulate() starts it; one inside the wall is refused
-    ref = _simulate_compiled(ctx.cm, x0, t0, t0 + T, ctx.p, ref_opts, mode0=st0.mode,
-                             dkind0=st0.kind, didx0=st0.index, refuse=True)
+    ref = _trajectory(ctx, x0, st0, t0, t0 + T, ref_opts, refuse=True)
     if ref.status.failed:
         raise OrbitError("simulation", f"the guess could not be simulated over one period: "
                          f"{ref.message} (stopped at t={ref.t_final:.17g} in {ref.state[-1]})")
@@ -349,8 +357,7 @@ def find_periodic_orbit(model: ModelLike, x0: StateLike, *,
             # a node at an event makes the one-period map non-smooth (the event falls in or
             # out of the interval): move the base point into the longest smooth segment
             t0, x0, st0 = _smooth_base_point(ctx, ref, st0, t0, T)
-            ref = _simulate_compiled(ctx.cm, x0, t0, t0 + T, ctx.p, ref_opts, mode0=st0.mode,
-                                     dkind0=st0.kind, didx0=st0.index)
+            ref = _trajectory(ctx, x0, st0, t0, t0 + T, ref_opts)
             if ref.status.failed:
                 raise OrbitError("simulation", f"the guess could not be simulated over one "
                                  f"period: {ref.message} (stopped at t={ref.t_final:.17g} in "
@@ -363,8 +370,7 @@ def find_periodic_orbit(model: ModelLike, x0: StateLike, *,
             # an event of the iterate came too close to a node: restart from its node-0 state
             T = rb.T
             x0 = np.asarray(rb.X[0], dtype=float)
-            ref = _simulate_compiled(ctx.cm, x0, t0, t0 + T, ctx.p, ref_opts, mode0=st0.mode,
-                                     dkind0=st0.kind, didx0=st0.index, admit=False)
+            ref = _trajectory(ctx, x0, st0, t0, t0 + T, ref_opts, admit=False)
             if ref.status.failed:
                 raise OrbitError("simulation", f"the iterate could not be simulated over one "
                                  f"period: {ref.message}", history=history) from None

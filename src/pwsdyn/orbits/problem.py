@@ -61,7 +61,7 @@ import numpy as np
 
 from .. import _validate as V
 from ..errors import ArgumentError
-from ..stability._saltation import event_map_saltation as event_map_saltation
+from ..integrate.compiled import event_map_saltation as event_map_saltation
 from . import _admissibility, _guesses, _results, monitors
 from ._admissibility import Admissibility as Admissibility
 from ._base import ADMISSIBILITY_RTOL as ADMISSIBILITY_RTOL

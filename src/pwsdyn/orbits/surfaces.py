@@ -16,9 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..integrate._codes import REGULAR, SLIDE, STICK
-from ..model.codegen import W_GUARD, W_HD, W_HDT, W_HDX
-from ..stability._context import KernelState, ModelContext
+from .._codes import REGULAR, STICK
+from ..integrate.compiled import KernelState, ModelContext
 from ._segments import FieldKey as FieldKey
 
 
@@ -56,17 +55,14 @@ def surface(ctx, k: int) -> ScalarFunction:
 
 def normal_velocity(ctx, k: int, mode: int) -> ScalarFunction:
     """The normal velocity of mode ``mode``'s field on surface ``k``: ``h_t + h_x f_mode``."""
-    nm = ctx.nm
-
     def fn(t, x):
-        return float(ctx._eval(W_HD, k * nm + mode, t, x, 1)[0])
+        return ctx.hdot(k, mode, t, x)
     return ScalarFunction(fn)
 
 
 def normal_velocity_rate(ctx, k: int, mode: int, t, x, f) -> float:
     """``d/dt (h_t + h_x f_mode)`` on surface ``k`` at ``(t, x)`` along the field ``f``."""
-    i = k * ctx.nm + mode
-    return float(ctx._eval(W_HDT, i, t, x, 1)[0] + ctx._eval(W_HDX, i, t, x, ctx.n) @ f)
+    return ctx.hdot_rate(k, mode, t, x, f)
 
 
 def normal_acceleration(ctx, k: int, mode: int) -> ScalarFunction:
@@ -82,15 +78,12 @@ def sliding_boundary_rate(ctx, j: int, mode: int, t, x) -> float:
     """``d/dt (h_x f_mode)`` along the sliding field of switch ``j`` at ``(t, x)`` (its
     convex combination extended smoothly where the point is not in the sliding region): the
     rate at which the sliding flow crosses the sliding region's boundary ``h_x f_mode = 0``."""
-    k = ctx.model.switches[j].surface
-    return normal_velocity_rate(ctx, k, mode, t, x, state_field(ctx, FieldKey("slide", j), t, x))
+    return ctx.boundary_rate(j, mode, t, x)
 
 
 def guard_holds(ctx, j: int, t, x) -> bool:
     """Whether the guard of event ``j`` holds at ``(t, x)`` (an event without one: always)."""
-    if ctx.model.events[j].guard is None:
-        return True
-    return bool(ctx._eval(W_GUARD, j, t, x, 1)[0] != 0.0)
+    return ctx.guard(j, t, x)
 
 
 def state_field(ctx, fk: FieldKey, t, x):
@@ -100,5 +93,5 @@ def state_field(ctx, fk: FieldKey, t, x):
     elif fk.kind == "stick":
         st = KernelState(STICK, fk.index, fk.mode)
     else:
-        st = KernelState(SLIDE, fk.index, int(ctx.stab[fk.index]["above"]))
+        st = ctx.sliding_state(fk.index)
     return ctx.field(t, x, st)
