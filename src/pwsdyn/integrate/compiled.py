@@ -237,51 +237,7 @@ class RunResult:
     def trajectory(self, model, opts, t0: float, t_end: float) -> Trajectory:
         """The :class:`~pwsdyn.Trajectory` of this run (``opts``: the options it ran with;
         ``model`` the model it carries)."""
-        raw = self._raw
-        cm, pv, etab, stab, kopts, tab, x_start, method = self._run
-        n = model.n_states
-        dense = raw.dense
-        if opts["dense"] and kopts[0]["save"] == SAVE_NODES:
-            dense = _lazy_dense(cm, pv, etab, stab, kopts, tab, float(t0), x_start,
-                                raw.nodes_t, raw.nodes_y, raw.nodes_s, raw.hstep,
-                                raw.dense.shape[2])
-        nodes_s = raw.nodes_s
-        # discrete state per node, mapped through the few distinct codes (vectorised: runs
-        # can have millions of nodes)
-        N = len(nodes_s)
-        if N and (nodes_s == nodes_s[0]).all():
-            # one discrete state throughout (most short runs): the same array, fewer steps
-            states = np.repeat(_label_array(model, tuple(nodes_s[0].tolist())), N)
-        else:
-            d = nodes_s[1:] != nodes_s[:-1]
-            starts = np.concatenate(([0], np.flatnonzero(d[:, 0] | d[:, 1] | d[:, 2]) + 1))[:N]
-            label: dict = {}
-            for code in map(tuple, nodes_s[starts].tolist()):
-                if code not in label:
-                    label[code] = _state_name(model, *code)
-            run_names = np.array([label[c] for c in map(tuple, nodes_s[starts].tolist())],
-                                 dtype=str)
-            states = (np.full(N, run_names[0]) if len(starts) == 1 else
-                      np.repeat(run_names, np.diff(np.append(starts, N))))
-        # the event log as arrays; its records are made when it is read (sweeps read columns)
-        events = self.event_log(model)
-        stat = dict(zip(STATS, self._stats.tolist()))
-        params = dict(zip(model.parameters, pv.tolist()))
-        samples = None if self.samples_t is None else (self.samples_t, self.samples_x)
-        return Trajectory(
-            t=raw.nodes_t, x=raw.nodes_y[:, :n].copy(), state=states, events=events,
-            status=self.status, message=self.status.message, stats=stat, model=model,
-            params=params,
-            options={**{k: v for k, v in opts.items() if k != "throw"}, "method": method},
-            t0=t0, t_end=t_end,
-            jacobian=self.jacobian, transfer_matrices=self.transfer_matrices,
-            final_discrete_state=tuple(raw.state.tolist()),
-            samples=samples,
-            _dense=dense if opts["dense"] else None,
-            _ikind=raw.ikind, _y=raw.nodes_y,
-            provenance={"model": model.name, "model_hash": model.hash,
-                        "pwsdyn_version": __version__},
-        )
+        return run_trajectory(self, model, opts, t0, t_end)
 
     def solve_error(self, model, result=None) -> SolveError:
         """The :class:`~pwsdyn.errors.SolveError` of a failed run."""
@@ -289,6 +245,95 @@ class RunResult:
         n = model.n_states
         return SolveError(self.status, float(raw.t), dict(zip(model.states, raw.y[:n])),
                           _state_name(model, *raw.state), result=result)
+
+
+def _node_states(model, nodes_s) -> np.ndarray:
+    """The discrete state of every node (kernel codes ``nodes_s``) as names."""
+    # mapped through the few distinct codes (vectorised: runs can have millions of nodes)
+    N = len(nodes_s)
+    if N and (nodes_s == nodes_s[0]).all():
+        # one discrete state throughout (most short runs): the same array, fewer steps
+        return np.repeat(_label_array(model, tuple(nodes_s[0].tolist())), N)
+    d = nodes_s[1:] != nodes_s[:-1]
+    starts = np.concatenate(([0], np.flatnonzero(d[:, 0] | d[:, 1] | d[:, 2]) + 1))[:N]
+    label: dict = {}
+    for code in map(tuple, nodes_s[starts].tolist()):
+        if code not in label:
+            label[code] = _state_name(model, *code)
+    run_names = np.array([label[c] for c in map(tuple, nodes_s[starts].tolist())], dtype=str)
+    return (np.full(N, run_names[0]) if len(starts) == 1 else
+            np.repeat(run_names, np.diff(np.append(starts, N))))
+
+
+class _TrajectoryParts:
+    """Makes the deferred fields of a run's trajectory (:class:`pwsdyn.integrate.trajectory.
+    _Deferred`) from the run's arrays when they are first read.
+
+    ``model`` is the model the run used, read only for names (states, modes, events,
+    parameters) and its digest and hash; ``copy`` (or None) makes the model the trajectory
+    hands out: a model given by name runs on the loaded original
+    (:func:`pwsdyn.model.spec.loaded_original`), which is never handed out, and the
+    trajectory's own copy is made only if ``traj.model`` (or the event log, which holds it)
+    is read."""
+
+    __slots__ = ("res", "model", "copy", "opts", "t0")
+
+    def __init__(self, res, model, copy, opts, t0):
+        self.res, self.model, self.copy, self.opts, self.t0 = res, model, copy, opts, t0
+
+    def __call__(self, traj, name):
+        res, model, opts = self.res, self.model, self.opts
+        raw = res._raw
+        if name == "state":
+            return _node_states(model, raw.nodes_s)
+        if name == "model":
+            return model if self.copy is None else self.copy()
+        if name == "events":
+            # the event log as arrays; its records are made when it is read (sweeps read
+            # columns); it holds the trajectory's model
+            return res.event_log(traj.model)
+        if name == "stats":
+            return dict(zip(STATS, res._stats.tolist()))
+        cm, pv, etab, stab, kopts, tab, x_start, method = res._run
+        if name == "params":
+            return dict(zip(model.parameters, pv.tolist()))
+        if name == "options":
+            return {**{k: v for k, v in opts.items() if k != "throw"}, "method": method}
+        if name == "provenance":
+            return {"model": model.name, "model_hash": model.hash,
+                    "pwsdyn_version": __version__}
+        if name == "_dense":
+            if not opts["dense"]:
+                return None
+            if kopts[0]["save"] == SAVE_NODES:
+                return _lazy_dense(cm, pv, etab, stab, kopts, tab, float(self.t0), x_start,
+                                   raw.nodes_t, raw.nodes_y, raw.nodes_s, raw.hstep,
+                                   raw.dense.shape[2])
+            return raw.dense
+        raise AttributeError(name)
+
+
+def run_trajectory(res, model, opts, t0, t_end, copy=None) -> Trajectory:
+    """:meth:`RunResult.trajectory`; ``copy`` (a model given by name): makes the model the
+    trajectory hands out, ``model`` being the loaded original the run read
+    (:class:`_TrajectoryParts`).
+
+    The arrays and scalars are set now; the other fields when first read (the values are
+    those :class:`~pwsdyn.Trajectory`'s constructor would have been given)."""
+    raw = res._raw
+    n = model.n_states
+    tr = Trajectory.__new__(Trajectory)
+    d = tr.__dict__
+    d.update(t=raw.nodes_t, x=raw.nodes_y[:, :n].copy(), status=res.status,
+             message=res.status.message, t0=t0, t_end=t_end, jacobian=res.jacobian,
+             transfer_matrices=res.transfer_matrices,
+             final_discrete_state=tuple(raw.state.tolist()),
+             samples=None if res.samples_t is None else (res.samples_t, res.samples_x),
+             _ikind=raw.ikind, _y=raw.nodes_y,
+             _make=_TrajectoryParts(res, model, copy, opts, t0))
+    if copy is None:
+        d["model"] = model
+    return tr
 
 
 def load_kernel() -> None:
