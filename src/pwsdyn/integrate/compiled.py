@@ -189,10 +189,45 @@ class RunResult:
         steps.
     """
 
-    __slots__ = ("status", "t", "x", "state", "event_t", "event_t_after", "event_kind",
-                 "event_ref", "event_state_before", "event_state_after", "event_x_before",
-                 "event_x_after", "samples_t", "samples_x", "jacobian", "transfer_matrices",
-                 "_raw", "_run", "_stats", "_model", "_events")
+    __slots__ = ("status", "t", "x", "event_t", "event_t_after", "samples_t", "samples_x",
+                 "jacobian", "transfer_matrices", "_raw", "_run", "_stats", "_model",
+                 "_events", "_xb", "_xa")
+
+    # the columns below are views of (or, for the states, copies made once from) the
+    # kernel's arrays, made when read: simulate() reads none of them, and a one-period run
+    # cost about as much in making them as in integrating
+
+    @property
+    def state(self) -> "KernelState":
+        return KernelState(*self._raw.state.tolist())
+
+    @property
+    def event_kind(self) -> np.ndarray:
+        return self._raw.ev_info[:, 0]
+
+    @property
+    def event_ref(self) -> np.ndarray:
+        return self._raw.ev_info[:, 1]
+
+    @property
+    def event_state_before(self) -> np.ndarray:
+        return self._raw.ev_info[:, 2:5]
+
+    @property
+    def event_state_after(self) -> np.ndarray:
+        return self._raw.ev_info[:, 5:8]
+
+    @property
+    def event_x_before(self) -> np.ndarray:
+        if self._xb is None:
+            self._xb = self._raw.ev_xb[:, :self.x.shape[0]].copy()
+        return self._xb
+
+    @property
+    def event_x_after(self) -> np.ndarray:
+        if self._xa is None:
+            self._xa = self._raw.ev_xa[:, :self.x.shape[0]].copy()
+        return self._xa
 
     @property
     def failed(self) -> bool:
@@ -358,6 +393,12 @@ def _lazy_dense(cm, p, etab, stab, kopts, tab, t0, x0, nodes_t, nodes_y, nodes_s
     return LazyDense((len(hstep), nodes_y.shape[1], deg), rebuild)
 
 
+#: Kernel option records by the values they are made from (:func:`run_compiled`).
+_KOPTS: dict = {}
+#: The run statuses by the kernel's code.
+_STATUS = {int(s): s for s in Status}
+
+
 def run_compiled(cm, x, t0, t_end, p, opts, mode0=None, dkind0=None, didx0=None, stop=None,
                  sample=None, admit=True, refuse=False, store_dense=False, model=None,
                  checked=False) -> RunResult:
@@ -408,19 +449,42 @@ def run_compiled(cm, x, t0, t_end, p, opts, mode0=None, dkind0=None, didx0=None,
     # with the variational equations, whose nodes are transformed after the run
     save = (SAVE_EVENTS if not opts["dense"] else
             SAVE_DENSE if opts["variational"] or store_dense else SAVE_NODES)
-    kopts = kernel_options(
-        mode0=mode0, n_modes=len(model.modes), max_steps=opts["max_steps"],
-        max_events=opts["max_events"], method=tab.code, order=tab.order,
-        variational=VAR_SEGMENTS if opts["variational"] else VAR_NONE, chatter=opts["chatter"],
-        save=save, stop=_stop_code(stop, model), dkind0=0 if dkind0 is None else dkind0,
-        didx0=-1 if didx0 is None else didx0, exact=_exact_code(model, opts["exact"]),
-        rtol=opts["rtol"], atol=opts["atol"], first_step=opts["first_step"] or 0.0,
-        max_step=_max_step(model, p, opts["max_step"]),
-        # negative: the default ratio, applied where the map is accurate
-        chatter_ratio=(-DEFAULT_CHATTER_RATIO if opts["chatter_ratio"] is None
-                       else opts["chatter_ratio"]),
-        chatter_velocity=-1.0 if opts["chatter_velocity"] is None else opts["chatter_velocity"],
-        sliding_gain=opts["sliding_gain"], sample=sample)
+    stop_code = _stop_code(stop, model)
+    dkind0 = 0 if dkind0 is None else dkind0
+    didx0 = -1 if didx0 is None else didx0
+    exact = _exact_code(model, opts["exact"])
+    max_step = _max_step(model, p, opts["max_step"])
+    # the record is a function of these values (and of the types of those a caller passes,
+    # which kernel_options checks): loops pass the same ones on every call. The kernel
+    # reads the record only, so runs share it.
+    key = (mode0, type(mode0), dkind0, type(dkind0), didx0, type(didx0), len(model.modes),
+           tab.code, tab.order, opts["variational"], opts["chatter"], save, stop_code,
+           None if stop_code is None else tuple(map(type, stop_code)), sample, exact,
+           max_step, opts["max_steps"], opts["max_events"], opts["rtol"], opts["atol"],
+           opts["first_step"], opts["chatter_ratio"], opts["chatter_velocity"],
+           opts["sliding_gain"])
+    try:
+        kopts = _KOPTS.get(key)
+    except TypeError:       # an unhashable value (a list for ``sample``): made every time
+        key = kopts = None
+    if kopts is None:
+        kopts = kernel_options(
+            mode0=mode0, n_modes=len(model.modes), max_steps=opts["max_steps"],
+            max_events=opts["max_events"], method=tab.code, order=tab.order,
+            variational=VAR_SEGMENTS if opts["variational"] else VAR_NONE,
+            chatter=opts["chatter"], save=save, stop=stop_code, dkind0=dkind0, didx0=didx0,
+            exact=exact, rtol=opts["rtol"], atol=opts["atol"],
+            first_step=opts["first_step"] or 0.0, max_step=max_step,
+            # negative: the default ratio, applied where the map is accurate
+            chatter_ratio=(-DEFAULT_CHATTER_RATIO if opts["chatter_ratio"] is None
+                           else opts["chatter_ratio"]),
+            chatter_velocity=(-1.0 if opts["chatter_velocity"] is None
+                              else opts["chatter_velocity"]),
+            sliding_gain=opts["sliding_gain"], sample=sample)
+        if key is not None:
+            if len(_KOPTS) >= 1024:
+                _KOPTS.clear()
+            _KOPTS[key] = kopts
     pv = np.ascontiguousarray(p if p.size else np.zeros(1), dtype=float)
     x = np.array(x, dtype=float)
     raw = KernelResult(*K.run_kernel(cm.evaluate, float(t0), float(t_end), x, pv, etab, eact,
@@ -438,20 +502,16 @@ def run_compiled(cm, x, t0, t_end, p, opts, mode0=None, dkind0=None, didx0=None,
     r._stats = raw.stats
     r._model = model
     r._events = None
-    r.status = Status(int(raw.status))
+    status = _STATUS.get(raw.status)
+    r.status = Status(int(raw.status)) if status is None else status
     # the end as the trajectory's last node (``Trajectory.x_final``), the kernel's end state
     # for a run without nodes
     if len(raw.nodes_t):
         r.t, r.x = float(raw.nodes_t[-1]), raw.nodes_y[-1, :n]
     else:
         r.t, r.x = float(raw.t), raw.y[:n]
-    r.state = KernelState(*raw.state.tolist())
-    info = raw.ev_info
     r.event_t, r.event_t_after = raw.ev_t, raw.ev_t2
-    r.event_kind, r.event_ref = info[:, 0], info[:, 1]
-    r.event_state_before, r.event_state_after = info[:, 2:5], info[:, 5:8]
-    r.event_x_before = raw.ev_xb[:, :n].copy()
-    r.event_x_after = raw.ev_xa[:, :n].copy()
+    r._xb = r._xa = None
     if sample is not None:
         r.samples_t, r.samples_x = raw.samples[:, 0].copy(), raw.samples[:, 1:].copy()
     else:
