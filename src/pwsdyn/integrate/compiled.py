@@ -365,7 +365,8 @@ def run_trajectory(res, model, opts, t0, t_end, copy=None) -> Trajectory:
              final_discrete_state=tuple(raw.state.tolist()),
              samples=None if res.samples_t is None else (res.samples_t, res.samples_x),
              _ikind=raw.ikind, _y=raw.nodes_y,
-             _make=_TrajectoryParts(res, model, copy, opts, t0))
+             # (the options as they are now: a caller may reuse and change its dict)
+             _make=_TrajectoryParts(res, model, copy, dict(opts), t0))
     if copy is None:
         d["model"] = model
     return tr

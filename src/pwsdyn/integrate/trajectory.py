@@ -401,6 +401,13 @@ class Trajectory:
         The kernel's discrete state at the end, ``(kind, index, mode)`` (kind 0 a mode, 1
         sticking on event ``index``, 2 sliding on switch ``index``): a run continued from
         ``x_final`` starts in it (the ``dkind0``/``didx0``/``mode0`` of the internal runner).
+
+    Notes
+    -----
+    A trajectory returned by a run makes ``state``, ``events``, ``stats``, ``params``,
+    ``options``, ``provenance``, its dense output and, for a model given by name, its own
+    copy of the model when each is first read, then keeps it: the values are those it
+    would have been built with.
     """
 
     t: np.ndarray
