@@ -315,13 +315,17 @@ def loaded_original(name: str):
     when ``traj.model`` is first read, so a model by name costs a file check per call, not a
     copy, and every trajectory still has a model of its own. Reading the file's key on every
     call keeps the rule of :func:`load_model`: an edited file is read again."""
-    if "\n" in name:
-        return None
-    # the file load_model would read (a built-in name first, as there)
-    path = zoo_path(name) if name in _ZOO_NAMES[1] or name in _zoo_names() else Path(name)
+    # the file load_model would read (a built-in name first, as there); a built-in name
+    # looked up before is in _ZOO_PATHS (a file of it removed since: its key is None below)
+    path = _ZOO_PATHS.get(name)
+    if path is None:
+        if "\n" in name:
+            return None
+        path = zoo_path(name) if name in _ZOO_NAMES[1] or name in _zoo_names() else Path(name)
     hit = _LOADED.get(str(path))
     if hit is None:
         return None
+    # the one system call per call: an edited file is read again (load_model's rule)
     key = _file_key(path)
     if key is None or hit[0] != key:
         return None
