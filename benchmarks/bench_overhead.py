@@ -12,7 +12,9 @@ the :class:`~pwsdyn.Trajectory` and its event log -- is most of it. Rows, CPU ti
   period;
 * ``object dense``, ``object dense=False``: ``simulate(model, x0, (0, T))`` with a loaded
   ``Model``;
-* ``name dense``, ``name dense=False``: the same with the model given by its name.
+* ``name dense``, ``name dense=False``: the same with the model given by its name (after
+  its first load the difference is the model file's check, one ``stat``: an edited file is
+  read again).
 
 The overhead of a call is its time less the kernel call's, reported in periods of the
 integration (the ``kernel x{P}`` time per period). ``--base PATH`` times a second source tree

@@ -189,10 +189,45 @@ class RunResult:
         steps.
     """
 
-    __slots__ = ("status", "t", "x", "state", "event_t", "event_t_after", "event_kind",
-                 "event_ref", "event_state_before", "event_state_after", "event_x_before",
-                 "event_x_after", "samples_t", "samples_x", "jacobian", "transfer_matrices",
-                 "_raw", "_run", "_stats", "_model", "_events")
+    __slots__ = ("status", "t", "x", "event_t", "event_t_after", "samples_t", "samples_x",
+                 "jacobian", "transfer_matrices", "_raw", "_run", "_stats", "_model",
+                 "_events", "_xb", "_xa")
+
+    # the columns below are views of (or, for the states, copies made once from) the
+    # kernel's arrays, made when read: simulate() reads none of them, and a one-period run
+    # cost about as much in making them as in integrating
+
+    @property
+    def state(self) -> "KernelState":
+        return KernelState(*self._raw.state.tolist())
+
+    @property
+    def event_kind(self) -> np.ndarray:
+        return self._raw.ev_info[:, 0]
+
+    @property
+    def event_ref(self) -> np.ndarray:
+        return self._raw.ev_info[:, 1]
+
+    @property
+    def event_state_before(self) -> np.ndarray:
+        return self._raw.ev_info[:, 2:5]
+
+    @property
+    def event_state_after(self) -> np.ndarray:
+        return self._raw.ev_info[:, 5:8]
+
+    @property
+    def event_x_before(self) -> np.ndarray:
+        if self._xb is None:
+            self._xb = self._raw.ev_xb[:, :self.x.shape[0]].copy()
+        return self._xb
+
+    @property
+    def event_x_after(self) -> np.ndarray:
+        if self._xa is None:
+            self._xa = self._raw.ev_xa[:, :self.x.shape[0]].copy()
+        return self._xa
 
     @property
     def failed(self) -> bool:
@@ -237,51 +272,7 @@ class RunResult:
     def trajectory(self, model, opts, t0: float, t_end: float) -> Trajectory:
         """The :class:`~pwsdyn.Trajectory` of this run (``opts``: the options it ran with;
         ``model`` the model it carries)."""
-        raw = self._raw
-        cm, pv, etab, stab, kopts, tab, x_start, method = self._run
-        n = model.n_states
-        dense = raw.dense
-        if opts["dense"] and kopts[0]["save"] == SAVE_NODES:
-            dense = _lazy_dense(cm, pv, etab, stab, kopts, tab, float(t0), x_start,
-                                raw.nodes_t, raw.nodes_y, raw.nodes_s, raw.hstep,
-                                raw.dense.shape[2])
-        nodes_s = raw.nodes_s
-        # discrete state per node, mapped through the few distinct codes (vectorised: runs
-        # can have millions of nodes)
-        N = len(nodes_s)
-        if N and (nodes_s == nodes_s[0]).all():
-            # one discrete state throughout (most short runs): the same array, fewer steps
-            states = np.repeat(_label_array(model, tuple(nodes_s[0].tolist())), N)
-        else:
-            d = nodes_s[1:] != nodes_s[:-1]
-            starts = np.concatenate(([0], np.flatnonzero(d[:, 0] | d[:, 1] | d[:, 2]) + 1))[:N]
-            label: dict = {}
-            for code in map(tuple, nodes_s[starts].tolist()):
-                if code not in label:
-                    label[code] = _state_name(model, *code)
-            run_names = np.array([label[c] for c in map(tuple, nodes_s[starts].tolist())],
-                                 dtype=str)
-            states = (np.full(N, run_names[0]) if len(starts) == 1 else
-                      np.repeat(run_names, np.diff(np.append(starts, N))))
-        # the event log as arrays; its records are made when it is read (sweeps read columns)
-        events = self.event_log(model)
-        stat = dict(zip(STATS, self._stats.tolist()))
-        params = dict(zip(model.parameters, pv.tolist()))
-        samples = None if self.samples_t is None else (self.samples_t, self.samples_x)
-        return Trajectory(
-            t=raw.nodes_t, x=raw.nodes_y[:, :n].copy(), state=states, events=events,
-            status=self.status, message=self.status.message, stats=stat, model=model,
-            params=params,
-            options={**{k: v for k, v in opts.items() if k != "throw"}, "method": method},
-            t0=t0, t_end=t_end,
-            jacobian=self.jacobian, transfer_matrices=self.transfer_matrices,
-            final_discrete_state=tuple(raw.state.tolist()),
-            samples=samples,
-            _dense=dense if opts["dense"] else None,
-            _ikind=raw.ikind, _y=raw.nodes_y,
-            provenance={"model": model.name, "model_hash": model.hash,
-                        "pwsdyn_version": __version__},
-        )
+        return run_trajectory(self, model, opts, t0, t_end)
 
     def solve_error(self, model, result=None) -> SolveError:
         """The :class:`~pwsdyn.errors.SolveError` of a failed run."""
@@ -289,6 +280,96 @@ class RunResult:
         n = model.n_states
         return SolveError(self.status, float(raw.t), dict(zip(model.states, raw.y[:n])),
                           _state_name(model, *raw.state), result=result)
+
+
+def _node_states(model, nodes_s) -> np.ndarray:
+    """The discrete state of every node (kernel codes ``nodes_s``) as names."""
+    # mapped through the few distinct codes (vectorised: runs can have millions of nodes)
+    N = len(nodes_s)
+    if N and (nodes_s == nodes_s[0]).all():
+        # one discrete state throughout (most short runs): the same array, fewer steps
+        return np.repeat(_label_array(model, tuple(nodes_s[0].tolist())), N)
+    d = nodes_s[1:] != nodes_s[:-1]
+    starts = np.concatenate(([0], np.flatnonzero(d[:, 0] | d[:, 1] | d[:, 2]) + 1))[:N]
+    label: dict = {}
+    for code in map(tuple, nodes_s[starts].tolist()):
+        if code not in label:
+            label[code] = _state_name(model, *code)
+    run_names = np.array([label[c] for c in map(tuple, nodes_s[starts].tolist())], dtype=str)
+    return (np.full(N, run_names[0]) if len(starts) == 1 else
+            np.repeat(run_names, np.diff(np.append(starts, N))))
+
+
+class _TrajectoryParts:
+    """Makes the deferred fields of a run's trajectory (:class:`pwsdyn.integrate.trajectory.
+    _Deferred`) from the run's arrays when they are first read.
+
+    ``model`` is the model the run used, read only for names (states, modes, events,
+    parameters) and its digest and hash; ``copy`` (or None) makes the model the trajectory
+    hands out: a model given by name runs on the loaded original
+    (:func:`pwsdyn.model.spec.loaded_original`), which is never handed out, and the
+    trajectory's own copy is made only if ``traj.model`` (or the event log, which holds it)
+    is read."""
+
+    __slots__ = ("res", "model", "copy", "opts", "t0")
+
+    def __init__(self, res, model, copy, opts, t0):
+        self.res, self.model, self.copy, self.opts, self.t0 = res, model, copy, opts, t0
+
+    def __call__(self, traj, name):
+        res, model, opts = self.res, self.model, self.opts
+        raw = res._raw
+        if name == "state":
+            return _node_states(model, raw.nodes_s)
+        if name == "model":
+            return model if self.copy is None else self.copy()
+        if name == "events":
+            # the event log as arrays; its records are made when it is read (sweeps read
+            # columns); it holds the trajectory's model
+            return res.event_log(traj.model)
+        if name == "stats":
+            return dict(zip(STATS, res._stats.tolist()))
+        cm, pv, etab, stab, kopts, tab, x_start, method = res._run
+        if name == "params":
+            return dict(zip(model.parameters, pv.tolist()))
+        if name == "options":
+            return {**{k: v for k, v in opts.items() if k != "throw"}, "method": method}
+        if name == "provenance":
+            return {"model": model.name, "model_hash": model.hash,
+                    "pwsdyn_version": __version__}
+        if name == "_dense":
+            if not opts["dense"]:
+                return None
+            if kopts[0]["save"] == SAVE_NODES:
+                return _lazy_dense(cm, pv, etab, stab, kopts, tab, float(self.t0), x_start,
+                                   raw.nodes_t, raw.nodes_y, raw.nodes_s, raw.hstep,
+                                   raw.dense.shape[2])
+            return raw.dense
+        raise AttributeError(name)
+
+
+def run_trajectory(res, model, opts, t0, t_end, copy=None) -> Trajectory:
+    """:meth:`RunResult.trajectory`; ``copy`` (a model given by name): makes the model the
+    trajectory hands out, ``model`` being the loaded original the run read
+    (:class:`_TrajectoryParts`).
+
+    The arrays and scalars are set now; the other fields when first read (the values are
+    those :class:`~pwsdyn.Trajectory`'s constructor would have been given)."""
+    raw = res._raw
+    n = model.n_states
+    tr = Trajectory.__new__(Trajectory)
+    d = tr.__dict__
+    d.update(t=raw.nodes_t, x=raw.nodes_y[:, :n].copy(), status=res.status,
+             message=res.status.message, t0=t0, t_end=t_end, jacobian=res.jacobian,
+             transfer_matrices=res.transfer_matrices,
+             final_discrete_state=tuple(raw.state.tolist()),
+             samples=None if res.samples_t is None else (res.samples_t, res.samples_x),
+             _ikind=raw.ikind, _y=raw.nodes_y,
+             # (the options as they are now: a caller may reuse and change its dict)
+             _make=_TrajectoryParts(res, model, copy, dict(opts), t0))
+    if copy is None:
+        d["model"] = model
+    return tr
 
 
 def load_kernel() -> None:
@@ -311,6 +392,12 @@ def _lazy_dense(cm, p, etab, stab, kopts, tab, t0, x0, nodes_t, nodes_y, nodes_s
                                            deg)
 
     return LazyDense((len(hstep), nodes_y.shape[1], deg), rebuild)
+
+
+#: Kernel option records by the values they are made from (:func:`run_compiled`).
+_KOPTS: dict = {}
+#: The run statuses by the kernel's code.
+_STATUS = {int(s): s for s in Status}
 
 
 def run_compiled(cm, x, t0, t_end, p, opts, mode0=None, dkind0=None, didx0=None, stop=None,
@@ -363,19 +450,42 @@ def run_compiled(cm, x, t0, t_end, p, opts, mode0=None, dkind0=None, didx0=None,
     # with the variational equations, whose nodes are transformed after the run
     save = (SAVE_EVENTS if not opts["dense"] else
             SAVE_DENSE if opts["variational"] or store_dense else SAVE_NODES)
-    kopts = kernel_options(
-        mode0=mode0, n_modes=len(model.modes), max_steps=opts["max_steps"],
-        max_events=opts["max_events"], method=tab.code, order=tab.order,
-        variational=VAR_SEGMENTS if opts["variational"] else VAR_NONE, chatter=opts["chatter"],
-        save=save, stop=_stop_code(stop, model), dkind0=0 if dkind0 is None else dkind0,
-        didx0=-1 if didx0 is None else didx0, exact=_exact_code(model, opts["exact"]),
-        rtol=opts["rtol"], atol=opts["atol"], first_step=opts["first_step"] or 0.0,
-        max_step=_max_step(model, p, opts["max_step"]),
-        # negative: the default ratio, applied where the map is accurate
-        chatter_ratio=(-DEFAULT_CHATTER_RATIO if opts["chatter_ratio"] is None
-                       else opts["chatter_ratio"]),
-        chatter_velocity=-1.0 if opts["chatter_velocity"] is None else opts["chatter_velocity"],
-        sliding_gain=opts["sliding_gain"], sample=sample)
+    stop_code = _stop_code(stop, model)
+    dkind0 = 0 if dkind0 is None else dkind0
+    didx0 = -1 if didx0 is None else didx0
+    exact = _exact_code(model, opts["exact"])
+    max_step = _max_step(model, p, opts["max_step"])
+    # the record is a function of these values (and of the types of those a caller passes,
+    # which kernel_options checks): loops pass the same ones on every call. The kernel
+    # reads the record only, so runs share it.
+    key = (mode0, type(mode0), dkind0, type(dkind0), didx0, type(didx0), len(model.modes),
+           tab.code, tab.order, opts["variational"], opts["chatter"], save, stop_code,
+           None if stop_code is None else tuple(map(type, stop_code)), sample, exact,
+           max_step, opts["max_steps"], opts["max_events"], opts["rtol"], opts["atol"],
+           opts["first_step"], opts["chatter_ratio"], opts["chatter_velocity"],
+           opts["sliding_gain"])
+    try:
+        kopts = _KOPTS.get(key)
+    except TypeError:       # an unhashable value (a list for ``sample``): made every time
+        key = kopts = None
+    if kopts is None:
+        kopts = kernel_options(
+            mode0=mode0, n_modes=len(model.modes), max_steps=opts["max_steps"],
+            max_events=opts["max_events"], method=tab.code, order=tab.order,
+            variational=VAR_SEGMENTS if opts["variational"] else VAR_NONE,
+            chatter=opts["chatter"], save=save, stop=stop_code, dkind0=dkind0, didx0=didx0,
+            exact=exact, rtol=opts["rtol"], atol=opts["atol"],
+            first_step=opts["first_step"] or 0.0, max_step=max_step,
+            # negative: the default ratio, applied where the map is accurate
+            chatter_ratio=(-DEFAULT_CHATTER_RATIO if opts["chatter_ratio"] is None
+                           else opts["chatter_ratio"]),
+            chatter_velocity=(-1.0 if opts["chatter_velocity"] is None
+                              else opts["chatter_velocity"]),
+            sliding_gain=opts["sliding_gain"], sample=sample)
+        if key is not None:
+            if len(_KOPTS) >= 1024:
+                _KOPTS.clear()
+            _KOPTS[key] = kopts
     pv = np.ascontiguousarray(p if p.size else np.zeros(1), dtype=float)
     x = np.array(x, dtype=float)
     raw = KernelResult(*K.run_kernel(cm.evaluate, float(t0), float(t_end), x, pv, etab, eact,
@@ -393,20 +503,16 @@ def run_compiled(cm, x, t0, t_end, p, opts, mode0=None, dkind0=None, didx0=None,
     r._stats = raw.stats
     r._model = model
     r._events = None
-    r.status = Status(int(raw.status))
+    status = _STATUS.get(raw.status)
+    r.status = Status(int(raw.status)) if status is None else status
     # the end as the trajectory's last node (``Trajectory.x_final``), the kernel's end state
     # for a run without nodes
     if len(raw.nodes_t):
         r.t, r.x = float(raw.nodes_t[-1]), raw.nodes_y[-1, :n]
     else:
         r.t, r.x = float(raw.t), raw.y[:n]
-    r.state = KernelState(*raw.state.tolist())
-    info = raw.ev_info
     r.event_t, r.event_t_after = raw.ev_t, raw.ev_t2
-    r.event_kind, r.event_ref = info[:, 0], info[:, 1]
-    r.event_state_before, r.event_state_after = info[:, 2:5], info[:, 5:8]
-    r.event_x_before = raw.ev_xb[:, :n].copy()
-    r.event_x_after = raw.ev_xa[:, :n].copy()
+    r._xb = r._xa = None
     if sample is not None:
         r.samples_t, r.samples_x = raw.samples[:, 0].copy(), raw.samples[:, 1:].copy()
     else:

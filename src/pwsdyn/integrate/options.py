@@ -160,8 +160,23 @@ def _max_step(model, p, max_step) -> float:
     """The largest step: the user's, else a quarter forcing period for forced models."""
     if math.isfinite(max_step) or model.forcing_period is None:
         return min(max_step, 1e300)
-    period = model.forcing_period_function(*p)
-    return period / 4.0 if math.isfinite(period) and period > 0 else 1e300
+    fn = model.forcing_period_function
+    # by the function and the parameter vector's bits (loops run at the same parameters;
+    # the key holds the function, so its identity is not reused while the entry lives)
+    key = (fn, p.dtype.str, p.tobytes()) if isinstance(p, np.ndarray) else None
+    step = _PERIOD_STEPS.get(key)
+    if step is None:
+        period = fn(*p)
+        step = period / 4.0 if math.isfinite(period) and period > 0 else 1e300
+        if key is not None:
+            if len(_PERIOD_STEPS) >= 1024:
+                _PERIOD_STEPS.clear()
+            _PERIOD_STEPS[key] = step
+    return step
+
+
+#: :func:`_max_step`'s default for forced models, by period function and parameters.
+_PERIOD_STEPS: dict = {}
 
 
 _TABLES: dict = {}

@@ -16,8 +16,9 @@ from .. import _validate as V
 from ..errors import ArgumentError
 from ..model import codegen as _codegen, compile_model
 from ..model.codegen import CompiledModel
-from ..model.spec import as_model, run_defaults
-from .compiled import _state_name, run_compiled  # noqa: F401 (_state_name: kept importable)
+from ..model.spec import as_model, loaded_original, run_defaults
+from .compiled import (_state_name, run_compiled,  # noqa: F401 (_state_name: kept importable)
+                       run_trajectory)
 # the options live in .options; kept importable from here (tests, the command line)
 from .options import (AUTO_DOP853_BELOW, DEFAULT_CHATTER_RATIO, DEFAULTS,  # noqa: F401
                       MAX_BUDGET, SLIDING_METHODS, _check_exact, _check_options, check_mode,
@@ -190,7 +191,19 @@ def simulate(model: ModelLike, x0: StateLike | Trajectory | None = None,
     'impact'
     """
     opts = integrator_options(options, "simulate()")
-    model = as_model(model, kind="flow", caller="simulate()")
+    copy = None
+    if type(model) is str:
+        # a name (or path) loaded before and unchanged: the run reads the loaded original,
+        # the trajectory makes its own copy when its model is read (loaded_original). Not a
+        # cheaper copy per call: load_model's copy (dicts and the parsed file unmarshalled,
+        # then freed) cost ~10 us, a one-period run ~4 us; checking the file's key costs a
+        # stat, and every trajectory still hands out a model of its own, so a caller that
+        # changes it changes no other trajectory and no later load.
+        hit = loaded_original(model)
+        if hit is not None and not getattr(hit[0], "is_map", False):
+            model, copy = hit
+    if copy is None:
+        model = as_model(model, kind="flow", caller="simulate()")
     cont = x0 if isinstance(x0, Trajectory) else None
     if cont is not None:
         params = _continued_params(model, cont, opts, params)
@@ -222,9 +235,10 @@ def simulate(model: ModelLike, x0: StateLike | Trajectory | None = None,
     if state is not None and t0 == cont.t_final and len(state) == 3:
         kind, idx, mode0 = (int(v) for v in state)
         return _simulate_compiled(cm, x, t0, t_end, p, opts, mode0=mode0, dkind0=kind,
-                                  didx0=idx, refuse=True, model=model, checked=True)
+                                  didx0=idx, refuse=True, model=model, checked=True,
+                                  copy=copy)
     return _simulate_compiled(cm, x, t0, t_end, p, opts, refuse=True, model=model,
-                              checked=True)
+                              checked=True, copy=copy)
 
 
 def _compiled(model) -> CompiledModel:
@@ -293,10 +307,13 @@ def _time_span(t_span, name: str = "t_span", t0=None):
 
 def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dkind0=None,
                        didx0=None, stop=None, sample=None, admit=True, refuse=False,
-                       store_dense=False, model=None, checked=False) -> Trajectory:
+                       store_dense=False, model=None, checked=False,
+                       copy=None) -> Trajectory:
     """:func:`~pwsdyn.integrate.compiled.run_compiled` (the one run entry point, arguments
     as there) with its result made a :class:`Trajectory`, raising :class:`SolveError` for a
-    failed run with ``opts["throw"]``: the run behind :func:`simulate`."""
+    failed run with ``opts["throw"]``: the run behind :func:`simulate`. ``copy``: makes the
+    trajectory's model where ``model`` is a loaded original that is not handed out
+    (:func:`~pwsdyn.integrate.compiled.run_trajectory`)."""
     if not checked:
         _check_options(opts)
     if model is None:
@@ -304,7 +321,7 @@ def _simulate_compiled(cm: CompiledModel, x, t0, t_end, p, opts, mode0=None, dki
     res = run_compiled(cm, x, t0, t_end, p, opts, mode0=mode0, dkind0=dkind0, didx0=didx0,
                        stop=stop, sample=sample, admit=admit, refuse=refuse,
                        store_dense=store_dense, model=model, checked=True)
-    traj = res.trajectory(model, opts, t0, t_end)
+    traj = run_trajectory(res, model, opts, t0, t_end, copy)
     if res.status.failed and opts["throw"]:
         raise res.solve_error(model, result=traj)
     return traj

@@ -401,6 +401,13 @@ class Trajectory:
         The kernel's discrete state at the end, ``(kind, index, mode)`` (kind 0 a mode, 1
         sticking on event ``index``, 2 sliding on switch ``index``): a run continued from
         ``x_final`` starts in it (the ``dkind0``/``didx0``/``mode0`` of the internal runner).
+
+    Notes
+    -----
+    A trajectory returned by a run makes ``state``, ``events``, ``stats``, ``params``,
+    ``options``, ``provenance``, its dense output and, for a model given by name, its own
+    copy of the model when each is first read, then keeps it: the values are those it
+    would have been built with.
     """
 
     t: np.ndarray
@@ -433,6 +440,16 @@ class Trajectory:
             self.events = EventLog.from_records(self.model, self.events,
                                                 n=np.shape(self.x)[1] if np.ndim(self.x) == 2
                                                 else None)
+
+    def __getstate__(self):
+        # a trajectory with deferred fields (see _Deferred) pickles and copies as one with
+        # every field made: the function making them is the run's, not data
+        d = self.__dict__
+        if "_make" in d:
+            for name in DEFERRED_FIELDS:
+                getattr(self, name)
+            d = {k: v for k, v in d.items() if k != "_make"}
+        return d
 
     # ------------------------------------------------------------------------------------
     @property
@@ -665,6 +682,47 @@ class Trajectory:
         from .._netcdf import save_dataset
 
         return save_dataset(self.to_dataset(), path, overwrite=overwrite)
+
+
+_NO_DEFAULT = object()
+
+
+class _Deferred:
+    """A field of :class:`Trajectory` made when first read, then kept in the instance.
+
+    A trajectory from a run (:meth:`pwsdyn.integrate.compiled.RunResult.trajectory`) is
+    created with its arrays only and a function ``_make(traj, name)`` in its ``__dict__``;
+    the discrete state per node, the event log, the statistics, parameter and option dicts,
+    the provenance, the dense output (and, for a model given by name, the model's own copy)
+    are made by it on first access: ``simulate()`` of a short span cost more in building
+    them than in integrating, and most callers read a few of them. A non-data descriptor: a
+    value in the instance's ``__dict__`` (from ``__init__``, an assignment, or the first
+    read) takes precedence, so a trajectory built by its constructor never comes here."""
+
+    __slots__ = ("name", "default")
+
+    def __init__(self, name, default):
+        self.name = name
+        self.default = default
+
+    def __get__(self, obj, cls=None):
+        if obj is None:
+            if self.default is _NO_DEFAULT:
+                raise AttributeError(self.name)
+            return self.default
+        make = obj.__dict__.get("_make")
+        if make is None:
+            raise AttributeError(f"'Trajectory' object has no attribute {self.name!r}")
+        value = obj.__dict__[self.name] = make(obj, self.name)
+        return value
+
+
+#: The fields of :class:`Trajectory` that a run's trajectory makes when first read.
+DEFERRED_FIELDS = ("state", "events", "stats", "model", "params", "options", "provenance",
+                   "_dense")
+for _name in DEFERRED_FIELDS:
+    setattr(Trajectory, _name, _Deferred(_name, Trajectory.__dict__.get(_name, _NO_DEFAULT)))
+del _name
 
 
 def trajectory_to_dataset(traj) -> xr.Dataset:

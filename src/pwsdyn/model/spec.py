@@ -304,6 +304,35 @@ def _load_file(path: Path, key) -> "Model":
     return model
 
 
+def loaded_original(name: str):
+    """``(model, copy)`` for a model name or path whose file is in :data:`_LOADED` and
+    unchanged (the same :func:`_file_key`): the kept model itself, never to be handed out or
+    changed, and a function making the copy :func:`load_model` would return; None otherwise
+    (not loaded yet, edited, a TOML string).
+
+    For a caller that only *reads* the model during a call and hands a copy out later, if at
+    all: :func:`pwsdyn.simulate` runs on the kept model and gives its trajectory the copy
+    when ``traj.model`` is first read, so a model by name costs a file check per call, not a
+    copy, and every trajectory still has a model of its own. Reading the file's key on every
+    call keeps the rule of :func:`load_model`: an edited file is read again."""
+    # the file load_model would read (a built-in name first, as there); a built-in name
+    # looked up before is in _ZOO_PATHS (a file of it removed since: its key is None below)
+    path = _ZOO_PATHS.get(name)
+    if path is None:
+        if "\n" in name:
+            return None
+        path = zoo_path(name) if name in _ZOO_NAMES[1] or name in _zoo_names() else Path(name)
+    hit = _LOADED.get(str(path))
+    if hit is None:
+        return None
+    # the one system call per call: an edited file is read again (load_model's rule)
+    key = _file_key(path)
+    if key is None or hit[0] != key:
+        return None
+    _, model, spec_bytes = hit
+    return model, functools.partial(_copy_model, model, spec_bytes)
+
+
 def as_model(value, *, kind: str | None = None, caller: str = "", name: str = "model"):
     """The model an entry point was given: ``value`` loaded with :func:`~pwsdyn.load_model`, a
     wrong type an :class:`~pwsdyn.ArgumentError` naming ``name``; ``kind='flow'`` or ``'map'``
