@@ -17,6 +17,7 @@ import sympy as sp
 from .. import _validate as V
 from ..errors import ArgumentError
 from ..integrate.compiled import run_compiled
+from ..integrate.options import check_options
 from ..integrate.trajectory import DiscreteState
 from ..model.spec import as_model
 from ..newton import TrialRejected, newton
@@ -476,7 +477,9 @@ class _OrbitProblemBase:
     def flow(self, i: int, t: float, z, T: float, opts: dict):
         """``(y, Phi, run)`` of segment ``i``'s discrete state from ``(t, z)`` (extended state
         ``z = (x, p)``) for a duration ``T``: the end state, its Jacobian (with
-        ``opts['variational']``) and the kernel's run (``None`` for no time)."""
+        ``opts['variational']``) and, with ``opts['dense']``, its Trajectory (else None).
+        ``opts``: :meth:`segment_options`, possibly changed; checked here."""
+        check_options(opts)
         return self._flow(i, t, z, T, opts)
 
     def dense_segment(self, i: int, s, p):
@@ -528,7 +531,9 @@ class _OrbitProblemBase:
             t0, t1, mode = t, t + T, fidx
         else:
             t0, t1, mode = -t, -t - T, self.sys.field_index(self.fields[i], reverse=True)
-        run = run_compiled(self.sys.cm, z, t0, t1, self._pv, opts, mode0=mode, admit=False)
+        # opts: the problem's options (checked when it was built) with the segment's settings
+        run = run_compiled(self.sys.cm, z, t0, t1, self._pv, opts, mode0=mode, admit=False,
+                           checked=True)
         if run.status.failed or not np.all(np.isfinite(run.x)) or (
                 run.jacobian is not None and not np.all(np.isfinite(run.jacobian))):
             raise SegmentFailed(i, f"segment {i} ({self.state_names[i]}) could not be "
