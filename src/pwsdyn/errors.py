@@ -176,7 +176,7 @@ _ORBIT_REASONS = {s: s.name.lower() for s in ORBIT_FAILURES}
 _ORBIT_REASONS[Status.NEWTON_DIVERGED] = "diverged"
 _ORBIT_REASONS[Status.SIMULATION_FAILED] = "simulation"
 
-#: How a continued branch can end, in the order of :attr:`Status.value` (-20 down).
+#: How a continued branch can end, in the order of their values (-20 down).
 BRANCH_ENDS = (Status.MAX_POINTS, Status.MAX_ARCLENGTH, Status.STEP_BELOW_DS_MIN,
                Status.SPAN_END, Status.BRANCH_NONFINITE, Status.STOP_AT_SPECIAL_POINT,
                Status.SPAN2_LEFT, Status.SWITCH_FAILED, Status.START_FAILED)

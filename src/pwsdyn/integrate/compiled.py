@@ -374,7 +374,7 @@ def run_trajectory(res, model, opts, t0, t_end, copy=None) -> Trajectory:
 
 def load_kernel() -> None:
     """Compile the integrator (or load it from numba's cache) now, in this process, with its
-    notice (:func:`pwsdyn.integrate._load.kernel`): a caller about to hand runs to workers
+    notice (``integrate._load.kernel``): a caller about to hand runs to workers
     does it once, before them."""
     kernel()
 
@@ -410,10 +410,10 @@ def run_compiled(cm, x, t0, t_end, p, opts, mode0=None, dkind0=None, didx0=None,
     ``dkind0``, ``didx0``: initial discrete state (0 mode, 1 sticking on event ``didx0``, 2
     sliding on switch ``didx0``; default a regular mode ``mode0``, else ``opts["mode"]``, else
     the model's initial mode). A start in a regular mode goes through
-    :func:`pwsdyn.integrate._start.start_state` (``admit``, default True): a state on an
+    ``integrate._start.start_state`` (``admit``, default True): a state on an
     impact constraint (within round-off or the position tolerance ``atol + rtol |x|``) starts
     sticking, with the impact at ``t0`` or in free motion, and one a little behind it
-    (``ADMIT_BEHIND``) is put on it first; one further behind raises :class:`ArgumentError`
+    (``ADMIT_BEHIND``) is put on it first; one further behind raises :class:`~pwsdyn.ArgumentError`
     with ``refuse`` (the public entry points) and is left alone otherwise. Newton iterations
     (shooting) pass ``admit=False``: they integrate exactly the state they are given.
     ``stop``: None, :class:`AfterEvents` or :class:`AtTime` (``t_end`` then stays the
@@ -574,7 +574,8 @@ class KernelState:
     """A discrete state as the kernel codes it: ``kind`` 0 regular mode, 1 sticking on impact
     event ``index``, 2 sliding on switch ``index``; ``mode`` the mode index (for sticking the
     mode whose field is constrained). :meth:`ModelContext.state` and
-    :meth:`ModelContext.state_name` translate to and from :class:`DiscreteState`."""
+    :meth:`ModelContext.state_name` translate to and from
+    :class:`~pwsdyn.integrate.trajectory.DiscreteState`."""
 
     kind: int
     index: int
@@ -790,7 +791,7 @@ class ModelContext:
         """Full and projected saltation matrices at one event (:func:`event_map_saltation`
         with the reset's ``g_x``, ``g_t``, the surface's ``h_x``, ``h_t`` and the fields of
         the discrete states before and after). For ``chatter``: the kernel's full matrix and
-        None (it has no projected form). Raises :class:`ArgumentError` at a grazing event
+        None (it has no projected form). Raises :class:`~pwsdyn.ArgumentError` at a grazing event
         (``|h_t + h_x f_in| <= GRAZING_RTOL |h_x| |f_in|``, the kernel's test)."""
         n = self.n
         x_before = np.asarray(x_before, dtype=float)
@@ -827,7 +828,7 @@ class ModelContext:
     # ---- runs ------------------------------------------------------------------------------
     def start(self, t: float, x, p=None, *, behind_tol: float | None = None) -> Start:
         """The start a run from ``x`` at ``t`` in the model's initial mode takes
-        (:func:`pwsdyn.integrate._start.start_state`): the state, moved onto an impact
+        (``integrate._start.start_state``): the state, moved onto an impact
         constraint it lies within ``behind_tol`` (default ``ADMIT_BEHIND (1 + |x|)``) behind,
         and the discrete state (sticking on it, or regular)."""
         x = np.array(x, dtype=float)
@@ -913,7 +914,8 @@ class ModelContext:
         return int(self.etab[self.event_index(name)]["surface"])
 
     def state(self, name, mode_hint: str | int | None = None) -> KernelState:
-        """The kernel code of a discrete state (a :class:`DiscreteState` or its text, as in
+        """The kernel code of a discrete state (a
+        :class:`~pwsdyn.integrate.trajectory.DiscreteState` or its text, as in
         ``Trajectory.state``).
 
         ``mode_hint`` is the regular mode a sticking state constrains (the ``mode_before`` of
@@ -947,8 +949,8 @@ class ModelContext:
 def check_state_name(model, mode, name: str = "mode") -> None:
     """``mode`` names a discrete state of the (symbolic) flow ``model``: None, a
     :class:`KernelState`, a mode name, ``stick:<event>`` or ``slide:<switch>`` (a
-    :class:`DiscreteState` or its text). Checked before anything is compiled;
-    :func:`initial_state` then makes the kernel's code."""
+    :class:`~pwsdyn.integrate.trajectory.DiscreteState` or its text). Checked before
+    anything is compiled; :func:`initial_state` then makes the kernel's code."""
     if mode is None or isinstance(mode, KernelState):
         return
     must = (f"None or a discrete state of model {model.name!r}: a mode "
@@ -971,7 +973,7 @@ def check_state_name(model, mode, name: str = "mode") -> None:
 def initial_state(ctx, mode, name: str = "mode") -> KernelState:
     """The kernel code of the discrete state named by ``mode`` (None: the model's initial
     mode; a :class:`KernelState`; a mode name, ``stick:<event>`` or ``slide:<switch>``), with
-    an :class:`ArgumentError` naming ``name`` otherwise."""
+    an :class:`~pwsdyn.ArgumentError` naming ``name`` otherwise."""
     if mode is None:
         return KernelState(REGULAR, -1, ctx.model.initial_mode)
     if isinstance(mode, KernelState):

@@ -5,7 +5,7 @@
 of values (loops pass the same options on every call). :func:`kernel_tables` builds the
 kernel's event and switch tables once per model and sliding method; :func:`resolve_method`,
 ``_exact_code`` and ``_max_step`` turn the options into the kernel's option record
-(:func:`pwsdyn.integrate._codes.kernel_options`), which :mod:`pwsdyn.integrate.compiled`
+(``_codes.kernel_options``), which :mod:`pwsdyn.integrate.compiled`
 builds for each run.
 """
 

@@ -2,7 +2,7 @@
 
 It checks the arguments, resolves the model, state, time span and parameters, and makes one
 run through the compiled-model layer (:func:`pwsdyn.integrate.compiled.run_compiled`), whose
-lean result becomes the :class:`Trajectory` it returns."""
+lean result becomes the :class:`~pwsdyn.Trajectory` it returns."""
 
 from __future__ import annotations
 

@@ -115,7 +115,8 @@ def derivatives(model: Model) -> Derivatives:
             f = sp.Matrix(mode.rhs)
             hd = without_dirac_deltas(ht + (hx * f)[0])
             cases[(W_HD, k * nm + i)] = [hd]
-            cases[(W_HDX, k * nm + i)] = [without_dirac_deltas(e) for e in sp.Matrix([hd]).jacobian(X)]
+            cases[(W_HDX, k * nm + i)] = [without_dirac_deltas(e)
+                                          for e in sp.Matrix([hd]).jacobian(X)]
             cases[(W_HDT, k * nm + i)] = [without_dirac_deltas(sp.diff(hd, t))]
             cases[(W_HHD, k * nm + i)] = [h, hd]
     for s, sw in enumerate(model.switches):
@@ -207,7 +208,7 @@ def emit_evaluate(cases: dict, states, parameters) -> str:
     The model's own module is ``emit_evaluate(derivatives(model).cases, ...)``; other code
     (the orbit problems of :mod:`pwsdyn.orbits.problem`) emits its own cases the same way, so
     that the compiled kernel integrates them. ``states`` and ``parameters`` must be checked
-    identifiers (:func:`~pwsdyn.model.spec.check_identifiers`): they become prefixed locals.
+    identifiers (:func:`~pwsdyn.model.symbolic.check_identifiers`): they become prefixed locals.
     """
     check_identifiers(states, parameters)
     pr = NumbaPrinter()

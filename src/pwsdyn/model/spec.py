@@ -305,16 +305,16 @@ def _load_file(path: Path, key) -> "Model":
 
 
 def loaded_original(name: str):
-    """``(model, copy)`` for a model name or path whose file is in :data:`_LOADED` and
-    unchanged (the same :func:`_file_key`): the kept model itself, never to be handed out or
-    changed, and a function making the copy :func:`load_model` would return; None otherwise
-    (not loaded yet, edited, a TOML string).
+    """``(model, copy)`` for a model name or path whose file is in ``_LOADED`` and
+    unchanged (the same ``_file_key``): the kept model itself, never to be handed out or
+    changed, and a function making the copy :func:`~pwsdyn.load_model` would return; None
+    otherwise (not loaded yet, edited, a TOML string).
 
     For a caller that only *reads* the model during a call and hands a copy out later, if at
     all: :func:`pwsdyn.simulate` runs on the kept model and gives its trajectory the copy
     when ``traj.model`` is first read, so a model by name costs a file check per call, not a
     copy, and every trajectory still has a model of its own. Reading the file's key on every
-    call keeps the rule of :func:`load_model`: an edited file is read again."""
+    call keeps the rule of :func:`~pwsdyn.load_model`: an edited file is read again."""
     # the file load_model would read (a built-in name first, as there); a built-in name
     # looked up before is in _ZOO_PATHS (a file of it removed since: its key is None below)
     path = _ZOO_PATHS.get(name)

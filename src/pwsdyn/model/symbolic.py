@@ -123,8 +123,9 @@ def default_parameters(parameters: dict, defaults) -> dict:
 
 
 class SymbolicSystem:
-    """What flows (:class:`Model`) and maps (:class:`~pwsdyn.model.maps.MapModel`) share:
-    symbols of states and parameters, and parameter values by name."""
+    """What flows (:class:`~pwsdyn.model.spec.Model`) and maps
+    (:class:`~pwsdyn.model.maps.MapModel`) share: symbols of states and parameters, and
+    parameter values by name."""
 
     @property
     def state_symbols(self) -> tuple:
