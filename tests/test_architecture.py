@@ -21,7 +21,8 @@ SRC = ROOT / "src" / "pwsdyn"
 
 
 def test_the_import_contracts_hold(capsys):
-    cli = pytest.importorskip("importlinter.cli", reason="import-linter is a test dependency")
+    cli = pytest.importorskip("importlinter.cli",
+                              reason="import-linter not installed (pip install -e .[lint])")
     rc = cli.lint_imports(config_filename=str(ROOT / "pyproject.toml"), no_cache=True)
     out = capsys.readouterr().out
     assert rc == 0, out
