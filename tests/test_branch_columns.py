@@ -214,4 +214,4 @@ def test_file_round_trip_of_the_columns(engine_points, tmp_path):
             assert getattr(a, name) == getattr(b, name), name
         assert np.array_equal(a.u, b.u) and np.array_equal(a.tangent, b.tangent)
         assert a.tests == b.tests
-    assert back.to_dataset().drop_attrs().equals(br.to_dataset().drop_attrs())
+    assert back.to_dataset().equals(br.to_dataset())      # values and coordinates, not attrs
