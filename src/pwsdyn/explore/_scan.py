@@ -29,7 +29,7 @@ from ..model.spec import as_model
 from ._common import check_common, check_section, check_time_unit, model_payload
 from ._executor import run_chunks
 from ._store import ChunkStore
-from ._sweep import LYAPUNOV_SAMPLES, SAMPLES, sweep_chunk
+from ._sweep import DIRECTIONS, LYAPUNOV_SAMPLES, SAMPLES, sweep_chunk
 
 if TYPE_CHECKING:
     from distributed import Client
@@ -42,12 +42,15 @@ SCAN_VARS = ("period", "events_per_period", "stick_time", "slide_time", "n_point
 
 
 def scan_row(task: dict) -> dict:
-    """Run one row of a scan (``p2`` fixed, ``p1`` swept up from ``x0``) on a worker or
-    in-process: the sweep's chunk runner with one chunk and no warm-up. Returns plain arrays
-    of the row's values (``SCAN_VARS``; ``lyapunov``: the largest exponent)."""
+    """Run one row of a scan (``p2`` fixed, ``p1`` swept from ``x0`` in the order of
+    ``task["values"]``) on a worker or in-process: the sweep's chunk runner with one chunk
+    and no warm-up. Returns plain arrays of the row's values in increasing order of ``p1``
+    (``SCAN_VARS``; ``lyapunov``: the largest exponent)."""
     res = sweep_chunk(task)
-    out = {k: res[k] for k in SCAN_VARS if k not in ("lyapunov",)}
+    out = {k: res[k] for k in SCAN_VARS if k != "lyapunov"}
     out["lyapunov"] = np.asarray(res["lyapunov"], dtype=float)[:, 0]
+    if task["direction"] == "down":
+        out = {k: v[::-1].copy() for k, v in out.items()}
     return out
 
 
@@ -70,7 +73,7 @@ def _values(name: str, values) -> np.ndarray:
 
 def scan(model: ModelLike, grid: Mapping[str, Any], x0: StateLike | None = None, *,
          transient: int = 200, samples: int | None = None, section: str = "stroboscopic",
-         params: Mapping[str, float] | None = None, phase: float = 0.0,
+         direction: str = "both", params: Mapping[str, float] | None = None, phase: float = 0.0,
          period: float | None = None, max_period: int | None = None,
          period_tol: float = 1e-6, bound: float = 1e8, lyapunov: bool = False,
          workers: int | None = None, client: Client | None = None,
@@ -80,11 +83,15 @@ def scan(model: ModelLike, grid: Mapping[str, Any], x0: StateLike | None = None,
     """Two-parameter scan: the period map of a model over a grid of two parameters.
 
     Each row of the grid (``p2`` fixed) is a sequential sweep of :func:`pwsdyn.sweep` in
-    ``p1``, upwards from ``x0``: at every value the run continues from the final state at the
+    ``p1`` from ``x0``: at every value the run continues from the final state at the
     previous one, runs ``transient`` periods and records ``samples`` periods at the section.
     A row runs as one task (no chunk border within it); rows run in parallel, and the result
     does not depend on ``workers``, the scheduler or a resume. The arguments mean what they
-    mean for :func:`pwsdyn.sweep` and have its defaults.
+    mean for :func:`pwsdyn.sweep` and have its defaults. Where attractors coexist the borders
+    of the period regions differ between the sweeps up and down in ``p1`` (hysteresis): the
+    up scan shows where the attractor followed upwards ends (a fold, a period doubling), the
+    down scan where the one followed downwards does (e.g. a non-impacting orbit at its
+    grazing).
 
     Parameters
     ----------
@@ -98,6 +105,10 @@ def scan(model: ModelLike, grid: Mapping[str, Any], x0: StateLike | None = None,
         ``[defaults] x0``).
     transient, samples, section, params, phase, period, max_period, period_tol, bound
         As for :func:`pwsdyn.sweep` (``samples``: default 100, or 300 with ``lyapunov``).
+    direction : {'up', 'down', 'both'}
+        Rows swept in increasing ``p1``, decreasing ``p1``, or both (default, as
+        :func:`pwsdyn.sweep`: the two period maps, which differ where attractors coexist;
+        ``"up"`` alone costs half).
     lyapunov : bool
         Also compute the largest Lyapunov exponent at each point (slower for flows).
     workers, client, scheduler
@@ -118,11 +129,11 @@ def scan(model: ModelLike, grid: Mapping[str, Any], x0: StateLike | None = None,
     Returns
     -------
     xarray.Dataset
-        Dimensions ``p1``, ``p2`` (named by the parameters) and ``state``. Variables, each
-        over ``(p1, p2)`` as in :func:`pwsdyn.sweep`: ``period`` (0: none found),
+        Dimensions ``direction``, ``p1``, ``p2`` (named by the parameters) and ``state``.
+        Variables, each over ``(direction, p1, p2)`` as in :func:`pwsdyn.sweep`: ``period`` (0: none found),
         ``events_per_period``, ``stick_time``, ``slide_time``, ``n_points`` (section points
         recorded), ``status`` (0 success; see :func:`pwsdyn.io.decode_status`), ``steps``,
-        ``x_final`` (p1, p2, state): the state handed on to the next ``p1``, and with
+        ``x_final`` (direction, p1, p2, state): the state handed on to the next ``p1``, and with
         ``lyapunov=True`` ``lyapunov``: the largest exponent. Attributes: ``kind`` =
         ``"scan"``, ``parameter`` and ``parameter2`` (the two names), the settings and the
         provenance.
@@ -142,8 +153,8 @@ def scan(model: ModelLike, grid: Mapping[str, Any], x0: StateLike | None = None,
     >>> import numpy as np, pwsdyn
     >>> ds = pwsdyn.scan("sqrt-map", {"mu": np.linspace(0.01, 0.05, 3),
     ...                               "lam": [0.5, 0.8]}, [0.0], workers=1, progress=False)
-    >>> dict(ds.sizes)["mu"], dict(ds.sizes)["lam"]
-    (3, 2)
+    >>> dict(ds.sizes)
+    {'direction': 2, 'mu': 3, 'lam': 2, 'state': 1}
     """
     if samples is None:
         samples = LYAPUNOV_SAMPLES if V.flag("lyapunov", lyapunov) else SAMPLES
@@ -151,6 +162,7 @@ def scan(model: ModelLike, grid: Mapping[str, Any], x0: StateLike | None = None,
         transient=transient, samples=samples, samples_min=1, phase=phase, period=period,
         max_period=max_period, period_tol=period_tol, bound=bound, chunk_size=None,
         workers=workers, progress=progress, store=store, out=out, scheduler=scheduler)
+    direction = V.choice("direction", direction, DIRECTIONS)
     lyapunov = V.flag("lyapunov", lyapunov)
     overwrite = V.flag("overwrite", overwrite)
     model = as_model(model, caller="scan()")
@@ -199,8 +211,10 @@ def scan(model: ModelLike, grid: Mapping[str, Any], x0: StateLike | None = None,
         max_period = max(1, min(samples // 4, 64))
     n = model.n_states
     # a row holds its section points while it runs (samples x states per value)
+    dirs = ["up", "down"] if direction == "both" else [direction]
     V.memory(f"scan() of {len(vals1)} x {len(vals2)} values",
-             8.0 * len(vals1) * len(vals2) * (n + 8) + 8.0 * len(vals1) * samples * (n + 1))
+             8.0 * len(dirs) * len(vals1) * len(vals2) * (n + 8)
+             + 8.0 * len(vals1) * samples * (n + 1))
     opts = {**DEFAULTS, **options, "dense": False, "throw": False}
     opts["variational"] = False
     out_path = check_output_path(out, overwrite=overwrite) if out is not None else None
@@ -208,7 +222,7 @@ def scan(model: ModelLike, grid: Mapping[str, Any], x0: StateLike | None = None,
     settings = dict(param=p1, values=[float(v) for v in vals1], param2=p2,
                     values2=[float(v) for v in vals2], x0=[float(v) for v in x0v],
                     transient=int(transient), samples=int(samples), section=section,
-                    params={k: float(v) for k, v in zip(names, p) if k not in (p1, p2)},
+                    direction=direction, params={k: float(v) for k, v in zip(names, p) if k not in (p1, p2)},
                     phase=float(phase), period=None if period is None else float(period),
                     max_points=int(samples), max_period=int(max_period),
                     period_tol=float(period_tol), bound=float(bound), lyapunov=bool(lyapunov),
@@ -217,12 +231,15 @@ def scan(model: ModelLike, grid: Mapping[str, Any], x0: StateLike | None = None,
     settings = json.loads(json.dumps(settings, sort_keys=True, default=float))
 
     payload = model_payload(model)
-    tasks = []
-    for v2 in vals2:
-        q = p.copy()
-        q[i2] = v2
-        tasks.append({"model": payload, "settings": settings, "p": q.tolist(), "pidx": i1,
-                      "opts": opts, "values": settings["values"], "warmup": 0})
+    tasks = []      # row j of direction d is task d * len(vals2) + j
+    for d in dirs:
+        order = settings["values"] if d == "up" else settings["values"][::-1]
+        for v2 in vals2:
+            q = p.copy()
+            q[i2] = v2
+            tasks.append({"model": payload, "settings": settings, "p": q.tolist(),
+                          "pidx": i1, "opts": opts, "values": order, "warmup": 0,
+                          "direction": d})
 
     va = _variable_attrs(model)
     results: dict[int, dict] = {}
@@ -252,7 +269,7 @@ def scan(model: ModelLike, grid: Mapping[str, Any], x0: StateLike | None = None,
     finally:
         if st is not None:
             st.close()
-    ds = _assemble(model, p1, vals1, p2, vals2, results, settings, lyapunov, va)
+    ds = _assemble(model, dirs, p1, vals1, p2, vals2, results, settings, lyapunov, va)
     if out_path is not None:
         from .._netcdf import save_dataset
 
@@ -286,17 +303,21 @@ def _variable_attrs(model) -> dict:
     }
 
 
-def _assemble(model, p1, vals1, p2, vals2, results, settings, lyapunov, va) -> xr.Dataset:
-    n1, n2 = len(vals1), len(vals2)
+def _assemble(model, dirs, p1, vals1, p2, vals2, results, settings, lyapunov,
+              va) -> xr.Dataset:
+    n2 = len(vals2)
     data = {}
     for k in SCAN_VARS:
         if k == "lyapunov" and not lyapunov:
             continue
-        rows = [np.asarray(results[j][k]) for j in range(n2)]
-        arr = np.stack(rows, axis=1)          # (p1, p2[, state])
-        dims = (p1, p2, "state") if k == "x_final" else (p1, p2)
+        arr = np.stack([np.stack([np.asarray(results[d * n2 + j][k]) for j in range(n2)],
+                                 axis=1) for d in range(len(dirs))])  # (dir, p1, p2[, state])
+        dims = ("direction", p1, p2) + (("state",) if k == "x_final" else ())
         data[k] = (dims, arr, va[k])
-    coords = {p1: (p1, vals1, {**quantity_attrs(model, p1),
+    coords = {"direction": ("direction", list(dirs),
+                            {"long_name": f"direction of the sweep in {p1} along each row "
+                                          "(up: increasing values)"}),
+              p1: (p1, vals1, {**quantity_attrs(model, p1),
                                "comment": "the parameter swept within a row"}),
               p2: (p2, vals2, {**quantity_attrs(model, p2),
                                "comment": "the parameter fixed per row"}),
