@@ -19,6 +19,7 @@ import math
 
 import numpy as np
 import pytest
+import xarray as xr
 from scipy.optimize import brentq
 
 import pwsdyn
@@ -64,11 +65,13 @@ def test_each_row_is_the_uninterrupted_sequential_sweep(serial):
 
 
 def test_workers_and_resume_do_not_change_the_result(serial, tmp_path):
-    par = _io_scan(GRID, workers=2)
-    assert par.equals(serial)
+    """1 worker, 2 threads, a Dask LocalCluster of 2 worker processes (the user's cluster is
+    reached the same way, by its address) and a resume: identical datasets."""
+    xr.testing.assert_identical(_io_scan(GRID, workers=2), serial)
+    xr.testing.assert_identical(_io_scan(GRID, workers=2, scheduler="processes"), serial)
     store = tmp_path / "store"
     first = _io_scan(GRID, workers=2, store=store)
-    assert first.equals(serial)
+    xr.testing.assert_identical(first, serial)
     rows = sorted(store.glob("chunk-*.nc"))
     assert len(rows) == 2 * len(GRID["sigma"])
     # a run killed after some rows: the others are recomputed, the kept ones read back
@@ -76,7 +79,7 @@ def test_workers_and_resume_do_not_change_the_result(serial, tmp_path):
         f.unlink()
         f.with_suffix(".sha256").unlink()
     resumed = _io_scan(GRID, workers=2, store=store)
-    assert resumed.equals(serial)
+    xr.testing.assert_identical(resumed, serial)
     with pytest.raises(pwsdyn.explore.StoreMismatchError):
         _io_scan(GRID, workers=1, store=store, transient=101)
 
