@@ -33,10 +33,10 @@ SHARED = ("--param", "--set", "--x0", "--rtol", "--atol", "--method", "--sliding
 #: ``--scheduler``: where the work is parallel. ``--t0``: where a run starts at a time
 #: (``sweep`` and ``basins`` start at the API's forcing ``phase``).
 WHERE_THEY_APPLY = {
-    "--exact": {"simulate", "sweep", "basins"},
-    "--no-progress": {"sweep", "basins", "continue", "grazing"},
-    "--workers": {"sweep", "basins"},
-    "--scheduler": {"sweep", "basins"},
+    "--exact": {"simulate", "sweep", "scan", "basins"},
+    "--no-progress": {"sweep", "scan", "basins", "continue", "grazing"},
+    "--workers": {"sweep", "scan", "basins"},
+    "--scheduler": {"sweep", "scan", "basins"},
     "--t0": {"simulate", "orbit", "continue", "grazing"},
 }
 

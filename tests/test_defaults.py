@@ -147,6 +147,8 @@ MINIMAL = {
     "orbit": ["m"],
     "sweep": ["m", "--from", "0", "--to", "1", "--num", "2"],
     "basins": ["m", "--x", "x", "--x-from", "0", "--x-to", "1", "--x-num", "2"],
+    "scan": ["m", "--from", "0", "--to", "1", "--num", "2", "--param2", "b", "--from2", "0",
+             "--to2", "1", "--num2", "2"],
     "continue": ["m", "--from", "0", "--to", "1"],
     "grazing": ["m", "--from", "0", "--to", "1"],
 }
@@ -174,6 +176,11 @@ SAME_DEFAULT = [
     ("sweep", "--store", pwsdyn.sweep, "store"),
     ("sweep", "--out", pwsdyn.sweep, "out"),
     ("sweep", "--force", pwsdyn.sweep, "overwrite"),
+    *[("scan", flag, pwsdyn.scan, name) for flag, name in (
+        ("--transient", "transient"), ("--samples", "samples"), ("--section", "section"),
+        ("--direction", "direction"), ("--lyapunov", "lyapunov"), ("--workers", "workers"),
+        ("--scheduler", "scheduler"), ("--store", "store"), ("--out", "out"),
+        ("--force", "overwrite"), ("--no-progress", "progress"))],
     ("basins", "--transient", pwsdyn.basins, "transient"),
     ("basins", "--samples", pwsdyn.basins, "samples"),
     ("basins", "--section", pwsdyn.basins, "section"),
@@ -233,7 +240,7 @@ def test_every_option_gives_a_plain_value_when_not_given(command):
 #: help text names that value.
 #: Shooting (orbit, continue, grazing) has its own integrator defaults, over a simulation's.
 SHOOTING = {**DEFAULTS, **SHOOTING_DEFAULTS}
-LIBRARY_DEFAULT = [(cmd, flag, DEFAULTS) for cmd in ("simulate", "sweep", "basins")
+LIBRARY_DEFAULT = [(cmd, flag, DEFAULTS) for cmd in ("simulate", "sweep", "scan", "basins")
                    for flag in ("--rtol", "--atol", "--method", "--exact", "--sliding")] + \
                   [(cmd, flag, SHOOTING) for cmd in ("orbit", "continue", "grazing")
                    for flag in ("--rtol", "--atol", "--method", "--sliding")]
@@ -263,12 +270,12 @@ def test_shooting_defaults_are_the_apis(tmp_path):
 
 
 def test_every_model_running_command_has_the_same_shared_options():
-    for command in ("simulate", "orbit", "sweep", "basins", "continue", "grazing"):
+    for command in ("simulate", "orbit", "sweep", "scan", "basins", "continue", "grazing"):
         for flag in ("-p", "--param", "-s", "--set", "--x0", "--rtol", "--atol", "--method",
                      "--sliding", "--out", "--plot", "--force"):
             _option(command, flag)
         assert _option(command, "--set").hidden and not _option(command, "--param").hidden
-    for command in ("orbit", "sweep", "basins", "continue", "grazing"):
+    for command in ("orbit", "sweep", "scan", "basins", "continue", "grazing"):
         assert _option("simulate", "--sliding").type.choices == \
             _option(command, "--sliding").type.choices
 

@@ -31,7 +31,7 @@ _LAZY = {
     "find_periodic_orbit": "orbits",
     "SectionNotReachedError": "stability", "floquet_multipliers": "stability",
     "monodromy": "stability", "poincare_map": "stability", "saltation_matrix": "stability",
-    "basins": "explore", "lyapunov_spectrum": "explore", "sweep": "explore",
+    "basins": "explore", "lyapunov_spectrum": "explore", "scan": "explore", "sweep": "explore",
     "Branch": "continuation", "continue_bifurcation": "continuation",
     "continue_equilibrium": "continuation",
     "continue_orbit": "continuation", "load_branch": "continuation",
@@ -44,7 +44,7 @@ __all__ = ["ArgumentError", "ExpressionError", "ModelError", "OutputExistsError"
 if TYPE_CHECKING:  # what static checkers and IDEs see; at run time see __getattr__
     from .continuation import (Branch, continue_bifurcation, continue_equilibrium,
                                continue_orbit, load_branch)
-    from .explore import basins, lyapunov_spectrum, sweep
+    from .explore import basins, lyapunov_spectrum, scan, sweep
     from .grazing import design_control, discontinuity_map
     from .integrate import EventRecord, Trajectory, simulate
     from .model import Model, compile_model, load_model, with_discrete_control, zoo_names

@@ -1,9 +1,10 @@
 """The ``pwsdyn`` command line.
 
 ``pwsdyn models`` lists the built-in models; ``pwsdyn simulate MODEL`` simulates a built-in
-model or a model file and writes the trajectory (NetCDF) and a figure (PNG); ``pwsdyn sweep``
-and ``pwsdyn basins`` compute bifurcation diagrams and basins of attraction (parallel on
-threads or Dask, resumable) and write their datasets and figures; ``pwsdyn orbit MODEL``
+model or a model file and writes the trajectory (NetCDF) and a figure (PNG); ``pwsdyn sweep``,
+``pwsdyn scan`` and ``pwsdyn basins`` compute bifurcation diagrams, two-parameter period maps
+and basins of attraction (parallel on threads or Dask, resumable) and write their datasets and
+figures; ``pwsdyn orbit MODEL``
 finds a periodic orbit by Newton shooting and prints its period, signature and Floquet
 multipliers; ``pwsdyn continue`` follows it in a parameter and ``pwsdyn grazing`` to its
 first graze, where it prints Nordmark's discontinuity map.
@@ -59,12 +60,12 @@ controls are shown as escapes (``\\x1b``, ``\\u202e``), so a model cannot drive 
 
 The package: ``_output`` (terminal output, output files), ``_common`` (the shared options
 and the preamble), ``_main`` (the group and ``models``) and one module per family of commands
-(``_simulate``, ``_explore``, ``_orbits``), each registering its commands on ``main``.
+(``_simulate``, ``_explore``, ``_scan``, ``_orbits``), each registering its commands on ``main``.
 """
 
 from __future__ import annotations
 
-from . import _explore, _orbits, _simulate  # noqa: F401  (they register their commands)
+from . import _explore, _orbits, _scan, _simulate  # noqa: F401  (they register their commands)
 from ._common import FALLBACK_T_END
 from ._main import main
 from ._output import NETCDF_SUFFIXES, _safe  # noqa: F401  (_safe: the one sanitiser)

@@ -11,8 +11,9 @@ path (directory, format, existing file) is checked before the figure is drawn.
 One module per family of figures: trajectories (:func:`plot_trajectory`), periodic orbits
 (:func:`plot_orbit`), continued branches (:func:`plot_branch`), sweeps, basins and response
 metrics (:func:`plot_bifurcation`, :func:`plot_lyapunov`, :func:`plot_basins`,
-:func:`plot_metrics`); what they share (names typeset, legends, files) in one more. Every
-name is importable from ``pwsdyn.plot``.
+:func:`plot_metrics`), period maps of two-parameter scans (:func:`plot_scan`); what they
+share (names typeset, legends, files) in one more. Every name is importable from
+``pwsdyn.plot``.
 
 This package only reads result objects; the numerical code never imports it.
 """
@@ -32,6 +33,10 @@ from ._common import _tex as _tex
 from ._common import _values_text as _values_text
 from ._common import figure_formats as figure_formats
 from ._orbits import plot_orbit as plot_orbit
+from ._scans import PERIOD_COLORS as PERIOD_COLORS
+from ._scans import SCAN_SPECIAL_COLORS as SCAN_SPECIAL_COLORS
+from ._scans import plot_scan as plot_scan
+from ._scans import scan_classes as scan_classes
 from ._sweeps import BASIN_COLORS as BASIN_COLORS
 from ._sweeps import BASIN_SPECIAL_COLORS as BASIN_SPECIAL_COLORS
 from ._sweeps import DEFAULT_METRICS as DEFAULT_METRICS
@@ -49,7 +54,9 @@ from ._trajectories import TRAJECTORY_COLOR as TRAJECTORY_COLOR
 from ._trajectories import plot_trajectory as plot_trajectory
 
 __all__ = ["BASIN_COLORS", "BASIN_SPECIAL_COLORS", "BRANCH_STYLES", "CONSTRAINED_STYLES",
-           "DEFAULT_METRICS", "EVENT_STYLES", "GREEK_SPELLINGS", "SPECIAL_MARKERS",
-           "SURFACE_COLOR", "SWEEP_COLORS", "SWEEP_MARKERS", "TRAJECTORY_COLOR",
+           "DEFAULT_METRICS", "EVENT_STYLES", "GREEK_SPELLINGS", "PERIOD_COLORS",
+           "SCAN_SPECIAL_COLORS", "SPECIAL_MARKERS", "SURFACE_COLOR", "SWEEP_COLORS",
+           "SWEEP_MARKERS", "TRAJECTORY_COLOR",
            "VARIANT_COLORS", "figure_formats", "plot_basins", "plot_bifurcation", "plot_branch",
-           "plot_lyapunov", "plot_metrics", "plot_orbit", "plot_trajectory"]
+           "plot_lyapunov", "plot_metrics", "plot_orbit", "plot_scan", "plot_trajectory",
+           "scan_classes"]

@@ -110,6 +110,11 @@ def _branch_y(branch, y):
             _, X = traj.sample(400)
             out.append(X[:, k].max() if how == "max" else X[:, k].min())
         return np.array(out), f"{how} {_tex(state)} over the orbit"
+    p2 = getattr(branch, "parameter2", None)
+    if p2 is not None and (y is None or y == p2):
+        # a two-parameter curve is drawn in its parameter plane by default (the first
+        # parameter across, as a period map of pwsdyn.scan is drawn)
+        return branch.values_of(p2), _tex(p2)
     if y is None:
         # the state that changes most along the branch (at an impact section the position
         # is the wall's, the same at every point)
@@ -147,7 +152,9 @@ def plot_branch(branch, y=None, path: str | Path | None = None, *, ax: Axes | No
         orbits, ``"period"``, ``"max:<state>"`` / ``"min:<state>"`` (over the whole orbit:
         continuous across a graze, where the section state jumps) or a function of the
         :class:`~pwsdyn.PeriodicOrbit` at each point (its name, underscores as spaces, labels
-        the axis). Default: the state that varies most along the branch.
+        the axis). Default: the state that varies most along the branch; for a
+        two-parameter curve (:func:`pwsdyn.continue_bifurcation`) its second parameter, so
+        that the curve is drawn in the parameter plane (also ``y`` = that parameter's name).
     path : str or Path, optional
         Also save the figure there.
     ax : matplotlib.axes.Axes, optional
