@@ -692,3 +692,25 @@ def restart(op, key: str, u, lam: float, direction: float, span, delta: float):
                 return made[0], made[1], lam2, -direction, True
         delta *= 0.5
     return fallback if fallback is not None else why
+
+
+def dip_suspected(s, m) -> bool:
+    """Whether a monitor positive at three consecutive points of a branch (arclengths ``s``,
+    values ``m``) may reach zero between them, out of sight of the points themselves: the
+    parabola through them is convex, its vertex lies between the first and the last point,
+    and its least value is smaller than the monitor's variation over the two steps (the
+    extremum approaches zero relative to the step: a dip to zero and back as narrow as a
+    fraction of the step would show no sign change at the points)."""
+    s0, s1, s2 = (float(x) for x in s)
+    m0, m1, m2 = (float(x) for x in m)
+    if not (m0 > 0.0 and m1 > 0.0 and m2 > 0.0) or not (s0 < s1 < s2 or s0 > s1 > s2):
+        return False
+    d01, d12 = (m1 - m0) / (s1 - s0), (m2 - m1) / (s2 - s1)
+    c2 = (d12 - d01) / (s2 - s0)
+    if not c2 > 0.0:
+        return False
+    sv = 0.5 * (s0 + s1) - d01 / (2.0 * c2)
+    if not min(s0, s2) < sv < max(s0, s2):
+        return False
+    qv = m1 + d01 * (sv - s1) + c2 * (sv - s0) * (sv - s1)
+    return qv < max(m0, m1, m2) - qv
