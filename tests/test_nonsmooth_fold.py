@@ -120,7 +120,7 @@ def test_down_the_impacting_branch_through_the_fold_and_the_graze(model):
     assert abs(lp.value - Af) < 1e-10
     assert abs(_impact_velocity(br, lp.index) - vf) < 1e-7
     assert abs(gr.value - 0.1) < 1e-10 and gr.key == "GR/impact@0"
-    assert gr.point.data.get("nonsmooth_fold") is True
+    assert gr.nonsmooth_fold and not lp.nonsmooth_fold and "non-smooth fold" in repr(gr)
     assert ep.value == pytest.approx(0.05)
     assert br.admissible.all()
     after = [i for i, p in enumerate(br.points) if i > gr.index]
@@ -152,7 +152,7 @@ def test_up_the_non_impacting_branch_turns_back_at_the_graze(model):
     assert [sp.kind for sp in br.special_points] == ["GR", "LP", "EP"], br.stop_reason
     gr, lp, ep = br.special_points
     assert abs(gr.value - 0.1) < 1e-10 and gr.key == "GR/impact/0"
-    assert gr.point.data.get("nonsmooth_fold") is True
+    assert gr.nonsmooth_fold
     assert abs(lp.value - Af) < 1e-10 and abs(_impact_velocity(br, lp.index) - vf) < 1e-7
     assert ep.value == pytest.approx(1.0) and br.admissible.all()
     small_side = list(range(gr.index + 1, lp.index))
@@ -175,18 +175,24 @@ def _window(width):
     return math.sqrt(C * C - C ** 4 / 4 + r * r), math.sqrt(s_star - r), math.sqrt(s_star + r)
 
 
-@pytest.mark.parametrize("width", [1e-3, 1e-4])
-def test_no_graze_stepped_over(model, width):
-    """The non-impacting orbit continued in w over (0.9, 1.1) at default settings penetrates
-    the wall on a window of w narrower than a step (before: stepped over, nothing reported):
-    both grazes are located at their closed forms, the orbit in between has one impact."""
+@pytest.mark.parametrize("width, start, ds", [(1e-3, 0.9, None), (1e-4, 0.9, None),
+                                               (1e-4, 1.1, -0.02), (1e-4, 0.9, 0.0005)])
+def test_no_graze_stepped_over(model, width, start, ds):
+    """The non-impacting orbit continued in w over (0.9, 1.1) penetrates the wall on a window
+    of w narrower than a step (before: stepped over, nothing reported): both grazes are
+    located at their closed forms, once each, at default settings, in either direction and
+    for steps over a 40x range; the orbit in between has one impact (the offset of the
+    restart past the first graze, 2e-4 by default, shrinks below the window's width)."""
     A, w1, w2 = _window(width)
-    orb = _non_impacting(model, A, 0.9)
-    br = pwsdyn.continue_orbit(model, orb, "w", span=(0.9, 1.1), params={"A": A})
-    gr = br.special("GR")
+    orb = _non_impacting(model, A, start)
+    kw = {} if ds is None else {"ds": ds}
+    br = pwsdyn.continue_orbit(model, orb, "w", span=(0.9, 1.1), params={"A": A}, **kw)
+    gr = sorted(br.special("GR"), key=lambda sp: sp.value)
     assert len(gr) == 2, br.stop_reason
     assert abs(gr[0].value - w1) < 1e-9 and abs(gr[1].value - w2) < 1e-9
-    assert br.values.max() == pytest.approx(1.1) and br.admissible.all()
+    assert not any(sp.nonsmooth_fold for sp in gr)
+    assert br.values.min() == pytest.approx(0.9) and br.values.max() == pytest.approx(1.1)
+    assert br.admissible.all()
     for i, p in enumerate(br.points):
         if len(br.problem_of(p).orbit_problem.signature):
             assert w1 - 1e-9 <= p.lam <= w2 + 1e-9

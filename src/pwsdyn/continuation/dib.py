@@ -638,7 +638,7 @@ def _connected(op, key, u, lam, made, lam_near) -> bool:
     """Whether the new orbit ``made`` (at an offset ``delta`` from the bifurcation at ``lam``)
     lies on the branch through the bifurcation: built the same way at ``lam_near`` (a quarter
     of the offset), its distance from Newton's start must shrink (see
-    :data:`CONNECTED_RATIO`)."""
+    :data:`pwsdyn.continuation.dib.CONNECTED_RATIO`)."""
     g = _gap(made)
     if g <= 1e-9 * (1.0 + float(np.max(np.abs(made[1])))):
         return True
@@ -657,13 +657,14 @@ def restart(op, key: str, u, lam: float, direction: float, span, delta: float):
     a short offset ``delta`` past the bifurcation (the new problem is singular at it): first
     on the far side (persistence), where the old orbit must have crossed the surface -- its
     monitor negative there; a positive one means a second bifurcation closer than ``delta``,
-    and a new orbit that is not admissible or does not connect (:func:`_connected`, Newton
+    and a new orbit that is not admissible or does not connect (``_connected``: Newton
     landed on another branch) may mean the same -- then on the side the branch came from: a
     new orbit there is the other half of a non-smooth fold (the branches with and without
     the new event meet from one side, the branch turns back, ``direction1 = -direction``).
     Neither: ``delta`` is halved (a second bifurcation or a smooth fold of the new branch
-    closer than it), :data:`RESTART_HALVINGS` times. Where only an admissible far-side orbit
-    that does not pass the connection test was found, it is taken (as before the test)."""
+    closer than it), :data:`pwsdyn.continuation.dib.RESTART_HALVINGS` times. Where only an
+    admissible far-side orbit that does not pass the connection test was found, it is taken
+    (as before the test)."""
     lo, hi = span
     if not lo <= lam + direction * delta <= hi:
         return "the span ends at the graze"
