@@ -629,6 +629,11 @@ def _candidate(op, key, u, lam, lam1):
     return made, m_old
 
 
+def _back(value) -> bool:
+    """Whether an old monitor's value past the bifurcation is positive again."""
+    return value is not None and value > 0.0
+
+
 def _gap(made) -> float:
     prob, x, guess = made
     return float(np.max(np.abs(np.asarray(x) - np.asarray(guess))))
@@ -656,7 +661,8 @@ def restart(op, key: str, u, lam: float, direction: float, span, delta: float):
     The branch goes on with the orbit of the new signature that connects there. It is sought
     a short offset ``delta`` past the bifurcation (the new problem is singular at it): first
     on the far side (persistence), where the old orbit must have crossed the surface -- its
-    monitor negative there; a positive one means a second bifurcation closer than ``delta``,
+    monitor negative there and at twice the offset; a positive one means a second
+    bifurcation closer than ``2 delta``,
     and a new orbit that is not admissible or does not connect (``_connected``: Newton
     landed on another branch) may mean the same -- then on the side the branch came from: a
     new orbit there is the other half of a non-smooth fold (the branches with and without
@@ -675,9 +681,12 @@ def restart(op, key: str, u, lam: float, direction: float, span, delta: float):
             made, m_old = _candidate(op, key, u, lam, lam1)
             if isinstance(made, str):
                 why = made
-            elif m_old is not None and m_old > 0.0:
-                why = (f"the old orbit is back on its side of the surface at "
-                       f"{lam1:.12g}: a second bifurcation within {delta:.3g}")
+            elif _back(m_old) or _back(_old_past(op, key, u, lam, lam + 2 * direction * delta)[1]
+                                      if lo <= lam + 2 * direction * delta <= hi else None):
+                # the new orbit at lam1 must not sit on (or past) a second bifurcation: the old
+                # orbit still crosses the surface at twice the offset
+                why = (f"the old orbit is back on its side of the surface within "
+                       f"{2 * delta:.3g} of {lam:.12g}: a second bifurcation there")
             else:
                 if fallback is None:
                     fallback = (made[0], made[1], lam1, direction, False)
