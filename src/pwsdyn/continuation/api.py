@@ -96,9 +96,11 @@ def _run(problem, u0, lam0, settings, *, tangent=None, correct_start=True, progr
 def _after_graze(bp, pt, settings, options, points=()):
     """The orbit just past the graze ``pt`` (a point of ``bp``) with the signature it has
     there (:func:`pwsdyn.continuation.dib.past_graze`): ``(problem, u, lam, ds)``, or why
-    there is none. The restart is a short step ``delta`` past the graze in the direction of
-    travel: far enough for the new orbit's Newton to be regular (its new impact's velocity
-    grows like ``sqrt(delta)``), near enough to lose nothing of the branch that matters."""
+    there is none. The restart is a short step ``delta`` from the graze: far enough for the
+    new orbit's Newton to be regular (its new impact's velocity grows like ``sqrt(delta)``),
+    near enough to lose nothing of the branch that matters; past it in the direction of
+    travel, or back where a non-smooth fold turns the branch
+    (:func:`pwsdyn.continuation.dib.restart`, which marks the graze point so)."""
     from .dib import restart
 
     op = bp.orbit_problem
