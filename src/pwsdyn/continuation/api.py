@@ -96,10 +96,12 @@ def _run(problem, u0, lam0, settings, *, tangent=None, correct_start=True, progr
 def _after_graze(bp, pt, settings, options, points=()):
     """The orbit just past the graze ``pt`` (a point of ``bp``) with the signature it has
     there (:func:`pwsdyn.continuation.dib.past_graze`): ``(problem, u, lam, ds)``, or why
-    there is none. The restart is a short step ``delta`` past the graze in the direction of
-    travel: far enough for the new orbit's Newton to be regular (its new impact's velocity
-    grows like ``sqrt(delta)``), near enough to lose nothing of the branch that matters."""
-    from .dib import past_graze
+    there is none. The restart is a short step ``delta`` from the graze: far enough for the
+    new orbit's Newton to be regular (its new impact's velocity grows like ``sqrt(delta)``),
+    near enough to lose nothing of the branch that matters; past it in the direction of
+    travel, or back where a non-smooth fold turns the branch
+    (:func:`pwsdyn.continuation.dib.restart`, which marks the graze point so)."""
+    from .dib import restart
 
     op = bp.orbit_problem
     key = pt.data.get("located", "")
@@ -109,22 +111,14 @@ def _after_graze(bp, pt, settings, options, points=()):
     came = next((q.lam for q in reversed(points) if abs(q.lam - pt.lam) > tiny), None)
     direction = (float(np.sign(pt.lam - came)) if came is not None else
                  float(np.sign(pt.tangent[-1])) or float(np.sign(settings.ds)) or 1.0)
-    lo, hi = settings.span
-    delta = 1e-4 * (1.0 + abs(pt.lam))
-    lam1 = pt.lam + direction * delta
-    if not lo <= lam1 <= hi:
-        return "the span ends at the graze"
-    # the old signature past the graze (regular: it crosses the surface there); where it has
-    # no solution there (a sliding segment that shrank to nothing: the old branch folds back
-    # at the graze), the new signature is built from the graze itself
-    res = op.solve(pt.u, np.array([lam1]))
-    if res.converged:
-        made = past_graze(op, key, res.x, lam1)
-    else:
-        made = past_graze(op, key, pt.u, pt.lam, solve_at=lam1)
+    # the new signature's orbit that connects there, on either side (a non-smooth fold turns
+    # back), the offset shrunk past a second bifurcation closer than it
+    made = restart(op, key, pt.u, pt.lam, direction, settings.span, 1e-4 * (1.0 + abs(pt.lam)))
     if isinstance(made, str):
         return made
-    prob1, u1 = made
+    prob1, u1, lam1, direction, fold = made
+    if fold:
+        pt.data["nonsmooth_fold"] = True
     u1 = _reduce_phase(prob1, u1)
     return OrbitBranchProblem(prob1), u1, lam1, direction * abs(settings.ds)
 

@@ -93,6 +93,14 @@ class SpecialPoint:
         return self.point.data.get("monitors", {}).get(self.key)
 
     @property
+    def nonsmooth_fold(self) -> bool:
+        """Whether the branch turned back at this discontinuity-induced bifurcation: the
+        orbits with and without the changed event meet there from one side (a graze where
+        the discontinuity map says the orbit is lost, with hysteresis), and the branch went
+        on along the other of them, back the way it came in the parameter."""
+        return bool(self.point.data.get("nonsmooth_fold", False))
+
+    @property
     def state(self) -> np.ndarray:
         """The state at the section (orbits) or the equilibrium."""
         return self.branch.problem_of(self.point).section_state(self.point.u)
@@ -114,6 +122,8 @@ class SpecialPoint:
         if self.multipliers is not None:
             extra = ", multipliers=" + np.array2string(np.asarray(self.multipliers),
                                                        precision=6)
+        if self.nonsmooth_fold:
+            extra += ", a non-smooth fold"
         return (f"SpecialPoint({self.kind} at {self.parameter} = {self.value:.12g}, "
                 f"index {self.index}{extra})")
 

@@ -47,7 +47,7 @@ on the new problem corrects (its Jacobian is regular there: the crossing is tran
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import brentq
+from scipy.optimize import brentq, minimize_scalar
 
 from ..newton import TrialRejected
 
@@ -71,10 +71,13 @@ def _old_segment(op, u, lam, seg):
             model_context(op.model, op.param_dict(p), op.sliding))
 
 
-def insert_impact(op, u, lam, seg: int, surface_name: str):
+def insert_impact(op, u, lam, seg: int, surface_name: str, touch: bool = False):
     """The problem with an impact on ``surface_name`` added inside segment ``seg`` and its
     ``u`` at ``lam`` from the old signature's solution there (which crosses the surface):
-    ``(problem, u)`` or a reason string."""
+    ``(problem, u)`` or a reason string. With ``touch`` an orbit that only touches the
+    surface (the graze itself) gets its impact at the point of tangency, where ``h`` is
+    least: the new orbit on the side where the old one does not reach the surface (a
+    non-smooth fold) starts there."""
     from ..orbits.signature import Signature, SignatureEvent
 
     m = op.model
@@ -95,9 +98,15 @@ def insert_impact(op, u, lam, seg: int, surface_name: str):
     ts = np.linspace(s.t, s.t + s.T, 400)[1:-1]
     hv = np.array([h(t) for t in ts])
     k = np.flatnonzero((hv[:-1] > 0) & (hv[1:] <= 0))
-    if not k.size:
+    if k.size:
+        ta = brentq(h, ts[k[0]], ts[k[0] + 1], xtol=1e-14)
+    elif touch:
+        i = int(np.argmin(hv))
+        lo, hi = ts[max(i - 1, 0)], ts[min(i + 1, ts.size - 1)]
+        ta = float(minimize_scalar(h, bounds=(lo, hi), method="bounded",
+                                   options={"xatol": 1e-13}).x)
+    else:
         return "the orbit past the graze does not cross the surface"
-    ta = brentq(h, ts[k[0]], ts[k[0] + 1], xtol=1e-14)
     xa = tr(ta)[:n]
     xr = ctx.g(j, ta, xa)
     t0, xs, Ts = op.unpack(u)
@@ -527,6 +536,12 @@ def past_graze(op, key: str, u, lam, solve_at=None):
     """The new signature's problem and solution just past the graze ``key`` at ``lam``:
     ``(problem, u)``, or a reason string. ``u`` solves the old signature at ``lam``; with
     ``solve_at`` the new problem is built there and solved at ``solve_at``."""
+    made = _past_graze(op, key, u, lam, solve_at)
+    return made if isinstance(made, str) else made[:2]
+
+
+def _past_graze(op, key: str, u, lam, solve_at=None):
+    """:func:`past_graze` with Newton's start: ``(problem, u, guess)`` or a reason."""
     from ..orbits.monitors import MonitorKey
 
     try:
@@ -558,7 +573,7 @@ def past_graze(op, key: str, u, lam, solve_at=None):
         elif kind == "GS":
             made = insert_sliding(op, u, lam, seg, k.name)
         else:
-            made = insert_impact(op, u, lam, seg, k.name)
+            made = insert_impact(op, u, lam, seg, k.name, touch=solve_at is not None)
     except TrialRejected as exc:
         return f"no orbit past the {kind}: {exc.message}"
     if isinstance(made, str):
@@ -571,4 +586,141 @@ def past_graze(op, key: str, u, lam, solve_at=None):
     adm = prob.admissibility(res.x, np.array([lam]))
     if not adm:
         return f"the orbit of the new signature {prob.signature} is not admissible: {adm.reason}"
-    return prob, res.x
+    return prob, res.x, u2
+
+
+#: Ratio of the gaps between Newton's start and the new orbit at ``delta / 4`` and at
+#: ``delta`` below which the new orbit is the one that connects at the bifurcation: its
+#: distance from the old orbit there vanishes with ``delta`` (like ``delta`` where an impact's
+#: velocity grows linearly, like ``sqrt(delta)``, ratio 1/2, where it grows like a square root;
+#: thesis Paper A), while an orbit of another branch stays a fixed distance away (ratio 1).
+CONNECTED_RATIO = 0.6
+#: Halvings of the restart offset ``delta`` before the search gives up.
+RESTART_HALVINGS = 10
+
+
+def _old_past(op, key, u, lam, lam1):
+    """The old signature's solution at ``lam1`` from ``u`` (at ``lam``) and the value of its
+    monitor ``key`` there: ``(u1, value)``; ``(None, None)`` where it has no solution, value
+    ``None`` where the monitor is gone."""
+    res = op.solve(u, np.array([lam1]))
+    if not res.converged:
+        return None, None
+    try:
+        mon = op.dib_monitors(res.x, np.array([lam1])).get(key)
+    except TrialRejected:
+        mon = None
+    return res.x, (None if mon is None else mon.value)
+
+
+def _candidate(op, key, u, lam, lam1):
+    """The orbit of the new signature at ``lam1``: ``((problem, u, guess), old monitor)`` or
+    ``(reason, old monitor)``. Built from the old signature's solution at ``lam1`` where it
+    crosses the surface there; else (it has none there, or it does not reach the surface:
+    ``lam1`` is on the side the branch came from) from the bifurcation itself."""
+    x_old, m_old = _old_past(op, key, u, lam, lam1)
+    made = None
+    if x_old is not None:
+        made = _past_graze(op, key, x_old, lam1)
+    if made is None or isinstance(made, str):
+        again = _past_graze(op, key, u, lam, solve_at=lam1)
+        if made is None or not isinstance(again, str):
+            made = again
+    return made, m_old
+
+
+def _back(value) -> bool:
+    """Whether an old monitor's value past the bifurcation is positive again."""
+    return value is not None and value > 0.0
+
+
+def _gap(made) -> float:
+    prob, x, guess = made
+    return float(np.max(np.abs(np.asarray(x) - np.asarray(guess))))
+
+
+def _connected(op, key, u, lam, made, lam_near) -> bool:
+    """Whether the new orbit ``made`` (at an offset ``delta`` from the bifurcation at ``lam``)
+    lies on the branch through the bifurcation: built the same way at ``lam_near`` (a quarter
+    of the offset), its distance from Newton's start must shrink (see
+    :data:`pwsdyn.continuation.dib.CONNECTED_RATIO`)."""
+    g = _gap(made)
+    if g <= 1e-9 * (1.0 + float(np.max(np.abs(made[1])))):
+        return True
+    near, _ = _candidate(op, key, u, lam, lam_near)
+    if isinstance(near, str) or near[0].signature != made[0].signature:
+        return False
+    return _gap(near) <= CONNECTED_RATIO * g
+
+
+def restart(op, key: str, u, lam: float, direction: float, span, delta: float):
+    """Where the branch goes on past the discontinuity-induced bifurcation ``key`` located at
+    ``(u, lam)`` (a solution of ``op``), arrived at going ``direction`` (+1 or -1) in the
+    parameter: ``(problem, u1, lam1, direction1, nonsmooth_fold)``, or why there is none.
+
+    The branch goes on with the orbit of the new signature that connects there. It is sought
+    a short offset ``delta`` past the bifurcation (the new problem is singular at it): first
+    on the far side (persistence), where the old orbit must have crossed the surface -- its
+    monitor negative there and at twice the offset; a positive one means a second
+    bifurcation closer than ``2 delta``,
+    and a new orbit that is not admissible or does not connect (``_connected``: Newton
+    landed on another branch) may mean the same -- then on the side the branch came from: a
+    new orbit there is the other half of a non-smooth fold (the branches with and without
+    the new event meet from one side, the branch turns back, ``direction1 = -direction``).
+    Neither: ``delta`` is halved (a second bifurcation or a smooth fold of the new branch
+    closer than it), :data:`pwsdyn.continuation.dib.RESTART_HALVINGS` times. Where only an
+    admissible far-side orbit that does not pass the connection test was found, it is taken
+    (as before the test)."""
+    lo, hi = span
+    if not lo <= lam + direction * delta <= hi:
+        return "the span ends at the graze"
+    fallback, why = None, ""
+    for _ in range(RESTART_HALVINGS + 1):
+        lam1 = lam + direction * delta
+        if lo <= lam1 <= hi:
+            made, m_old = _candidate(op, key, u, lam, lam1)
+            if isinstance(made, str):
+                why = made
+            elif _back(m_old) or _back(_old_past(op, key, u, lam, lam + 2 * direction * delta)[1]
+                                      if lo <= lam + 2 * direction * delta <= hi else None):
+                # the new orbit at lam1 must not sit on (or past) a second bifurcation: the old
+                # orbit still crosses the surface at twice the offset
+                why = (f"the old orbit is back on its side of the surface within "
+                       f"{2 * delta:.3g} of {lam:.12g}: a second bifurcation there")
+            else:
+                if fallback is None:
+                    fallback = (made[0], made[1], lam1, direction, False)
+                if _connected(op, key, u, lam, made, lam + direction * delta / 4):
+                    return made[0], made[1], lam1, direction, False
+        elif not why:
+            why = "the span ends at the graze"
+        lam2 = lam - direction * delta
+        if lo <= lam2 <= hi:
+            made, _ = _candidate(op, key, u, lam, lam2)
+            if not isinstance(made, str) and _connected(op, key, u, lam, made,
+                                                        lam - direction * delta / 4):
+                return made[0], made[1], lam2, -direction, True
+        delta *= 0.5
+    return fallback if fallback is not None else why
+
+
+def dip_suspected(s, m) -> bool:
+    """Whether a monitor positive at three consecutive points of a branch (arclengths ``s``,
+    values ``m``) may reach zero between them, out of sight of the points themselves: the
+    parabola through them is convex, its vertex lies between the first and the last point,
+    and its least value is smaller than the monitor's variation over the two steps (the
+    extremum approaches zero relative to the step: a dip to zero and back as narrow as a
+    fraction of the step would show no sign change at the points)."""
+    s0, s1, s2 = (float(x) for x in s)
+    m0, m1, m2 = (float(x) for x in m)
+    if not (m0 > 0.0 and m1 > 0.0 and m2 > 0.0) or not (s0 < s1 < s2 or s0 > s1 > s2):
+        return False
+    d01, d12 = (m1 - m0) / (s1 - s0), (m2 - m1) / (s2 - s1)
+    c2 = (d12 - d01) / (s2 - s0)
+    if not c2 > 0.0:
+        return False
+    sv = 0.5 * (s0 + s1) - d01 / (2.0 * c2)
+    if not min(s0, s2) < sv < max(s0, s2):
+        return False
+    qv = m1 + d01 * (sv - s1) + c2 * (sv - s0) * (sv - s1)
+    return qv < max(m0, m1, m2) - qv

@@ -532,8 +532,13 @@ class Continuation:
         new = self._point(X, v, ds=ds, iterations=res.iterations, arclength=arc)
         if not (len(self.points) == 1 and prev.special):
             # leaving a special point (a branch switch, a restart there), the test functions
-            # are zero at the start: its own zero is not located again
-            out.extend(self._located(prev, new))
+            # are zero at the start: its own zero is not located again. A monitor that dips
+            # below zero and back within the step is seen at its least value in between
+            dip = self._dip(prev, new)
+            if dip is None:
+                out.extend(self._located(prev, new))
+            else:
+                out.extend(self._located(prev, dip) + self._located(dip, new))
         if self._stops_at(out):
             return out[:self._stops_at(out)]
         out.append(new)
@@ -582,6 +587,67 @@ class Continuation:
     # ------------------------------------------------------------------------------
     # special points
     # ------------------------------------------------------------------------------
+    def _dip(self, a: Point, b: Point) -> Point | None:
+        """A point between ``a`` and ``b`` where a monitor of a discontinuity-induced
+        bifurcation (a test ``KIND/...``) positive at both is negative: two bifurcations
+        inside one step (an orbit that grazes a surface, penetrates it for a short stretch
+        of the parameter and leaves it again). Sought only where the monitor's values at
+        the last three points suggest it (:func:`pwsdyn.continuation.dib.dip_suspected`),
+        by minimising it along the branch between ``a`` and ``b`` (each trial a corrected
+        point); ``None`` where none is found."""
+        from .dib import dip_suspected
+
+        if len(self.points) < 2 or self.points[-1] is not a:
+            return None
+        z = self.points[-2]
+        keys = [k for k, vb in b.tests.items()
+                if "/" in k and k in a.tests and k in z.tests and
+                dip_suspected((z.arclength, a.arclength, b.arclength),
+                              (z.tests[k], a.tests[k], vb))]
+        if not keys:
+            return None
+        from scipy.optimize import minimize_scalar
+
+        found = []
+
+        def least(sig):
+            p = self._between(a, b, sig)
+            if p is None:
+                return math.inf
+            v = min(p.tests.get(k, math.inf) for k in keys)
+            if v < 0.0:
+                found.append(p)
+                raise StopIteration
+            return v
+        try:
+            minimize_scalar(least, bounds=(0.0, 1.0), method="bounded",
+                            options={"xatol": 1e-6, "maxiter": 60})
+        except StopIteration:
+            return found[-1]
+        return None
+
+    def _between(self, a: Point, b: Point, sig: float) -> Point | None:
+        """The point of the branch at the fraction ``sig`` of the chord from ``a`` to ``b``:
+        predicted on their cubic Hermite curve and corrected on the hyperplane through the
+        prediction orthogonal to the chord (as in :meth:`_locate`)."""
+        chord = b.X - a.X
+        L = float(np.linalg.norm(chord))
+        if not L > 0.0:
+            return None
+        e = chord / L
+        h00, h10 = 2 * sig**3 - 3 * sig**2 + 1, sig**3 - 2 * sig**2 + sig
+        h01, h11 = -2 * sig**3 + 3 * sig**2, sig**3 - sig**2
+        Xg = h00 * a.X + h10 * L * a.tangent + h01 * b.X + h11 * L * b.tangent
+        try:
+            X, res = self._correct_on(Xg, e, float(e @ Xg))
+            if X is None or np.linalg.norm(X - Xg) > 0.05 * L:
+                return None
+            v = self._tangent(X, a.tangent)
+            return self._point(X, v, ds=sig * L, iterations=res.iterations,
+                               arclength=a.arclength + sig * (b.arclength - a.arclength))
+        except TrialRejected:
+            return None
+
     def _located(self, a: Point, b: Point) -> list[Point]:
         """Special points between ``a`` and ``b``, located, in the order of the arclength."""
         found = []
