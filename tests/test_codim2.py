@@ -5,13 +5,14 @@ derived here independently of pwsdyn.
 The kicked shear: a forced model that relaxes ``y`` for half a period and shears ``x`` for the
 other half (``T = 1``),
 
-    relax (cos(2 pi t) > 0):  x' = 0,         y' = G(x) - k y,   G = g0 + g1 x + g2 x^2 + g3 x^3
+    relax (cos(2 pi t) > 0):  x' = 0,         y' = G(x) - (k + k2 x^2) y,
+                              G = g0 + g1 x + g2 x^2 + g3 x^3
     shear (cos(2 pi t) < 0):  x' = y - m x,   y' = 0,
 
 so that each phase has a closed-form flow (``x`` or ``y`` frozen, the other linear) and the
 stroboscopic map from ``t = 0`` is the composition ``R_{1/4} S_{1/2} R_{1/4}`` with
 
-    R_tau(x, y) = (x, e^{-k tau} y + G(x) (1 - e^{-k tau}) / k),
+    R_tau(x, y) = (x, e^{-K tau} y + G(x) (1 - e^{-K tau}) / K),   K = k + k2 x^2,
     S_s(x, y)   = (e^{-m s} x + y (1 - e^{-m s}) / m, y),
 
 written out in SymPy below and differentiated exactly. Its fixed points are ``G(x*) = 0``,
@@ -48,12 +49,13 @@ M_DAMP = 0.1
 
 
 def shear(**p) -> dict:
-    params = {"g0": 0.0, "g1": -1.0, "g2": 0.0, "g3": 0.0, "k": 0.2, "m": M_DAMP,
+    params = {"g0": 0.0, "g1": -1.0, "g2": 0.0, "g3": 0.0, "k": 0.2, "k2": 0.0, "m": M_DAMP,
               "omega": 2 * math.pi}
     params.update(p)
     return {"name": "kicked-shear", "states": ["x", "y"], "parameters": params,
             "forcing_period": "2*pi/omega",
-            "modes": {"relax": {"x": "0", "y": "g0 + g1*x + g2*x**2 + g3*x**3 - k*y"},
+            "modes": {"relax": {"x": "0",
+                                "y": "g0 + g1*x + g2*x**2 + g3*x**3 - (k + k2*x**2)*y"},
                       "shear": {"x": "y - m*x", "y": "0"}},
             "events": [{"name": "to_shear", "kind": "transition", "surface": "cos(omega*t)",
                         "direction": -1, "modes": ["relax"], "target": "shear"},
@@ -65,11 +67,12 @@ def shear(**p) -> dict:
 
 @functools.lru_cache(maxsize=None)
 def _map():
-    x, y, g0, g1, g2, g3, k, m = sp.symbols("x y g0 g1 g2 g3 k m", real=True)
+    x, y, g0, g1, g2, g3, k, k2, m = sp.symbols("x y g0 g1 g2 g3 k k2 m", real=True)
 
     def relax(X, Y, tau):
-        a = sp.exp(-k * tau)
-        return X, a * Y + (g0 + g1 * X + g2 * X**2 + g3 * X**3) * (1 - a) / k
+        kx = k + k2 * X**2
+        a = sp.exp(-kx * tau)
+        return X, a * Y + (g0 + g1 * X + g2 * X**2 + g3 * X**3) * (1 - a) / kx
 
     def shr(X, Y, s):
         e = sp.exp(-m * s)
@@ -80,7 +83,7 @@ def _map():
     X, Y = relax(X, Y, sp.Rational(1, 4))
     P = [X, Y]
     v = (x, y)
-    args = (x, y, g0, g1, g2, g3, k, m)
+    args = (x, y, g0, g1, g2, g3, k, k2, m)
     J = sp.lambdify(args, [[sp.diff(P[i], v[j]) for j in range(2)] for i in range(2)])
     B = sp.lambdify(args, [[[sp.diff(P[i], v[a], v[b]) for b in range(2)] for a in range(2)]
                            for i in range(2)])
@@ -90,9 +93,9 @@ def _map():
 
 
 def _params(**p):
-    base = dict(g0=0.0, g1=-1.0, g2=0.0, g3=0.0, k=0.2, m=M_DAMP)
+    base = dict(g0=0.0, g1=-1.0, g2=0.0, g3=0.0, k=0.2, k2=0.0, m=M_DAMP)
     base.update(p)
-    return [base[n] for n in ("g0", "g1", "g2", "g3", "k", "m")]
+    return [base[n] for n in ("g0", "g1", "g2", "g3", "k", "k2", "m")]
 
 
 def map_jacobian(xs=(0.0, 0.0), **p) -> np.ndarray:
@@ -115,6 +118,27 @@ def flip_coefficient(xs=(0.0, 0.0), **p) -> float:
     Cf = lambda u, v, z: np.einsum("iabc,a,b,c->i", Ct, u, v, z)  # noqa: E731
     return float(pv @ Cf(q, q, q) / 6 + 0.5 * pv @ Bf(q, np.linalg.solve(np.eye(2) - A,
                                                                            Bf(q, q))))
+
+
+def ns_coefficient(xs=(0.0, 0.0), **p) -> float:
+    """Kuznetsov's Neimark-Sacker coefficient ``d`` (``|q| = 1``) from the exact derivatives
+    of the closed-form map."""
+    J, B, C = _map()
+    A = map_jacobian(xs, **p)
+    Bt = np.array(B(*xs, *_params(**p)), dtype=float)
+    Ct = np.array(C(*xs, *_params(**p)), dtype=float)
+    w, V = np.linalg.eig(A)
+    i = int(np.argmax(w.imag))
+    mu, q = w[i], V[:, i] / np.linalg.norm(V[:, i])
+    wl, W = np.linalg.eig(A.T)
+    pv = W[:, int(np.argmin(abs(wl - np.conj(mu))))]
+    pv = pv / np.vdot(q, pv)
+    Bf = lambda u, v: np.einsum("iab,a,b->i", Bt, u, v)  # noqa: E731
+    Cf = lambda u, v, z: np.einsum("iabc,a,b,c->i", Ct, u, v, z)  # noqa: E731
+    I2 = np.eye(2)
+    r = (Cf(q, q, q.conj()) + 2 * Bf(q, np.linalg.solve(I2 - A, Bf(q, q.conj())))
+         + Bf(q.conj(), np.linalg.solve(mu**2 * I2 - A, Bf(q, q))))
+    return float(0.5 * (np.conj(mu) / abs(mu) * np.vdot(pv, r)).real)
 
 
 def g1_period_doubling(**p) -> float:
@@ -227,6 +251,27 @@ def test_resonances_on_a_neimark_sacker_curve():
     assert "R2" in cur.stop_reason
     assert cur.special("R2")[0].point.data["meets"] == ("NS", "PD")
     assert np.allclose(cur.special("R2")[0].multipliers, -1.0, atol=1e-4)
+
+
+def test_neimark_sacker_coefficient_and_chenciner_point():
+    """With ``k = -m`` and ``k2 = 0`` the map is area-preserving (each phase's Jacobian has a
+    constant determinant), so its Neimark-Sacker coefficient vanishes; ``k2 x^2 y`` is
+    cubic, so ``d`` is linear in ``k2``: the Chenciner point of the curve in ``(k2, k)`` is
+    ``k2 = 0``. At ``k2 = 0.5`` the coefficient against the closed-form map's."""
+    model = shear(g1=-6.0, g2=1.0, k2=0.5)
+    br = pwsdyn.continue_orbit(model, _orbit(model, [0.01, 0.01]), "k", span=(-0.3, 0.2),
+                               ds=-0.05)
+    ns = br.special("NS")
+    assert len(ns) == 1
+    d = ns_coefficient(g1=-6.0, g2=1.0, k2=0.5, k=ns[0].value)
+    assert d < 0 and abs(ns[0].point.data["coefficient"] - d) < 1e-7
+    assert ns[0].point.data["criticality"] == "supercritical"
+    cur = pwsdyn.continue_bifurcation(model, ns[0], ("k2", "k"), span=(-0.5, 1.0), ds=-0.05,
+                                      max_points=40)
+    ch = cur.special("CH")
+    assert len(ch) == 1, cur.special_points
+    assert abs(ch[0].value) < 1e-7 and abs(cur.values_of("k")[ch[0].index] + M_DAMP) < 1e-9
+    assert ch[0].point.data["meets"] == ("NS",)
 
 
 # ---- the cusp on a fold curve ---------------------------------------------------------------
