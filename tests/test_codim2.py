@@ -341,14 +341,19 @@ def _fold_orbit_max(sigma, side):
     return w, best - sigma
 
 
-def test_a_fold_curve_meets_a_graze():
-    """Up in ``sigma`` the fold orbit's free flight reaches the wall in its interior (the
-    ``GR`` monitor of segment 0): the fold curve meets the grazing curve there."""
+@pytest.fixture(scope="module")
+def io_fold_curve():
     down = pwsdyn.continue_orbit("impact-oscillator", io_orbit("stable"), "omega",
                                  span=(1.9, 3.2), ds=-0.05)
-    cur = pwsdyn.continue_bifurcation("impact-oscillator", down.special("LP")[0],
-                                      ("sigma", "omega"), span=(-0.8, -0.2), ds=0.02,
-                                      ds_max=0.05, max_points=120)
+    return pwsdyn.continue_bifurcation("impact-oscillator", down.special("LP")[0],
+                                       ("sigma", "omega"), span=(-0.8, -0.2), ds=0.02,
+                                       ds_max=0.05, max_points=120)
+
+
+def test_a_fold_curve_meets_a_graze(io_fold_curve):
+    """Up in ``sigma`` the fold orbit's free flight reaches the wall in its interior (the
+    ``GR`` monitor of segment 0): the fold curve meets the grazing curve there."""
+    cur = io_fold_curve
     gr = cur.special("GR")
     assert gr, cur.special_points
     w_gr = cur.values_of("omega")[gr[0].index]
@@ -359,11 +364,55 @@ def test_a_fold_curve_meets_a_graze():
                      gr[0].value + 1e-4, xtol=1e-15)
     w_ref = _fold_orbit_max(sig_ref, side)[0]
     assert abs(gr[0].value - sig_ref) < 1e-7
-    assert abs(cur.values_of("omega")[gr[0].index] - w_ref) < 1e-7
+    assert abs(w_gr - w_ref) < 1e-7
     assert gr[0].key == "GR/impact/0"
     assert gr[0].point.data["meets"] == ("LP", "GR")
-    # past it no codimension-two point of the fold is reported: the map is not smooth there
+    # past it no codimension-two point of the fold is reported: the model's map there is not
+    # the orbit's (its flight passes through the wall)
     assert not [s for s in cur.special_points if s.kind in ("CP", "LPPD", "LPNS")]
+
+
+def _one_impact_max(sigma, omega):
+    """Over the two one-impact orbits at ``(sigma, omega)``: the smallest distance of the
+    largest interior maximum of ``x`` over the flight from ``sigma``."""
+    eps = IO["eps"]
+    A = np.array([[0.0, 1.0], [-1.0, -eps]])
+    X, Y = np.linalg.solve(np.array([[1 - omega**2, -eps * omega],
+                                     [eps * omega, 1 - omega**2]]), [1.0, 0.0])
+    T = 2 * np.pi / omega
+    out = np.inf
+    for root in (1, -1):
+        v, t0, _, _ = io_one_impact(omega, root, sigma=sigma)
+        zp = lambda t: np.array([X * np.sin(omega * t) + Y * np.cos(omega * t),  # noqa: E731
+                                 omega * (X * np.cos(omega * t) - Y * np.sin(omega * t))])
+        z0 = np.array([sigma, -IO["r"] * v]) - zp(t0)
+        z = lambda t: expm(A * (t - t0)) @ z0 + zp(t)  # noqa: E731
+        ts = t0 + np.linspace(0, T, 2001)[1:-1]
+        vs = np.array([z(t)[1] for t in ts])
+        for i in np.nonzero((vs[:-1] > 0) & (vs[1:] <= 0))[0]:
+            tm = brentq(lambda t: z(t)[1], ts[i], ts[i + 1], xtol=1e-15)
+            out = min(out, abs(z(tm)[0] - sigma))
+    return out
+
+
+def test_the_grazing_curve_starts_where_it_meets_the_fold_curve(io_fold_curve):
+    """``curve_start`` turns the ``GR`` point of the fold curve into the start of the grazing
+    curve; each of its points is a one-impact orbit whose flight touches the wall."""
+    from pwsdyn.continuation.problems import curve_start
+
+    gr = io_fold_curve.special("GR")[0]
+    start = curve_start(gr, "GR")
+    assert start.kind == "GR" and start.key == "GR/impact/0"
+    graze = pwsdyn.continue_bifurcation("impact-oscillator", start, ("sigma", "omega"),
+                                        span=(-0.5, -0.2), ds=-0.01, max_points=8)
+    assert graze.curve == "GR" and len(graze) >= 5
+    assert np.ptp(graze.values) > 0.01
+    # (the start, the fold itself, is checked above: there the closed form's velocity is the
+    # square root of a discriminant that is zero, and its round-off 1e-6)
+    for s_, w in zip(graze.values[1:], graze.values_of("omega")[1:]):
+        assert _one_impact_max(s_, w) < 1e-7
+    with pytest.raises(pwsdyn.ArgumentError, match="no PD curve"):
+        curve_start(gr, "PD")
 
 
 # ---- round-off is not a zero ----------------------------------------------------------------

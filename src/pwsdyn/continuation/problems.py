@@ -26,6 +26,8 @@ from ..errors import ArgumentError
 from ..newton import TrialRejected
 from ..orbits.monitors import DIB_KINDS
 from . import codim2
+from .branch import Branch, SpecialPoint
+from .engine import Point
 
 #: A located zero is the bifurcation its test function stands for when the critical
 #: multipliers (eigenvalues) are this close to the critical set.
@@ -505,6 +507,52 @@ class BifurcationCurveProblem:
     @property
     def state_names(self):
         return tuple(self.orbit_problem.model.states)
+
+
+def curve_start(special_point, curve: str):
+    """A start for :func:`~pwsdyn.continue_bifurcation` of the curve of kind ``curve`` through
+    a codimension-two point of a two-parameter curve, or a DIB located on one.
+
+    Parameters
+    ----------
+    special_point : SpecialPoint
+        A located point of a curve (:func:`~pwsdyn.continue_bifurcation`'s branch) whose
+        ``point.data["meets"]`` names ``curve``: ``"PD"`` at a fold-flip ``LPPD``, ``"GR"`` at
+        a graze on a fold curve, ...
+    curve : str
+        The kind of the curve to follow from there.
+
+    Returns
+    -------
+    SpecialPoint
+        A point of kind ``curve`` of a one-point orbit branch in the first of the curve's
+        parameters, at the same orbit and parameter values; pass it to
+        :func:`~pwsdyn.continue_bifurcation` with the two parameters. (Where the two curves'
+        defining functions meet degenerately -- a period-doubling curve at a 1:2 resonance,
+        whose function has a double zero there -- that continuation may not start.)
+    """
+    sp = special_point
+    if not isinstance(sp, SpecialPoint) or not isinstance(sp.problem, BifurcationCurveProblem):
+        raise ArgumentError("`special_point` must be a special point of a two-parameter curve")
+    meets = tuple(sp.point.data.get("meets", ()))
+    if curve not in meets:
+        raise ArgumentError(f"no {curve} curve meets at this {sp.kind} point; the curves "
+                            f"that meet there: {list(meets)}")
+    prob = sp.problem
+    U, lam = np.asarray(sp.point.u, dtype=float), float(sp.point.lam)
+    op = prob.orbit_problem
+    base = OrbitBranchProblem(op.replace(params=op.param_dict(np.array([lam, U[-1]])),
+                                         parameters=[prob.parameter]))
+    data = dict(sp.point.data)
+    if curve not in DIB_KINDS:
+        data["located"] = curve
+    tangent = np.zeros(U.size)
+    tangent[-1] = 1.0
+    pt = Point(u=U[:-1].copy(), lam=lam, tangent=tangent, data=data,
+               tests=dict(sp.point.tests), special=curve)
+    br = Branch(base, [pt], stop_reason=f"a start at the {sp.kind} point of a {prob.curve} "
+                f"curve", model=getattr(sp.branch, "model", None))
+    return br.special_points[0]
 
 
 class PseudoEquilibriumProblem(_PointProblem):
