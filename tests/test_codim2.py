@@ -154,6 +154,22 @@ def _orbit(model, x0):
 
 # ---- the coefficients on maps given in closed form ------------------------------------------
 
+def test_curve_tests_of_multipliers():
+    """The test functions of each curve from the multipliers (no coefficient needed for the
+    resonances): on a Neimark-Sacker curve ``kappa`` is the real part of the critical pair,
+    and stays continuous through the 1:2 resonance into a real pair ``mu, 1/mu``."""
+    th = 2 * np.pi / 3
+    t = codim2.curve_tests("NS", [np.exp(1j * th), np.exp(-1j * th), 0.3], 0.0)
+    assert abs(t["R3"]) < 1e-15 and abs(t["R2"] - 0.5) < 1e-15
+    t = codim2.curve_tests("NS", [-2.0, -0.5, 0.3], 0.0)
+    assert t["R2"] == pytest.approx(-0.25, abs=1e-15)
+    t = codim2.curve_tests("PD", [-1.0, -0.8], 0.1)
+    assert t["R2"] == pytest.approx(0.2) and t["LPPD"] == pytest.approx(2 * 1.8)
+    t = codim2.curve_tests("LP", [1.0, -1.0], 0.1)
+    assert t["LPPD"] == 0.0 and t["CP"] == 0.1
+    assert codim2.curve_tests("PD", [np.nan, 1.0], 0.1) == {}
+
+
 def _jac_of(exprs, syms):
     J = sp.lambdify(syms, sp.Matrix(exprs).jacobian(syms))
     return lambda v: np.array(J(*v), dtype=float)
@@ -229,7 +245,7 @@ def _g1_where_trace(tr, **p):
     return brentq(lambda g: np.trace(map_jacobian(g1=g, **p)) - tr, -40.0, -1.0, xtol=1e-15)
 
 
-def test_resonances_on_a_neimark_sacker_curve():
+def test_resonances_on_a_neimark_sacker_curve(tmp_path):
     """The origin with ``m = 0.1`` followed in ``k``: Neimark-Sacker at ``k = -m``
     (``det M = exp(-(k + m) / 2)``). Its curve in ``(g1, k)`` is ``k = -m``; along it
     ``tr M = 2 cos(theta)`` passes 0 (1:4), -1 (1:3) and -2 (1:2), where the pair becomes a real
@@ -251,6 +267,11 @@ def test_resonances_on_a_neimark_sacker_curve():
     assert "R2" in cur.stop_reason
     assert cur.special("R2")[0].point.data["meets"] == ("NS", "PD")
     assert np.allclose(cur.special("R2")[0].multipliers, -1.0, atol=1e-4)
+    # the file keeps the kinds and their test functions
+    back = pwsdyn.load_branch(cur.save(tmp_path / "ns.nc"))
+    assert [s.kind for s in back.special_points] == kinds
+    assert np.allclose([p.tests["R3"] for p in back.points],
+                       [p.tests["R3"] for p in cur.points], rtol=0, atol=0)
 
 
 def test_neimark_sacker_coefficient_and_chenciner_point():

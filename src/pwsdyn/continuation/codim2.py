@@ -75,6 +75,7 @@ import math
 import numpy as np
 
 from ..errors import PwsdynError
+from ..orbits.problem import SegmentFailed
 
 #: Step of the finite differences of the Poincaré map's Jacobian, relative to ``1 + |x|``.
 FD_STEP = 1e-2
@@ -348,5 +349,7 @@ def orbit_coefficient(curve: str, orbit_problem, u, p, *, orient=None, vector=Fa
         with np.errstate(all="ignore"):
             return normal_form_coefficient(curve, sm.jacobian, sm.x, orient=orient,
                                            vector=vector)
-    except (PwsdynError, np.linalg.LinAlgError, ValueError):
+    except (PwsdynError, SegmentFailed, np.linalg.LinAlgError, ValueError, ArithmeticError):
+        # (a segment that cannot be integrated from the orbit's section, a singular
+        # (I - A): the coefficient is not defined there)
         return (math.nan, None) if vector else math.nan
