@@ -328,6 +328,18 @@ def test_cusp_on_a_fold_curve():
 
 # ---- a DIB on a fold curve ------------------------------------------------------------------
 
+def _flight_velocities(A, z0, zp, t0, T, n=800):
+    """Sample times inside a flight and the velocity there (the homogeneous part stepped by
+    ``expm(A dt)``), where the sign changes of the velocity are bracketed."""
+    ts = t0 + np.linspace(0, T, n + 1)
+    step = expm(A * (T / n))
+    zh, vs = z0.copy(), []
+    for t in ts:
+        vs.append(zh[1] + zp(t)[1])
+        zh = step @ zh
+    return ts[1:-1], np.array(vs[1:-1])
+
+
 def _fold_orbit_max(sigma, side):
     """A fold of the impact oscillator's one-impact orbits at ``sigma`` (the discriminant of
     the impact-velocity quadratic vanishes, tests/_orbit_cases.py; near ``omega = 2`` it has
@@ -353,8 +365,7 @@ def _fold_orbit_max(sigma, side):
         return expm(A * (t - t0)) @ z0 + zp(t)
 
     T = 2 * np.pi / w
-    ts = t0 + np.linspace(0, T, 4001)[1:-1]
-    vs = np.array([z(t)[1] for t in ts])
+    ts, vs = _flight_velocities(A, z0, zp, t0, T)
     best = -np.inf
     for i in np.nonzero((vs[:-1] > 0) & (vs[1:] <= 0))[0]:
         tm = brentq(lambda t: z(t)[1], ts[i], ts[i + 1], xtol=1e-15)
@@ -368,7 +379,7 @@ def io_fold_curve():
                                  span=(1.9, 3.2), ds=-0.05)
     return pwsdyn.continue_bifurcation("impact-oscillator", down.special("LP")[0],
                                        ("sigma", "omega"), span=(-0.8, -0.2), ds=0.02,
-                                       ds_max=0.05, max_points=120)
+                                       ds_max=0.05, max_points=55)
 
 
 def test_a_fold_curve_meets_a_graze(io_fold_curve):
@@ -408,8 +419,7 @@ def _one_impact_max(sigma, omega):
                                  omega * (X * np.cos(omega * t) - Y * np.sin(omega * t))])
         z0 = np.array([sigma, -IO["r"] * v]) - zp(t0)
         z = lambda t: expm(A * (t - t0)) @ z0 + zp(t)  # noqa: E731
-        ts = t0 + np.linspace(0, T, 2001)[1:-1]
-        vs = np.array([z(t)[1] for t in ts])
+        ts, vs = _flight_velocities(A, z0, zp, t0, T)
         for i in np.nonzero((vs[:-1] > 0) & (vs[1:] <= 0))[0]:
             tm = brentq(lambda t: z(t)[1], ts[i], ts[i + 1], xtol=1e-15)
             out = min(out, abs(z(tm)[0] - sigma))
