@@ -15,7 +15,7 @@ from ..model.spec import as_model
 from .branch import Branch, SpecialPoint
 from .engine import Continuation, ContinuationError, ContinuationSettings, null_space
 from .problems import (CURVE_KINDS, DIB_KINDS, BifurcationCurveProblem,
-                       OrbitBranchProblem, equilibrium_problem)
+                       OrbitBranchProblem, curve_locate, curve_stop_at, equilibrium_problem)
 
 _SETTING_NAMES = {f.name for f in dataclasses.fields(ContinuationSettings)}
 
@@ -541,7 +541,10 @@ def continue_bifurcation(model, special_point: SpecialPoint, params, *, span=Non
         raise ArgumentError(f"the special point lies on a branch in {base.parameter!r}; it must "
                             f"be one of `params` {params!r}")
     settings, options = _split_options(dict(options), span, ds, max_points)
-    settings = dataclasses.replace(settings, locate=())
+    # the codimension-two points of the curve (and the DIBs met on it); a Neimark-Sacker
+    # curve ends where it turns into neutral saddles
+    settings = dataclasses.replace(settings, locate=curve_locate(sp.kind),
+                                   stop_at=curve_stop_at(sp.kind))
     op = base.orbit_problem
     all_params = dict(op.params)
     all_params[base.parameter] = sp.value

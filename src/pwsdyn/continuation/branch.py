@@ -35,6 +35,20 @@ KINDS = {
     "BEB": "boundary equilibrium bifurcation: an equilibrium reaches the boundary of its "
            "mode's region, or a pseudo-equilibrium that of the sliding region",
     "EP": "end point of the branch",
+    # codimension-two points on two-parameter curves (Kuznetsov, Elements of Applied
+    # Bifurcation Theory, 3rd ed., chapter 9; pwsdyn.continuation.codim2)
+    "CP": "cusp: on a fold curve, the fold's normal-form coefficient vanishes",
+    "LPPD": "fold-flip: a multiplier +1 and a multiplier -1",
+    "LPNS": "fold-Neimark-Sacker: a multiplier +1 and a complex pair on the unit circle",
+    "GPD": "generalized period doubling: on a period-doubling curve, the flip's normal-form "
+           "coefficient vanishes (the period doubling turns from super- to subcritical)",
+    "R1": "1:1 resonance: a double multiplier +1 (a Neimark-Sacker curve turns into neutral "
+          "saddles)",
+    "R2": "1:2 resonance: a double multiplier -1 (a Neimark-Sacker curve turns into neutral "
+          "saddles)",
+    "R3": "1:3 resonance: a Neimark-Sacker pair exp(+-2 pi i / 3)",
+    "R4": "1:4 resonance: a Neimark-Sacker pair +-i",
+    "CH": "Chenciner: on a Neimark-Sacker curve, the normal-form coefficient vanishes",
 }
 
 

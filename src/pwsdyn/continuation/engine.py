@@ -36,7 +36,11 @@ A problem is any object with
 * ``test_functions(data) -> dict``: ``{kind: value}`` of its own test functions;
 * ``confirm(kind, data) -> bool``: whether a located zero of ``kind`` is that bifurcation (a
   zero of the Neimark-Sacker function with a real pair of multipliers, a neutral saddle, is
-  not).
+  not);
+* optionally ``test_errors(data) -> dict``: ``{kind: error}`` of its test functions' values; a
+  sign change between two points whose values both lie within their error is not located;
+* optionally ``special_data(kind, u, lam, data) -> dict``: what a located point of ``kind``
+  carries besides its data (normal-form coefficients, the curves meeting there).
 """
 
 from __future__ import annotations
@@ -651,15 +655,29 @@ class Continuation:
     def _located(self, a: Point, b: Point) -> list[Point]:
         """Special points between ``a`` and ``b``, located, in the order of the arclength."""
         found = []
+        errors = getattr(self.problem, "test_errors", None)
+        err_a = err_b = None
         for key, vb in b.tests.items():
             va = a.tests.get(key)
             if va is None or not (va * vb < 0.0):
                 continue
+            if errors is not None:
+                if err_a is None:
+                    err_a, err_b = errors(a.data), errors(b.data)
+                # both values within the function's own evaluation error: round-off (an orbit
+                # whose multipliers stay on the unit circle), not a zero
+                if abs(va) <= err_a.get(key, 0.0) and abs(vb) <= err_b.get(key, 0.0):
+                    continue
             kind = key.split("/", 1)[0]
             p = self._locate(key, a, b)
             if p is not None and self.problem_confirms(kind, p):
                 p.special = kind
                 p.data["located"] = key
+                extra = getattr(self.problem, "special_data", None)
+                if extra is not None:
+                    # what the point carries besides its data (a normal-form coefficient, the
+                    # curves that meet at a codimension-two point)
+                    p.data.update(extra(kind, p.u, p.lam, p.data))
                 found.append(p)
         found.sort(key=lambda q: q.arclength)
         # one bifurcation seen by two monitors (a corner collision by the surface at each of

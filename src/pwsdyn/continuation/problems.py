@@ -25,6 +25,9 @@ import numpy as np
 from ..errors import ArgumentError
 from ..newton import TrialRejected
 from ..orbits.monitors import DIB_KINDS
+from . import codim2
+from .branch import Branch, SpecialPoint
+from .engine import Point
 
 #: A located zero is the bifurcation its test function stands for when the critical
 #: multipliers (eigenvalues) are this close to the critical set.
@@ -122,6 +125,25 @@ class OrbitBranchProblem:
             cx = mu[np.abs(mu.imag) > CONFIRM_TOL]
             return bool(cx.size and np.min(np.abs(np.abs(cx) - 1.0)) < CONFIRM_TOL ** 0.5)
         return True
+
+    def test_errors(self, data) -> dict:
+        """``{kind: error}`` of the test functions of the multipliers: each multiplier off by
+        :func:`~pwsdyn.continuation.codim2.multiplier_error`. A sign change of a test function
+        whose values on both sides lie within this is round-off (an orbit of a conservative
+        model keeps its multipliers on the unit circle), not a zero."""
+        return _multiplier_test_errors(self.orbit_problem, data, {
+            "PD": lambda m: float(np.prod(m + 1.0).real),
+            "NS": lambda m: _pair_product(m, lambda a, b: a * b - 1.0)})
+
+    def special_data(self, kind, u, lam, data) -> dict:
+        """What a located point of ``kind`` carries besides its data: at a period doubling
+        the flip coefficient ``c``, at a Neimark-Sacker point the coefficient ``d``
+        (:mod:`pwsdyn.continuation.codim2`), with ``criticality`` (``"supercritical"``,
+        ``"subcritical"``, or ``""`` where it is not computed)."""
+        if kind not in ("PD", "NS"):
+            return {}
+        c = codim2.orbit_coefficient(kind, self.orbit_problem, u, np.array([lam]))
+        return _criticality(kind, c)
 
     # ---- what a point is -------------------------------------------------------------
     def orbit(self, u, lam):
@@ -264,6 +286,27 @@ class EquilibriumProblem(_PointProblem):
 CURVE_KINDS = ("LP", "PD", "NS") + DIB_KINDS
 
 
+def _multiplier_test_errors(orbit_problem, data, funs) -> dict:
+    mu = np.asarray(data.get("multipliers", ()), dtype=complex)
+    if not mu.size or not np.all(np.isfinite(mu)):
+        return {}
+    delta = codim2.multiplier_error(mu, orbit_problem.opts.get("rtol", 1e-12))
+    return {k: codim2.function_error(f, mu, delta) for k, f in funs.items()}
+
+
+def _criticality(kind, c) -> dict:
+    """The coefficient of a fold (``a``), flip (``c``) or Neimark-Sacker point (``d``) and,
+    for the latter two, whether the bifurcation is super- or subcritical (flip: ``c > 0``
+    supercritical; Neimark-Sacker: ``d < 0``)."""
+    out = {"coefficient": float(c), "criticality": ""}
+    # within the finite differences' error (about 1e-7 for a map of unit scale) the sign is
+    # not known: a linear map's coefficient is zero
+    if np.isfinite(c) and abs(c) > 1e-7 and kind in ("PD", "NS"):
+        sup = c > 0 if kind == "PD" else c < 0
+        out["criticality"] = "supercritical" if sup else "subcritical"
+    return out
+
+
 def orbit_test_function(kind: str, mu) -> float:
     r"""The defining function of a bifurcation of a periodic orbit from its multipliers.
 
@@ -278,6 +321,19 @@ def orbit_test_function(kind: str, mu) -> float:
     if kind == "NS":
         return _pair_product(mu, lambda a, b: a * b - 1.0)
     raise ArgumentError(f"no curve of kind {kind!r}; kinds: {CURVE_KINDS}")
+
+
+def curve_locate(curve: str) -> tuple:
+    """The kinds located on a two-parameter curve of ``curve``: its codimension-two points
+    (:data:`~pwsdyn.continuation.codim2.CURVE_TESTS`) and the discontinuity-induced
+    bifurcations it meets."""
+    return tuple(codim2.CURVE_TESTS.get(curve, ())) + DIB_KINDS
+
+
+def curve_stop_at(curve: str) -> tuple:
+    """Where a curve of ``curve`` ends: a Neimark-Sacker curve at its 1:1 and 1:2
+    resonances, past which its points are neutral saddles."""
+    return codim2.NS_ENDS if curve == "NS" else ()
 
 
 class BifurcationCurveProblem:
@@ -300,6 +356,7 @@ class BifurcationCurveProblem:
     kind = "orbit"
 
     def __init__(self, problem, curve: str, *, fd_step: float = 1e-6, key: str = ""):
+        self._qref = None      # the fold's critical eigenvector at the last point (its sign)
         if curve in DIB_KINDS and not key.startswith(curve + "/"):
             raise ArgumentError(f"a {curve} curve needs the key of its monitor ({curve}/...)")
         self.key = key
@@ -369,17 +426,75 @@ class BifurcationCurveProblem:
         else:
             ev = self._ev(U[:-1], np.array([lam, U[-1]]))
         prob = self.orbit_problem
+        p = np.array([lam, U[-1]])
         mu = np.asarray(prob.multipliers(ev), dtype=complex)
-        adm = prob.admissibility(U[:-1], np.array([lam, U[-1]]), evaluation=ev)
-        return {"multipliers": mu, "stable": bool(mu.size == 0 or np.max(np.abs(mu)) < 1.0),
-                "admissible": bool(adm), "reason": adm.reason or "",
-                "period": float(ev.period), self.parameter2: float(U[-1])}
+        adm = prob.admissibility(U[:-1], p, evaluation=ev)
+        out = {"multipliers": mu, "stable": bool(mu.size == 0 or np.max(np.abs(mu)) < 1.0),
+               "admissible": bool(adm), "reason": adm.reason or "",
+               "period": float(ev.period), self.parameter2: float(U[-1])}
+        # the monitors of discontinuity-induced bifurcations: where one vanishes on the curve
+        # the orbit there grazes (starts to slide, collides with a corner) -- the curve meets
+        # that DIB's curve; on a DIB's own curve another DIB coinciding with it
+        out["monitors"] = prob.dib_monitors(U[:-1], p, evaluation=ev)
+        if self.curve in codim2.CURVE_TESTS:
+            # of an admissible orbit only (past a graze the model's map is another one)
+            coef, q = (codim2.orbit_coefficient(self.curve, prob, U[:-1], p,
+                                                orient=self._qref, vector=True)
+                       if adm else (np.nan, None))
+            if q is not None and self.curve == "LP":
+                self._qref = np.real(q)
+            out["coefficient"] = coef
+        return out
 
     def test_functions(self, data) -> dict:
-        return {}
+        out = {}
+        if self.curve in codim2.CURVE_TESTS:
+            out.update(codim2.curve_tests(self.curve, data["multipliers"],
+                                          data.get("coefficient", np.nan)))
+        for key, mon in data.get("monitors", {}).items():
+            if key != self.key:
+                out[key] = mon.value
+        return out
+
+    def test_errors(self, data) -> dict:
+        """``{kind: error}`` of the test functions (see
+        :meth:`~pwsdyn.continuation.OrbitBranchProblem.test_errors`); the normal-form
+        coefficients' error is that of their finite differences
+        (:data:`~pwsdyn.continuation.codim2.FD_STEP`), about 1e-7 of their scale."""
+        if self.curve not in codim2.CURVE_TESTS:
+            return {}
+        curve = self.curve
+        out = _multiplier_test_errors(self.orbit_problem, data, {
+            k: (lambda m, k=k: codim2.curve_tests(curve, m, 0.0)[k])
+            for k in codim2.CURVE_TESTS[curve] if k not in ("CP", "GPD", "CH")})
+        coef = data.get("coefficient", np.nan)
+        if np.isfinite(coef):
+            for k in ("CP", "GPD", "CH"):
+                out[k] = 1e-7 * (1.0 + abs(coef))
+        return out
 
     def confirm(self, kind, data) -> bool:
+        mu = data["multipliers"]
+        if kind == "LPNS":
+            # a complex pair on the unit circle besides the multiplier 1 (not a neutral saddle)
+            rest = np.delete(mu, int(np.argmin(np.abs(mu - 1.0))))
+            cx = rest[np.abs(rest.imag) > CONFIRM_TOL]
+            return bool(cx.size and np.min(np.abs(np.abs(cx) - 1.0)) < CONFIRM_TOL ** 0.5)
+        if kind == "CH":
+            return abs(codim2.ns_kappa(mu)) < 1.0
         return True
+
+    def special_data(self, kind, U, lam, data) -> dict:
+        """What a located codimension-two point carries to start the curves that meet there:
+        ``meets``, their kinds (:data:`~pwsdyn.continuation.codim2.CODIM2_MEETS`; for a
+        discontinuity-induced bifurcation on the curve, the curve's kind and that DIB's), and
+        the normal-form coefficient of the curve with its ``criticality``."""
+        kind0 = kind.split("/", 1)[0]
+        meets = codim2.CODIM2_MEETS.get(kind0, (self.curve, kind0))
+        out = {"meets": tuple(meets), "curve": self.curve}
+        if self.curve in codim2.CURVE_TESTS:
+            out.update(_criticality(self.curve, data.get("coefficient", np.nan)))
+        return out
 
     def orbit(self, U, lam):
         U = np.asarray(U, dtype=float)
@@ -392,6 +507,52 @@ class BifurcationCurveProblem:
     @property
     def state_names(self):
         return tuple(self.orbit_problem.model.states)
+
+
+def curve_start(special_point, curve: str):
+    """A start for :func:`~pwsdyn.continue_bifurcation` of the curve of kind ``curve`` through
+    a codimension-two point of a two-parameter curve, or a DIB located on one.
+
+    Parameters
+    ----------
+    special_point : SpecialPoint
+        A located point of a curve (:func:`~pwsdyn.continue_bifurcation`'s branch) whose
+        ``point.data["meets"]`` names ``curve``: ``"PD"`` at a fold-flip ``LPPD``, ``"GR"`` at
+        a graze on a fold curve, ...
+    curve : str
+        The kind of the curve to follow from there.
+
+    Returns
+    -------
+    SpecialPoint
+        A point of kind ``curve`` of a one-point orbit branch in the first of the curve's
+        parameters, at the same orbit and parameter values; pass it to
+        :func:`~pwsdyn.continue_bifurcation` with the two parameters. (Where the two curves'
+        defining functions meet degenerately -- a period-doubling curve at a 1:2 resonance,
+        whose function has a double zero there -- that continuation may not start.)
+    """
+    sp = special_point
+    if not isinstance(sp, SpecialPoint) or not isinstance(sp.problem, BifurcationCurveProblem):
+        raise ArgumentError("`special_point` must be a special point of a two-parameter curve")
+    meets = tuple(sp.point.data.get("meets", ()))
+    if curve not in meets:
+        raise ArgumentError(f"no {curve} curve meets at this {sp.kind} point; the curves "
+                            f"that meet there: {list(meets)}")
+    prob = sp.problem
+    U, lam = np.asarray(sp.point.u, dtype=float), float(sp.point.lam)
+    op = prob.orbit_problem
+    base = OrbitBranchProblem(op.replace(params=op.param_dict(np.array([lam, U[-1]])),
+                                         parameters=[prob.parameter]))
+    data = dict(sp.point.data)
+    if curve not in DIB_KINDS:
+        data["located"] = curve
+    tangent = np.zeros(U.size)
+    tangent[-1] = 1.0
+    pt = Point(u=U[:-1].copy(), lam=lam, tangent=tangent, data=data,
+               tests=dict(sp.point.tests), special=curve)
+    br = Branch(base, [pt], stop_reason=f"a start at the {sp.kind} point of a {prob.curve} "
+                f"curve", model=getattr(sp.branch, "model", None))
+    return br.special_points[0]
 
 
 class PseudoEquilibriumProblem(_PointProblem):
