@@ -392,3 +392,42 @@ def test_arguments_are_checked(saddle_case):
     # a state is refined to the periodic point first
     m = manifold(model, pt.x + 1e-3, arclength=0.5)
     assert np.allclose(m.saddle, pt.x, atol=1e-14)
+
+
+# ======================================================================================
+# a forced flow: the impact oscillator's stroboscopic map
+# ======================================================================================
+
+def test_the_impact_oscillators_saddle_orbit_has_invariant_manifolds_on_its_section():
+    # omega = 2.8: the period-1 impacting orbit is past its period doubling, a flip saddle
+    # (multipliers about -2.96 and -0.22). Its points' images are computed here with
+    # pwsdyn.simulate over one forcing period (Trajectories, not the compiled layer the
+    # manifold uses), at tighter tolerances than the manifold's runs.
+    orbit = pwsdyn.find_periodic_orbit("impact-oscillator", [-0.29, -0.58],
+                                       params={"omega": 2.8})
+    assert orbit.multipliers[0].real < -1 < orbit.multipliers[1].real < 0
+    tol = 1e-6
+
+    def F(x, k=1):
+        traj = pwsdyn.simulate("impact-oscillator", x, (orbit.t0, orbit.t0 + k * orbit.period),
+                               params={"omega": 2.8}, rtol=1e-12, atol=1e-13)
+        return traj.x[-1]
+
+    m = pwsdyn.manifold("impact-oscillator", orbit, arclength=0.6, tol=tol)
+    assert m.section == "stroboscopic" and m.status == ("arclength", "arclength")
+    assert np.allclose(m.saddle, orbit.x0) and m.multiplier < -1
+    # F swaps the branches; the first third of each maps into the part grown
+    for branch in m.branches:
+        piece = branch[0]
+        pos = arclength_positions([piece])[0]
+        sample = piece[pos <= 0.2][::7]
+        images = np.array([F(x) for x in sample])
+        # tolerance: the density criterion's tol (d alpha / 8 per chord) and the integration
+        # error of the manifold's runs (rtol 1e-10), a few times over
+        assert m.distance(images).max() < 5 * tol
+    # the stable manifold: each point is a Newton preimage under F^2 of a point of the branch
+    s = pwsdyn.manifold("impact-oscillator", orbit, "stable", arclength=0.3, tol=tol)
+    for branch in s.branches:
+        sample = branch[0][1::9]
+        images = np.array([F(x, 2) for x in sample])
+        assert s.distance(images).max() < 5 * tol

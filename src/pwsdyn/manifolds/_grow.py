@@ -7,7 +7,8 @@ saddle ``p``; every further point is the image under ``H`` of a point of the bra
 far, found by moving a cursor along that polyline (a preimage parameter ``s``: mesh index plus
 the fraction of the next segment). A candidate image is accepted when the distance ``d`` from
 the last point is at most ``max_step`` and the angle ``alpha`` between the last two chords is
-at most ``alpha_max`` with ``d * alpha`` at most ``8 tol`` (the deviation of the chord from an
+at most ``alpha_max`` with ``d * alpha`` at most ``8 tol`` (unless ``d`` is below ``min_dist``,
+the scale of the evaluation's own error; the deviation of the chord from an
 arc of length ``d`` turning by ``alpha`` is about ``d alpha / 8``); otherwise the cursor's step
 is halved, and it is doubled after a step well inside the criteria.
 
@@ -70,6 +71,7 @@ class Branch:
         self.length = float(np.linalg.norm(self.pts[1] - self.pts[0]))
         self.status = "arclength"
         self.unresolved = 0
+        self.flickers = 0
 
     def append(self, y, *, node=False, gap=False):
         if not gap:
@@ -94,7 +96,7 @@ class Branch:
 
 def grow(evaluate, q0, q1, sig0, *, arclength: float, max_points: int, max_step: float,
          tol: float, alpha_max: float = 0.3, jump_tol: float, bound: float,
-         min_step: float = 1e-14) -> Branch:
+         min_dist: float = 0.0, min_step: float = 1e-14) -> Branch:
     """Grow one branch from the fundamental domain ``[q0, q1 = H(q0)]`` (``sig0`` the signature
     of ``H`` at ``q0``) until its arclength exceeds ``arclength`` or it has ``max_points``
     points. ``evaluate(x, guess) -> (H(x), signature)``; ``guess`` is the image of a nearby
@@ -171,18 +173,29 @@ def grow(evaluate, q0, q1, sig0, *, arclength: float, max_points: int, max_step:
         border = None
         if sig1 != s_sig:
             sa, ya, sb, yb, sig_b, jump = bisect(s, s_sig, pts[-1], s1, y1, sig1)
-            border = (sb, yb, sig_b, jump)
-            s1, y1 = sa, ya
+            if sa == s and sig1 is not None and not jump:
+                # the signature changes at the cursor itself: the point the branch ends at is
+                # (to rounding) on the border, where the event detection of a grazing orbit
+                # may go either way; continuous there, so the new signature is taken and the
+                # step goes on (bisecting again would advance by one ulp at a time)
+                s_sig = sig1
+                br.flickers += 1
+            else:
+                border = (sb, yb, sig_b, jump)
+                s1, y1 = sa, ya
         d = float(np.linalg.norm(y1 - pts[-1]))
         a = 0.0
         if len(pts) >= 2 and not node[-1] and d > 0.0:
             a = angle(pts[-1] - pts[-2], y1 - pts[-1])
-        ok = d <= max_step and a <= alpha_max and d * a <= dalpha_max
+        # below min_dist the angle is not asked for: the direction of a very short chord is
+        # that of the rounding (or integration) error of its ends
+        ok = d <= max_step and (d < min_dist or (a <= alpha_max and d * a <= dalpha_max))
         if not ok:
             if (s1 - s) > min_step:
                 h = 0.5 * (s1 - s)
                 continue
             br.unresolved += 1
+            h = max(h, 1e6 * min_step)
         if not np.all(np.isfinite(y1)) or float(np.max(np.abs(y1))) > scale_bound:
             br.status = "diverged"
             break
@@ -192,7 +205,8 @@ def grow(evaluate, q0, q1, sig0, *, arclength: float, max_points: int, max_step:
         else:
             node[-1] = node[-1] or border is not None or at_node
         s = s1
-        if ok and d < 0.25 * max_step and a < 0.25 * alpha_max and d * a < 0.25 * dalpha_max:
+        if ok and d < 0.25 * max_step and (d < min_dist or (
+                a < 0.25 * alpha_max and d * a < 0.25 * dalpha_max)):
             h *= 2.0
         if border is not None:
             sb, yb, sig_b, jump = border

@@ -59,7 +59,9 @@ class Manifold:
     status : tuple of str
         Per branch, why it stopped: ``"arclength"`` (grown to ``arclength``),
         ``"max_points"``, ``"diverged"`` (beyond ``1e8 (1 + max|saddle|)``), ``"undefined"``
-        (no piece of the map applies, or a preimage could not be found), ``"stalled"``.
+        (no piece of the map applies, a flow's state is beyond an impact constraint, or a
+        preimage could not be found), ``"stalled"`` (the cursor caught up with the branch's
+        end: the branch converges, to an attractor or a saddle).
     arclengths : tuple of float
         Per branch, the length grown (jumps not counted).
     evaluations : int
@@ -67,6 +69,9 @@ class Manifold:
         period of a flow), Newton and bisection included.
     unresolved : int
         Points accepted at the smallest cursor step without meeting the density criteria.
+    flickers : int
+        Signature changes found at the cursor itself (a point on a border to rounding, where
+        a grazing orbit's event detection may go either way), taken as continuous.
     options : dict
         ``tol``, ``max_step``, ``alpha_max``, ``delta``, ``arclength``, ``max_points``.
     """
@@ -89,6 +94,7 @@ class Manifold:
     options: dict = field(default_factory=dict)
     t0: float | None = None
     section_period: float | None = None
+    flickers: int = 0
 
     @property
     def pieces(self) -> list:
@@ -187,6 +193,7 @@ class Manifold:
             "branch_status": json.dumps(list(self.status)),
             "branch_arclength": json.dumps([float(a) for a in self.arclengths]),
             "evaluations": int(self.evaluations), "unresolved": int(self.unresolved),
+            "flickers": int(self.flickers),
             "options": json.dumps({k: float(v) for k, v in self.options.items()}),
         })
         if self.t0 is not None:
@@ -363,6 +370,12 @@ def manifold(model, point, kind: str = "unstable", *, params=None, section=None,
     delta = 1e-6 * scale if delta is None else V.positive("delta", delta)
     # a negative multiplier swaps the branches at every iteration: each is invariant under the
     # second iterate, whose multiplier lam**2 is positive
+    # the angle criterion is not applied to chords shorter than the error of the map's
+    # evaluation: rounding for a map model, the integration tolerance for a flow
+    if sec_name == "map":
+        min_dist = 1e3 * np.finfo(float).eps * scale
+    else:
+        min_dist = 1e3 * max(sec.opts["rtol"], sec.opts["atol"]) * scale
     H = sec.iterate(2) if lam < 0 else sec
     Lam = lam * lam if lam < 0 else lam
     if kind == "unstable":
@@ -372,7 +385,7 @@ def manifold(model, point, kind: str = "unstable", *, params=None, section=None,
     else:
         def evaluate(x, guess):
             return preimage(H, x, guess)
-    branches, nodes, status, lengths, unresolved = [], [], [], [], 0
+    branches, nodes, status, lengths, unresolved, flickers = [], [], [], [], 0, 0
     for sign in (1.0, -1.0):
         q0 = p + sign * delta * v
         if kind == "unstable":
@@ -386,7 +399,7 @@ def manifold(model, point, kind: str = "unstable", *, params=None, section=None,
                                 f"(at {q0.tolist()})")
         br = grow(evaluate, q0, q1, sig0, arclength=arclength, max_points=max_points,
                   max_step=max_step, tol=tol, jump_tol=max(tol, 1e-7),
-                  bound=1e8 * scale)
+                  bound=1e8 * scale, min_dist=min_dist)
         # the saddle itself begins the branch: the segment to q0 is the eigendirection
         pieces = br.pieces()
         pieces[0] = np.vstack([p[None, :], pieces[0]])
@@ -400,6 +413,7 @@ def manifold(model, point, kind: str = "unstable", *, params=None, section=None,
         status.append(br.status)
         lengths.append(br.length)
         unresolved += br.unresolved
+        flickers += br.flickers
     return Manifold(model=model, params=dict(sec.params), kind=kind, saddle=p,
                     multipliers=multipliers, multiplier=lam, eigenvector=v, period=per,
                     section=sec_name, branches=branches, nodes=nodes, status=tuple(status),
@@ -408,4 +422,4 @@ def manifold(model, point, kind: str = "unstable", *, params=None, section=None,
                     options={"tol": tol, "max_step": max_step, "alpha_max": 0.3,
                              "delta": delta, "arclength": arclength,
                              "max_points": max_points},
-                    t0=t0, section_period=section_period)
+                    t0=t0, section_period=section_period, flickers=flickers)

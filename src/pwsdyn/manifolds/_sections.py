@@ -85,6 +85,16 @@ class StroboscopicSection:
         self.options = dict(options or {})
         self.opts = integrator_options(self.options, "manifold()")
         self.evaluations = 0
+        # the impact constraints sigma h >= 0 (sigma = -direction): the section's state space
+        # is the admissible side; beyond it the map is not defined (a branch ends there)
+        self._constraints = [(self.ctx.surface_of("impact", ev.name), -float(ev.direction))
+                             for ev in model.events if ev.kind == "impact"]
+
+    def admissible(self, x) -> bool:
+        band = 1e3 * max(self.opts["rtol"], self.opts["atol"]) * (1.0 + float(
+            np.max(np.abs(x))))
+        return all(sigma * self.ctx.h(k, self.t0, x) >= -band
+                   for k, sigma in self._constraints)
 
     def iterate(self, m: int) -> "StroboscopicSection":
         return StroboscopicSection(self.model, self.params, self.t0, self.period,
@@ -92,6 +102,8 @@ class StroboscopicSection:
 
     def evaluate(self, x, jacobian: bool = False):
         t_end = self.t0 + self.k * self.period
+        if self._constraints and not self.admissible(x):
+            return np.asarray(x, dtype=float), None, None
         res = self.ctx.run(np.asarray(x, dtype=float), t0=self.t0, opts=self.opts,
                            stop=AtTime(t_end), variational=jacobian)
         self.evaluations += 1
