@@ -65,8 +65,9 @@ class Manifold:
     arclengths : tuple of float
         Per branch, the length grown (jumps not counted).
     evaluations : int
-        Evaluations of the map (one iteration of a map model, or one run over the forcing
-        period of a flow), Newton and bisection included.
+        Evaluations of the map, Newton and bisection included: iterations of a map model, or
+        kernel runs of a flow (each over ``period`` forcing periods, two of them for the
+        second iterate of a saddle with a negative multiplier).
     unresolved : int
         Points accepted at the smallest cursor step without meeting the density criteria.
     flickers : int
