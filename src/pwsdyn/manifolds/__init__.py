@@ -1,12 +1,12 @@
 """Global analysis: saddle periodic points of maps and their one-dimensional stable and
 unstable manifolds.
 
-* :func:`find_periodic_point` and :class:`PeriodicPoint`: fixed and period-``k`` points of a
+* :func:`pwsdyn.find_periodic_point` and :class:`pwsdyn.PeriodicPoint`: fixed and period-``k`` points of a
   piecewise-smooth map model (``kind = "map"``) with their multipliers and the pieces applied;
-* :func:`manifold` and :class:`Manifold`: the 1-D manifolds of a saddle of a map model, or of a
+* :func:`pwsdyn.manifold` and :class:`pwsdyn.Manifold`: the 1-D manifolds of a saddle of a map model, or of a
   forced flow's periodic orbit on its stroboscopic Poincaré section, cut into pieces where the
   map jumps and resolved where it folds or stretches (a border, grazing);
-* :class:`ManifoldError`.
+* :class:`pwsdyn.ManifoldError`.
 """
 
 from ._manifold import Manifold, manifold

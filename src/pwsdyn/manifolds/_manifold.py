@@ -281,9 +281,9 @@ def manifold(model, point, kind: str = "unstable", *, params=None, section=None,
     model : MapModel, Model, str, path or dict
         The model (anything :func:`pwsdyn.load_model` accepts).
     point : PeriodicPoint, PeriodicOrbit or sequence
-        The saddle: a :class:`~pwsdyn.manifolds.PeriodicPoint` of a map model, a state of a map
+        The saddle: a :class:`~pwsdyn.PeriodicPoint` of a map model, a state of a map
         model's fixed or period-``period`` point (refined by
-        :func:`~pwsdyn.manifolds.find_periodic_point`), or a forced flow's
+        :func:`~pwsdyn.find_periodic_point`), or a forced flow's
         :class:`~pwsdyn.PeriodicOrbit` (its stroboscopic Poincaré map at the orbit's ``t0``).
     kind : {'unstable', 'stable'}
     params : dict, optional
@@ -320,7 +320,9 @@ def manifold(model, point, kind: str = "unstable", *, params=None, section=None,
 
     Examples
     --------
-    >>> m = manifold("sqrt-map", [0.04], params={"mu": 0.2, "lam": 0.3})  # doctest: +SKIP
+    >>> m = manifold("sqrt-map", [0.03], params={"mu": 0.2, "lam": 0.3}, arclength=0.1)
+    >>> m.multiplier < -1, m.status
+    (True, ('arclength', 'arclength'))
     """
     if kind not in _KINDS:
         raise ArgumentError(f"manifold(): kind must be 'unstable' or 'stable', got {kind!r}")

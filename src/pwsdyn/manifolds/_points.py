@@ -21,7 +21,7 @@ from ._sections import MapSection
 
 class ManifoldError(PwsdynError, RuntimeError):
     """A periodic point or a manifold could not be computed; ``result`` holds what was (the
-    last Newton iterate as a :class:`PeriodicPoint`, or ``None``)."""
+    last Newton iterate as a :class:`~pwsdyn.PeriodicPoint`, or ``None``)."""
 
     def __init__(self, message: str, result=None):
         super().__init__(message)
@@ -116,7 +116,7 @@ def find_periodic_point(model, x0, period: int = 1, *, params=None, tol: float =
     ------
     ManifoldError
         Newton did not converge (a singular ``D F^k - I``, no piece applies, or the iterations
-        ran out); its ``result`` is the last iterate as a :class:`PeriodicPoint` with
+        ran out); its ``result`` is the last iterate as a :class:`~pwsdyn.PeriodicPoint` with
         ``converged = False``.
 
     Examples
