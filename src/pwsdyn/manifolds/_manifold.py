@@ -287,7 +287,8 @@ def manifold(model, point, kind: str = "unstable", *, params=None, section=None,
         :class:`~pwsdyn.PeriodicOrbit` (its stroboscopic Poincaré map at the orbit's ``t0``).
     kind : {'unstable', 'stable'}
     params : dict, optional
-        Parameter values (default: the point's, else the model's).
+        Parameter values (default: the point's, else the model's). A map's periodic point is
+        found again at other values; a flow's orbit must be at these values.
     section : {None, 'stroboscopic'}
         A flow's section: only the stroboscopic one (every forcing period ``orbit.period``).
     arclength : float
@@ -339,7 +340,10 @@ def manifold(model, point, kind: str = "unstable", *, params=None, section=None,
         if point.autonomous:
             raise ArgumentError("manifold(): an autonomous orbit has no stroboscopic section; "
                                 "only forced orbits are supported so far")
-        params = dict(point.params) if params is None else params
+        if params is not None and {**point.params, **params} != dict(point.params):
+            raise ArgumentError("manifold(): `params` differ from the periodic orbit's; find "
+                                "the orbit at those parameters first")
+        params = dict(point.params)
         sec = StroboscopicSection(model, params, point.t0, point.period, 1, options)
         p = np.array(point.x0, dtype=float)
         _, _, J = sec.evaluate(p, jacobian=True)
