@@ -390,8 +390,13 @@ def manifold(model, point, kind: str = "unstable", *, params=None, section=None,
             y, sig, _ = H.evaluate(x)
             return y, sig
     else:
+        # Newton's residual can go no lower than the evaluation's error: rounding for a map,
+        # the integration tolerance for a flow
+        newton_tol = 1e-13 if sec_name == "map" else 10.0 * max(sec.opts["rtol"],
+                                                                 sec.opts["atol"])
+
         def evaluate(x, guess):
-            return preimage(H, x, guess)
+            return preimage(H, x, guess, newton_tol)
     branches, nodes, status, lengths, unresolved, flickers = [], [], [], [], 0, 0
     for sign in (1.0, -1.0):
         q0 = p + sign * delta * v
@@ -400,7 +405,7 @@ def manifold(model, point, kind: str = "unstable", *, params=None, section=None,
         else:
             # the preimage of q0, and the signature of the inverse's "evaluation" at q0: the
             # pieces the forward map applies at that preimage
-            q1, sig0 = preimage(H, q0, p + sign * delta / Lam * v)
+            q1, sig0 = evaluate(q0, p + sign * delta / Lam * v)
         if sig0 is None:
             raise ManifoldError(f"manifold(): the map cannot be evaluated next to the saddle "
                                 f"(at {q0.tolist()})")
