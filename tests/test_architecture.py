@@ -3,7 +3,7 @@ private modules, no import cycles at any depth, function-local imports included)
 import-linter cannot see, private *names* imported across subpackages.
 
 The layers, bottom up: model, integrate, stability, orbits, continuation, grazing, explore,
-then io and plot, then cli. A subpackage's private modules and names (a leading ``_``) are
+manifolds, then io and plot, then cli. A subpackage's private modules and names (a leading ``_``) are
 its own; the package-level private modules (``pwsdyn._netcdf``, ``pwsdyn._validate``, ...)
 are shared by the whole package, their underscore names are not.
 """

@@ -36,6 +36,8 @@ _LAZY = {
     "continue_equilibrium": "continuation",
     "continue_orbit": "continuation", "load_branch": "continuation",
     "discontinuity_map": "grazing", "design_control": "grazing",
+    "Manifold": "manifolds", "ManifoldError": "manifolds", "PeriodicPoint": "manifolds",
+    "find_periodic_point": "manifolds", "manifold": "manifolds",
 }
 
 __all__ = ["ArgumentError", "ExpressionError", "ModelError", "OutputExistsError", "PwsdynError",
@@ -47,6 +49,8 @@ if TYPE_CHECKING:  # what static checkers and IDEs see; at run time see __getatt
     from .explore import basins, lyapunov_spectrum, scan, sweep
     from .grazing import design_control, discontinuity_map
     from .integrate import EventRecord, Trajectory, simulate
+    from .manifolds import (Manifold, ManifoldError, PeriodicPoint, find_periodic_point,
+                            manifold)
     from .model import Model, compile_model, load_model, with_discrete_control, zoo_names
     from .orbits import OrbitError, PeriodicOrbit, RecurrenceWarning, find_periodic_orbit
     from .stability import (SectionNotReachedError, floquet_multipliers, monodromy,
