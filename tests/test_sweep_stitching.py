@@ -196,3 +196,17 @@ def test_same_attractor_compares_windows_not_states():
     assert not same_attractor(a, {**a, "period": 1}, 1.0, 6, False)
     assert not same_attractor(a, {**a, "stick_time": 0.5}, 1.0, 6, False)
     assert same_attractor({**a, "status": 5}, {**b, "status": 5}, 1.0, 6, False)
+
+
+def test_trajectory_and_metrics_see_a_sticking_start():
+    """The same start in :func:`pwsdyn.simulate`: the trajectory's discrete state is sticking
+    from its first node and :func:`pwsdyn.explore.response_metrics` counts the whole window
+    as stick time (closed form: the ball never leaves a table with A omega^2 < g)."""
+    from pwsdyn.explore import response_metrics
+
+    A = 0.1
+    tr = pwsdyn.simulate("bouncing-ball", [0.0, A * OMEGA], (0.0, 3.0),
+                         params={"A": A, "omega": OMEGA, "e": E})
+    assert str(tr.state[0]) == "stick:impact" and len(tr.events) == 0
+    m = response_metrics(tr, "v")
+    assert m.stick_time == pytest.approx(3.0, abs=1e-12)

@@ -25,15 +25,17 @@ differ along any attractor, but as recorded windows: status, period, events per 
 sticking and sliding time and the section points of the cycle, to a tolerance
 (:func:`same_attractor`). Where they agree the guess stands; where they do not (the guess
 settled on another of coexisting attractors), the chunk is rerun from that state in the
-same task, which changes the state it hands on, and the chunk after it is checked again.
-Where the first window finds no period (chaos, a long transient) nothing tells one
-attractor from another and the state handed on depends sensitively on the start: such a
-chunk is always rerun (chaotic stretches cost what a sequential sweep costs).
+same task until a value whose window lies on the guess's attractor at that value (the rerun
+has rejoined the guess; the guess's later values stand) or to its end, which may change the
+state it hands on: the chunk after it is then checked again. Windows with no period found
+(chaos, a long transient) never agree: nothing tells one attractor from another there and
+the state handed on depends sensitively on the start (chaotic stretches cost what a
+sequential sweep costs).
 Rounds of these checks run in parallel until every border agrees. Where the attractors agree
 at the borders the cost is one value per border; the dataset records the chunks rerun
 (``chunk_rerun``) and the cost (attributes ``stitch_borders``, ``stitch_reruns`` and
-``stitch_values``: the values integrated to stitch, one per border checked and the values of
-each rerun chunk). Example (tests/test_explore.py): the ball on a table vibrating at
+``stitch_values``: the values integrated to stitch, one per border checked and every value
+rerun). Example (tests/test_explore.py): the ball on a table vibrating at
 0.98 <= Gamma <= 1.05 has a period-1 orbit, continued from Gamma = 0.9, and a period-3 one,
 reached by a ball dropped from 1.5 m; chunks of four values whose guesses land on period 3
 are rerun, and the sweep follows period 1 throughout, as a single chunk does.
@@ -292,6 +294,7 @@ def _rows(nv: int, maxp: int, n: int) -> dict:
         ("slide_time", nv))}
     for k in ("n_points", "period", "status", "steps"):
         res[k] = np.zeros(nv, dtype=np.int64)
+    res["rerun"] = np.zeros(nv, dtype=bool)
     return res
 
 
@@ -378,7 +381,11 @@ def sweep_chunk(task: dict) -> dict:
     values run for their transient only (a guess). ``task["check"]`` (optional): the first
     row of the guess of this chunk; when the first value run from ``x_start`` lies on the
     same attractor (:func:`same_attractor`) the run stops there and returns
-    ``{"matched": True}``.
+    ``{"matched": True}``. ``task["guess"]`` (optional): the whole guess of this chunk (its
+    first row is then the check); where a later value run from ``x_start`` lies on the
+    guess's attractor at that value the rerun has rejoined the guess: it stops, and the
+    guess's rows after that value complete the result. ``rerun`` marks the rows run from
+    ``x_start``.
     """
     ctx = ModelContext.get(task["model"])
     model = ctx.model
@@ -389,7 +396,8 @@ def sweep_chunk(task: dict) -> dict:
     x0 = np.array(s["x0"], dtype=float)
     start = task.get("x_start")
     x = x0.copy() if start is None else np.array(start, dtype=float)
-    check = task.get("check")
+    guess = task.get("guess")
+    check = task.get("check") if guess is None else row(guess, 0)
     values = task["values"]
     nw = task["warmup"]
     nv = len(values) - nw
@@ -418,9 +426,17 @@ def sweep_chunk(task: dict) -> dict:
             if w["status"] == 0:
                 pts = _cycle_points(w["points"], w["phase"], use_phase)
                 res["period"][r] = period_estimate(pts, s["max_period"], s["period_tol"])
+            if start is not None:
+                res["rerun"][r] = True
             if r == 0 and check is not None and same_attractor(
                     row(res, 0), check, T, s["samples"], use_phase):
                 return {"matched": True}
+            if r > 0 and guess is not None and r + 1 < nv and same_attractor(
+                    row(res, r), row(guess, r), T, s["samples"], use_phase):
+                for k, v in res.items():
+                    if k not in ("x_start", "rerun"):
+                        v[r + 1:] = guess[k][r + 1:]
+                return res
         # continue the final state into the next value; restart from x0 after a failure
         ok = w["status"] == 0 and check_bound(w["x_end"], s["bound"])
         x = np.array(w["x_end"], dtype=float) if ok else x0.copy()
@@ -482,7 +498,7 @@ def stitch(tasks: list, chains: list, guesses: dict, reruns: dict, run, x0, boun
                 starts[i] = xs
                 todo.append((i, {**t, "x_start": xs.tolist(), "warmup": 0,
                                  "values": t["values"][t["warmup"]:],
-                                 "check": row(guesses[i], 0)}))
+                                 "guess": guesses[i]}))
         if not todo:
             if all(i in final for chain in chains for i in chain):
                 return final, info
@@ -619,13 +635,14 @@ def sweep(model: ModelLike, param: str, values: ArrayLike, x0: StateLike | None 
         - ``lyapunov`` (direction, param, exponent), with ``lyapunov=True`` (flows with
           sticking: exponents of the free motion, see :class:`pwsdyn.explore.LyapunovSpectrum`);
         - ``chunk_start`` (direction, param): True at the first value of each chunk;
-          ``chunk_rerun``: True at the values of a chunk whose guess lay on another attractor
-          than the sequence and which was rerun from the state the chunk before it hands on.
+          ``chunk_rerun``: True at the values rerun from the state the chunk before hands on
+          (the chunk's guess lay on another attractor), up to the value where the rerun
+          rejoined the guess's attractor.
 
         Attributes hold the provenance (model name and hash, pwsdyn version, settings) and
         the cost of the stitching: ``stitch_borders`` (chunk borders checked),
         ``stitch_reruns`` (chunks rerun) and ``stitch_values`` (values integrated again to
-        stitch: one per border checked and every value of a rerun chunk).
+        stitch: one per border checked and every value rerun).
 
     Raises
     ------
@@ -796,7 +813,7 @@ def sweep(model: ModelLike, param: str, values: ArrayLike, x0: StateLike | None 
 
 
 _CHUNK_VARS = ("section", "phase", "x_final", "lyapunov", "events_per_period", "stick_time",
-               "slide_time", "n_points", "period", "status", "steps", "x_start")
+               "slide_time", "n_points", "period", "status", "steps", "x_start", "rerun")
 _CHUNK_DIMS = {"section": ("value", "sample", "state"), "phase": ("value", "sample"),
                "x_final": ("value", "state"), "lyapunov": ("value", "state"),
                "x_start": ("state",)}
@@ -837,8 +854,8 @@ def _variable_attrs(model, settings: dict) -> dict:
                          " (per iteration)" if is_map else " (per unit time)"),
                      **({"units": lu} if lu else {})},
         "chunk_start": {"long_name": "first value of a chunk"},
-        "chunk_rerun": {"long_name": "value of a chunk rerun from the state the chunk before "
-                                     "it hands on (its guess lay on another attractor)"},
+        "chunk_rerun": {"long_name": "value rerun from the state the chunk before hands on "
+                                     "(the chunk's guess lay on another attractor)"},
     }
 
 
@@ -875,11 +892,12 @@ def _assemble(model, vals, tasks, results, dirs, settings, lyapunov, info=None
             arr[k][di, idx] = res[k]
         chunk_start[di, idx[0]] = True
         how = info.get(ti, "first")
-        chunk_rerun[di, idx] = how == "rerun"
+        rows_rerun = np.asarray(res.get("rerun", np.zeros(len(idx))), dtype=bool)
+        chunk_rerun[di, idx] = rows_rerun
         if how != "first":
             checks += 1
             reran += how == "rerun"
-            cost += len(idx) if how == "rerun" else 1
+            cost += int(rows_rerun.sum()) if how == "rerun" else 1
     arr["chunk_start"] = chunk_start
     arr["chunk_rerun"] = chunk_rerun
     pname = settings["param"]
@@ -915,7 +933,7 @@ def _assemble(model, vals, tasks, results, dirs, settings, lyapunov, info=None
              "settings": json.dumps(settings, sort_keys=True),
              # the stitching of the chunks into one sequence per direction (see the module
              # docstring): borders checked, chunks rerun, and the values integrated for it
-             # (one per border checked, a rerun chunk's values; the guesses not counted)
+             # (one per border checked, the values rerun; the guesses not counted)
              "stitch_borders": int(checks), "stitch_reruns": int(reran),
              "stitch_values": int(cost)}
     return xr.Dataset(data, coords=coords, attrs=attrs)
