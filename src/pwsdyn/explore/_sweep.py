@@ -452,13 +452,16 @@ def stitch(tasks: list, chains: list, guesses: dict, reruns: dict, run, x0, boun
     chunk ``i`` rerun from a start known before (a resumed store), by its ``x_start``;
     ``run(items) -> {i: result}`` runs stitching tasks ``(i, task)`` (in parallel).
 
-    In rounds: every chunk not yet confirmed has its first value run from the state its
-    predecessor (as now known) hands on; where that window lies on the attractor of the
-    guess's first window (:func:`same_attractor`) the guess stands, else the chunk is rerun
-    from that state in the same task. Then, in order, a chunk whose predecessor is confirmed
-    and whose run used the predecessor's confirmed state is confirmed. Each round confirms at
-    least the first unconfirmed chunk of every chain; where all borders agree, one round
-    (one value per border, in parallel) confirms them all. Returns ``(final, info)``:
+    In rounds: in the first, every chunk has its first value run from the state its
+    predecessor's guess hands on; in later ones, every chunk not yet confirmed whose
+    predecessor is confirmed, from its confirmed state. Where that window lies on the
+    attractor of the guess's first window (:func:`same_attractor`) the guess stands, else the
+    chunk is rerun from that state in the same task (until it rejoins the guess). Then, in
+    order, a chunk whose predecessor is confirmed and whose run used the predecessor's
+    confirmed state is confirmed: a rerun that rejoined its guess hands on the guess's state,
+    so the first round's check of the chunk after it stands. Each round confirms at least the
+    first unconfirmed chunk of every chain; where all borders agree, one round (one value per
+    border, in parallel) confirms them all. Returns ``(final, info)``:
     ``final[i]`` the confirmed result, ``info[i]`` ``"first"``, ``"matched"`` or
     ``"rerun"``.
     """
@@ -470,6 +473,7 @@ def stitch(tasks: list, chains: list, guesses: dict, reruns: dict, run, x0, boun
     for chain in chains:
         final[chain[0]] = guesses[chain[0]]
         info[chain[0]] = "first"
+    rounds = 0
     while True:
         # confirm, in order, what the runs so far allow
         for chain in chains:
@@ -491,6 +495,11 @@ def stitch(tasks: list, chains: list, guesses: dict, reruns: dict, run, x0, boun
                 i, prev = chain[k], chain[k - 1]
                 if i in final:
                     continue
+                if prev not in final and rounds:
+                    # after the first round only from a confirmed state: checks from states
+                    # that a rerun before them may still change would be repeated in every
+                    # round of a stretch of reruns (quadratic work)
+                    continue
                 xs = handed_on(final.get(prev, latest[prev]), x0, bound)
                 if (i, xs.tobytes()) in tried:
                     continue
@@ -503,6 +512,7 @@ def stitch(tasks: list, chains: list, guesses: dict, reruns: dict, run, x0, boun
             if all(i in final for chain in chains for i in chain):
                 return final, info
             raise RuntimeError("sweep stitching made no progress")  # not expected
+        rounds += 1
         for i, r in run(todo).items():
             got = "matched" if r.get("matched") else r
             tried[(i, starts[i].tobytes())] = got
