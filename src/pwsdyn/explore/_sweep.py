@@ -44,7 +44,9 @@ A stitched value lies on the attractor of the sequential sweep: its period, even
 section points agree with those of the sequential run to the integrator's tolerance on
 periodic attractors. Where a value has no period (chaos, chattering transients) its points
 and counts are those of a run from a state that agrees with the sequential one to the
-integrator's tolerance, and chaos amplifies that difference: other points of the attractor.
+integrator's tolerance, and chaos amplifies that difference: other points of the attractor,
+and past it possibly another of coexisting attractors, as between two integrator tolerances
+of the sequential sweep.
 """
 
 from __future__ import annotations
