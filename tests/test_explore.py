@@ -367,7 +367,8 @@ def test_serial_and_parallel_give_identical_datasets(tmp_path):
                      scheduler="processes", **BALL_SWEEP)
     xr.testing.assert_identical(a, d)
     with xr.open_dataset(tmp_path / "b.nc", engine="h5netcdf") as f:
-        xr.testing.assert_equal(a.drop_vars("chunk_start"), f.load().drop_vars("chunk_start"))
+        flags = ["chunk_start", "chunk_rerun"]
+        xr.testing.assert_equal(a.drop_vars(flags), f.load().drop_vars(flags))
     assert a.attrs["model_hash"] == pwsdyn.load_model("bouncing-ball").hash
     assert json.loads(a.attrs["settings"])["chunk_size"] == 4
     # a cluster the user already has: by scheduler address (basins) and as a client (sweep)
@@ -434,7 +435,7 @@ def test_killed_run_resumes_to_identical_dataset(tmp_path):
             proc.kill()
     assert proc.returncode == -signal.SIGKILL, "the run ended before it could be killed"
     done = sorted(store.glob("chunk-*.nc"))
-    assert 3 <= len(done) < n // 2, len(done)
+    assert 3 <= len(done) < n // 2, len(done)           # guesses only (slots 0 .. n/2 - 1)
     stamps = {p.name: p.stat().st_mtime_ns for p in done}
     kw = dict(transient=tr, samples=50, chunk_size=2, warmup=1, direction="up", workers=1,
               progress=False)
@@ -442,7 +443,8 @@ def test_killed_run_resumes_to_identical_dataset(tmp_path):
     resumed = pwsdyn.sweep("impact-oscillator", "omega", values, [-0.5, 0.0], store=store,
                            **kw)
     assert {p.name: p.stat().st_mtime_ns for p in done} == stamps   # not rewritten
-    assert len(list(store.glob("chunk-*.nc"))) == n // 2
+    # every guess, and each chunk rerun by the stitching in its own slot
+    assert len(list(store.glob("chunk-*.nc"))) == n // 2 + resumed.attrs["stitch_reruns"]
     assert not list(store.glob("*.tmp*"))
     full = pwsdyn.sweep("impact-oscillator", "omega", values, [-0.5, 0.0], **kw)
     xr.testing.assert_identical(resumed, full)
@@ -461,23 +463,26 @@ def test_chunk_borders_warmup_and_one_chunk():
     assert one.chunk_start.values.sum() == 1 and many.chunk_start.values.sum() == 5
 
 
-def test_coexisting_attractors_make_chunk_borders_visible():
+def test_coexisting_attractors_do_not_show_at_chunk_borders():
     """The ball at 0.98 <= Gamma <= 1.05 has a period-1 orbit (continued from Gamma = 0.9)
     and a period-3 one (reached from the drop at 1.5 m). One chunk follows period 1 all the
-    way; with chunks of 4 values each chunk restarts from x0 after its warm-up and may land
-    on period 3 -- the documented way chunk borders show where attractors coexist."""
+    way. With chunks of 4 values each chunk's guess restarts from x0 after its warm-up and
+    may land on period 3; the stitching sees that the first window of such a chunk is not
+    on the attractor the previous chunk hands on and reruns it: the sweep follows period 1
+    throughout, as the single chunk does, and records the chunks rerun."""
     gam = np.linspace(0.9, 1.05, 16)
     kw = dict(params={"omega": OMEGA, "e": E}, transient=300, samples=32, direction="up",
               workers=1, progress=False)
     one = pwsdyn.sweep("bouncing-ball", "A", ball_A(gam), [1.5, 0.0], chunk_size=16, **kw)
     assert np.all(one.period.values == 1)
     many = pwsdyn.sweep("bouncing-ball", "A", ball_A(gam), [1.5, 0.0], chunk_size=4, **kw)
-    per = many.period.values[0]
-    starts = np.flatnonzero(many.chunk_start.values[0])
-    assert np.any(per == 3)
-    # the attractor changes only at chunk starts (a chunk keeps the attractor it settles on)
-    changes = np.flatnonzero(np.diff(per)) + 1
-    assert set(changes) <= set(starts)
+    np.testing.assert_array_equal(many.period.values, one.period.values)
+    np.testing.assert_allclose(many.section.values, one.section.values, atol=1e-6)
+    rerun = many.chunk_rerun.values[0]
+    starts = many.chunk_start.values[0]
+    assert many.attrs["stitch_borders"] == 3
+    assert 1 <= many.attrs["stitch_reruns"] == int(np.sum(rerun & starts))
+    assert not rerun[0]                         # the first chunk starts at x0: exact
 
 
 # ======================================================================================

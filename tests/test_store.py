@@ -41,7 +41,7 @@ from hypothesis import strategies as st
 import pwsdyn
 from pwsdyn.errors import PwsdynError, StoreError
 from pwsdyn.explore import StoreMismatchError
-from pwsdyn.explore._store import ChunkStore
+from pwsdyn.explore._store import FORMAT, ChunkStore
 
 VALUES = np.linspace(0.01, 0.05, 8).tolist()
 KW = dict(params={"lam": 0.1}, transient=50, samples=8, chunk_size=2, direction="up",
@@ -493,7 +493,7 @@ def test_store_of_the_old_format_is_refused(store):
     man = json.loads(m.read_text())
     man["format"] = 1
     m.write_text(json.dumps(man))
-    _refused(store, "", "store format: stored 1, requested 3", error=StoreMismatchError)
+    _refused(store, "", f"store format: stored 1, requested {FORMAT}", error=StoreMismatchError)
 
 
 @settings(max_examples=40, deadline=None,

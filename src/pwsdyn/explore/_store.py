@@ -69,7 +69,9 @@ LOCK = "lock"
 #: The store format. 3: the status codes of map runs are those of pwsdyn.Status (no
 #: applicable piece -4, non-finite 5; format 2 wrote 2 and 3, the values of MAX_STEPS and
 #: MAX_EVENTS), so a store of format 2 is refused rather than resumed with codes misread.
-FORMAT = 3
+#: 4: a sweep's store holds two slots per chunk (its guess, and its rerun once stitched) and
+#: each chunk its start state ``x_start``; a store of format 3 (guesses only) is refused.
+FORMAT = 4
 
 try:                                    # POSIX
     import fcntl

@@ -6,25 +6,47 @@ state at the end of the window is the initial state at the next parameter value,
 these diagrams do (thesis, section 2.7: the final state of one value continues into the next).
 Sweeping up and down shows hysteresis where attractors coexist.
 
-Chunks and warm-up
-------------------
-The ordered values are split into chunks of ``chunk_size`` consecutive values that run
-independently (on Dask workers). Chunk ``c`` starts ``warmup`` values before its first value:
-from the user's ``x0`` it runs the transient at each of those warm-up values (results
-discarded), then continues through its own values. The first chunk starts at ``x0`` with no
-warm-up. The chunking depends only on the values and ``chunk_size`` (never on the number of
-workers), so serial and parallel runs give identical datasets.
+Chunks and stitching
+--------------------
+A sweep means one uninterrupted sequence per direction: every value starts from the state
+the previous value ends in (and from ``x0`` again after a value that failed or diverged).
+The result does not depend on ``workers``, ``chunk_size``, the scheduler or a resume.
 
-Where attractors coexist, a chunk border can show: the warm-up starts from ``x0`` and may
-settle on another attractor than the one the previous chunk was following, so a hysteresis
-branch followed across the border by a single uninterrupted sweep can switch to the other
-attractor exactly at a border. Example (tests/test_explore.py): the ball on a table vibrating
-at 0.98 <= Gamma <= 1.05 has a period-1 orbit, continued from Gamma = 0.9, and a period-3 one,
-reached by a ball dropped from 1.5 m; a single chunk follows period 1 throughout, chunks of
-four values switch to period 3 at some chunk starts. Use ``chunk_size=len(values)`` (one
-chunk, no parallelism within a direction) for an uninterrupted continuation, or a longer
-``warmup``; the chunk starts are stored in the dataset (``chunk_start``) so borders can be
-marked on plots.
+For speed the ordered values are split into chunks of ``chunk_size`` consecutive values
+that run independently (on threads or Dask workers), each from a *guess*: chunk ``c`` starts
+``warmup`` values before its first value, from ``x0``, runs the transient at each of those
+warm-up values (results discarded) and continues through its own values. The first chunk
+starts at ``x0`` with no warm-up: it is exact.
+
+The chunks are then stitched into the sequence (:func:`stitch`, in the manner of parareal
+iterations): the first value of every later chunk is run again from the state the chunk
+before it hands on, and compared with the guess's first window -- not as raw states, which
+differ along any attractor, but as recorded windows: status, period, events per period,
+sticking and sliding time and the section points of the cycle, to a tolerance
+(:func:`same_attractor`). Where they agree the guess stands; where they do not (the guess
+settled on another of coexisting attractors), the chunk is rerun from that state in the
+same task until a value whose window lies on the guess's attractor at that value (the rerun
+has rejoined the guess; the guess's later values stand) or to its end, which may change the
+state it hands on: the chunk after it is then checked again. Windows with no period found
+(chaos, a long transient) never agree: nothing tells one attractor from another there and
+the state handed on depends sensitively on the start (chaotic stretches cost what a
+sequential sweep costs).
+Rounds of these checks run in parallel until every border agrees. Where the attractors agree
+at the borders the cost is one value per border; the dataset records the chunks rerun
+(``chunk_rerun``) and the cost (attributes ``stitch_borders``, ``stitch_reruns`` and
+``stitch_values``: the values integrated to stitch, one per border checked and every value
+rerun). Example (tests/test_explore.py): the ball on a table vibrating at
+0.98 <= Gamma <= 1.05 has a period-1 orbit, continued from Gamma = 0.9, and a period-3 one,
+reached by a ball dropped from 1.5 m; chunks of four values whose guesses land on period 3
+are rerun, and the sweep follows period 1 throughout, as a single chunk does.
+
+A stitched value lies on the attractor of the sequential sweep: its period, events and
+section points agree with those of the sequential run to the integrator's tolerance on
+periodic attractors. Where a value has no period (chaos, chattering transients) its points
+and counts are those of a run from a state that agrees with the sequential one to the
+integrator's tolerance, and chaos amplifies that difference: other points of the attractor,
+and past it possibly another of coexisting attractors, as between two integrator tolerances
+of the sequential sweep.
 """
 
 from __future__ import annotations
@@ -44,10 +66,10 @@ from ..errors import Status
 from ..integrate.options import DEFAULTS, check_mode, integrator_options
 from ..model.spec import as_model
 from ..integrate.compiled import ModelContext
-from ..integrate.trajectory import DiscreteState, EventLog
+from ..integrate.trajectory import EVENT_KINDS, SWITCH_EVENT_KINDS, DiscreteState, EventLog
 from ._common import (check_common, check_section, check_time_unit, COUNTED_KINDS, DIVERGED,
                       SECTION_MISSED, check_bound, failed_status, model_payload,
-                      period_estimate, readmit, state_times)
+                      period_estimate, readmit, start_of, state_times)
 from ._executor import run_chunks
 from ._lyapunov import flow_segments
 from ._store import ChunkStore
@@ -98,6 +120,39 @@ def _event_columns(events, n: int):
             np.array(after, dtype=int))
 
 
+#: Kind codes of the kernel's event log (``RunResult.event_kind``): lookup tables of the
+#: kinds counted per period, of those that cross a section, of the kinds logged on a switch
+#: (their ``event_ref`` is a switch index, else an event index) and the chatter code.
+_COUNTED_LUT = np.isin(np.arange(len(EVENT_KINDS)), [EVENT_KINDS.index(k) for k in COUNTED_KINDS])
+_SECTION_LUT = np.isin(np.arange(len(EVENT_KINDS)), [EVENT_KINDS.index(k) for k in SECTION_KINDS])
+_SWITCH_LUT = np.isin(np.arange(len(EVENT_KINDS)),
+                      [EVENT_KINDS.index(k) for k in SWITCH_EVENT_KINDS])
+_CHATTER = EVENT_KINDS.index("chatter")
+
+
+def _section_refs(model, section: str) -> tuple[int, int]:
+    """The event index and the switch index named ``section`` (-1 where none)."""
+    ev = next((j for j, e in enumerate(model.events) if e.name == section), -1)
+    sw = next((j for j, e in enumerate(model.switches) if e.name == section), -1)
+    return ev, sw
+
+
+def _code_columns(res, model, section: str):
+    """Times, masks (counted, on the section, chatter), states before and kinds of discrete
+    state after of a run's events, straight from the kernel's columns (no event log is
+    made)."""
+    kc = res.event_kind
+    ref = res.event_ref
+    on_switch = _SWITCH_LUT[kc]
+    counted = _COUNTED_LUT[kc]
+    if section == "stroboscopic":
+        on_section = np.zeros(len(kc), dtype=bool)
+    else:
+        ev, sw = _section_refs(model, section)
+        on_section = _SECTION_LUT[kc] & np.where(on_switch, ref == sw, ref == ev)
+    return (res.event_t, counted, on_section, kc == _CHATTER, res.event_state_after[:, 0])
+
+
 def run_window(ctx: ModelContext, x, p, T: float, phase: float, n_tr: int, n_s: int,
                section: str, max_points: int, opts: dict, bound: float,
                lyapunov: bool = False, record: bool = True) -> dict:
@@ -144,6 +199,7 @@ def run_window(ctx: ModelContext, x, p, T: float, phase: float, n_tr: int, n_s: 
                 pts[:m] = starts[:m]
         x_end = xx
         nsteps = 0
+        start_kind = int(start_of(ctx, t_start, x, p).kind)
     else:
         events = []
         nsteps = 0
@@ -153,9 +209,9 @@ def run_window(ctx: ModelContext, x, p, T: float, phase: float, n_tr: int, n_s: 
             # t_w + k T (k = 0 .. n_s) on the dense output (no event, no landing step, so the
             # section costs a few percent; the state sticking or sliding at t_w just goes on).
             res = ctx.run(xx, None, t_start, t_end, opts, sample=(t_w, T), p=p)
+            start_kind = res.start_kind
             status = failed_status(res)
             nsteps = res.stats.get("steps", 0)
-            events = res.events
             ts, xs = res.samples_t, res.samples_x
             j = np.rint((ts - t_w) / T).astype(int)
             keep = (j >= 0) & (j < min(max_points, n_s))
@@ -165,21 +221,31 @@ def run_window(ctx: ModelContext, x, p, T: float, phase: float, n_tr: int, n_s: 
                 status = SECTION_MISSED
         else:
             res = ctx.run(xx, None, t_start, t_end, opts, p=p)
+            start_kind = res.start_kind
             status = failed_status(res)
             x_end = res.x.copy()
             nsteps = res.stats.get("steps", 0)
-            events = res.events
-    t, kind, name, xb, after = _event_columns(events, n)
+    if lyapunov:
+        t, kind, name, xb, after = _event_columns(events, n)
+        is_counted = np.isin(kind, COUNTED_KINDS)
+        on_section = (name == section) & np.isin(kind, SECTION_KINDS)
+        chatter = kind == "chatter"
+    else:
+        # the kernel's columns as they are (an event log would name every record)
+        t, is_counted, on_section, chatter, after = _code_columns(res, ctx.model, section)
+        xb = None
     in_window = (t >= t_w) & (t < t_end)
     if not strobe:
-        hits = np.flatnonzero(in_window & (name == section) & np.isin(kind, SECTION_KINDS))
+        hits = np.flatnonzero(in_window & on_section)
         m = min(len(hits), max_points)
-        pts[:m] = xb[hits[:m]]
+        if m:
+            pts[:m] = (xb if xb is not None else res.event_x_before)[hits[:m]]
         phs[:m] = ((t[hits[:m]] - t_start) / T) % 1.0
-    counted = int(np.sum(in_window & np.isin(kind, COUNTED_KINDS)))
-    chatter = kind == "chatter"
+    counted = int(np.sum(in_window & is_counted))
     before = np.flatnonzero((t < t_w) & ~chatter)
-    initial = int(after[before[-1]]) if len(before) else 0
+    # the discrete state at t_w: that after the last event before it, else the one the run
+    # started in (a ball put at rest on its table sticks from t_start without any event)
+    initial = int(after[before[-1]]) if len(before) else start_kind
     upto = t < t_end
     stick, slide = state_times(t[upto], after[upto], chatter[upto], t_w, t_end, initial)
     if status == 0 and not check_bound(x_end, bound):
@@ -222,8 +288,107 @@ def _map_window(ctx, x, p, n_tr, n_s, max_points, bound, lyapunov, record):
 # chunks
 # ======================================================================================
 
+def _rows(nv: int, maxp: int, n: int) -> dict:
+    """The result arrays of ``nv`` values (NaN / 0 where not run)."""
+    res = {k: np.full(shp, np.nan) for k, shp in (
+        ("section", (nv, maxp, n)), ("phase", (nv, maxp)), ("x_final", (nv, n)),
+        ("lyapunov", (nv, n)), ("events_per_period", nv), ("stick_time", nv),
+        ("slide_time", nv))}
+    for k in ("n_points", "period", "status", "steps"):
+        res[k] = np.zeros(nv, dtype=np.int64)
+    res["rerun"] = np.zeros(nv, dtype=bool)
+    return res
+
+
+def _uses_phase(ctx: ModelContext, section: str) -> bool:
+    """The phase of event-section points counts for a forced flow (autonomous flows have no
+    phase: ``period`` is then only a unit of time)."""
+    return (section != "stroboscopic" and not ctx.is_map
+            and ctx.model.forcing_period is not None)
+
+
+def _cycle_points(points, phase, use_phase: bool) -> np.ndarray:
+    """The finite section points of a window, with the phase as a point on the circle where
+    it counts (what :func:`~pwsdyn.explore._common.period_estimate` compares)."""
+    pts = np.asarray(points, dtype=float)
+    if use_phase:
+        ang = 2 * np.pi * np.asarray(phase, dtype=float)
+        pts = np.column_stack([pts, np.cos(ang), np.sin(ang)])
+    return pts
+
+
+#: Relative distance (of ``1 + max |P|``) within which the cycles of two windows are the same
+#: attractor: a thousand times the default ``period_tol`` (points of one window repeat to
+#: ``period_tol``; two runs settling on one stable orbit from different states agree to about
+#: that after the transient, distinct coexisting orbits differ by far more).
+STITCH_RTOL = 1e-3
+
+
+def same_attractor(a: dict, b: dict, T: float, samples: int, use_phase: bool) -> bool:
+    """Whether two recorded windows at one parameter value lie on the same attractor: same
+    status, period and number of section points, events per period within two events over
+    the window, sticking and sliding time per period within 1 % of the period, and the last
+    ``period`` section points the same set to :data:`STITCH_RTOL`. Windows with section
+    points but no period found are never the same (a chunk starting there is rerun). ``a``
+    and ``b`` hold one row of the
+    chunk arrays (``status``, ``period``, ``n_points``, ``events_per_period``,
+    ``stick_time``, ``slide_time``, ``section``, ``phase``)."""
+    if int(a["status"]) != int(b["status"]):
+        return False
+    if int(a["status"]):
+        return True         # both failed: the sequence goes on from x0 after either
+    if int(a["period"]) != int(b["period"]) or int(a["n_points"]) != int(b["n_points"]):
+        return False
+    if int(a["period"]) == 0 and int(a["n_points"]):
+        # no period found (chaos, a long transient): the windows cannot tell one attractor
+        # from another, and the state handed on depends sensitively on the start, so the
+        # chunk is rerun
+        return False
+    if abs(float(a["events_per_period"]) - float(b["events_per_period"])) > 2.0 / samples + 1e-12:
+        return False
+    for k in ("stick_time", "slide_time"):
+        if abs(float(a[k]) - float(b[k])) > 0.01 * T:
+            return False
+    pa = _cycle_points(a["section"], a["phase"], use_phase)
+    pb = _cycle_points(b["section"], b["phase"], use_phase)
+    pa = pa[np.all(np.isfinite(pa), axis=1)]
+    pb = pb[np.all(np.isfinite(pb), axis=1)]
+    if not len(pa):
+        return True
+    scale = 1.0 + max(float(np.max(np.abs(pa))), float(np.max(np.abs(pb))))
+    k = int(a["period"])
+    ca, cb = pa[-k:], pb[-k:]
+    d = np.max(np.abs(ca[:, None, :] - cb[None, :, :]), axis=2)
+    return bool(max(d.min(axis=1).max(), d.min(axis=0).max()) <= STITCH_RTOL * scale)
+
+
+def row(res: dict, r: int) -> dict:
+    """Row ``r`` of chunk arrays (one value's record) as a dict of arrays and scalars."""
+    return {k: res[k][r] for k in _CHUNK_VARS if k != "x_start"}
+
+
+def handed_on(res: dict, x0, bound: float) -> np.ndarray:
+    """The state a chunk hands on to the next value: its last final state, or ``x0`` where
+    the last value failed or left ``bound`` (a sequence restarts from ``x0`` then)."""
+    x = res["x_final"][-1]
+    ok = int(res["status"][-1]) == 0 and check_bound(x, bound)
+    return np.array(x if ok else x0, dtype=float)
+
+
 def sweep_chunk(task: dict) -> dict:
-    """Run one chunk of a sweep (on a worker or in-process). Returns plain arrays."""
+    """Run one chunk of a sweep (on a worker or in-process). Returns plain arrays.
+
+    ``task["x_start"]`` (optional): the state the chunk starts from at its first value (the
+    previous chunk's handed-on state, a stitching run); default ``x0`` after ``warmup``
+    values run for their transient only (a guess). ``task["check"]`` (optional): the first
+    row of the guess of this chunk; when the first value run from ``x_start`` lies on the
+    same attractor (:func:`same_attractor`) the run stops there and returns
+    ``{"matched": True}``. ``task["guess"]`` (optional): the whole guess of this chunk (its
+    first row is then the check); where a later value run from ``x_start`` lies on the
+    guess's attractor at that value the rerun has rejoined the guess: it stops, and the
+    guess's rows after that value complete the result. ``rerun`` marks the rows run from
+    ``x_start``.
+    """
     ctx = ModelContext.get(task["model"])
     model = ctx.model
     s = task["settings"]
@@ -231,19 +396,19 @@ def sweep_chunk(task: dict) -> dict:
     p = np.array(task["p"], dtype=float)
     pidx = task["pidx"]
     x0 = np.array(s["x0"], dtype=float)
-    x = x0.copy()
+    start = task.get("x_start")
+    x = x0.copy() if start is None else np.array(start, dtype=float)
+    guess = task.get("guess")
+    check = task.get("check") if guess is None else row(guess, 0)
     values = task["values"]
     nw = task["warmup"]
     nv = len(values) - nw
     maxp = s["max_points"]
     opts = task["opts"]
     fperiod = _period_function(ctx)
-    res = {k: np.full(shp, np.nan) for k, shp in (
-        ("section", (nv, maxp, n)), ("phase", (nv, maxp)), ("x_final", (nv, n)),
-        ("lyapunov", (nv, n)), ("events_per_period", nv), ("stick_time", nv),
-        ("slide_time", nv))}
-    for k in ("n_points", "period", "status", "steps"):
-        res[k] = np.zeros(nv, dtype=np.int64)
+    use_phase = _uses_phase(ctx, s["section"])
+    res = _rows(nv, maxp, n)
+    res["x_start"] = np.full(n, np.nan) if start is None else x.copy()
     for i, val in enumerate(values):
         p[pidx] = val
         T = s["period"] if s["period"] is not None else (
@@ -261,18 +426,99 @@ def sweep_chunk(task: dict) -> dict:
                       "steps"):
                 res[k][r] = w[k]
             if w["status"] == 0:
-                pts = w["points"]
-                # the phase of event-section points counts for a forced model (autonomous
-                # flows have no phase: ``period`` is then only a unit of time)
-                if (s["section"] != "stroboscopic" and not ctx.is_map
-                        and model.forcing_period is not None):
-                    ang = 2 * np.pi * w["phase"]
-                    pts = np.column_stack([pts, np.cos(ang), np.sin(ang)])
+                pts = _cycle_points(w["points"], w["phase"], use_phase)
                 res["period"][r] = period_estimate(pts, s["max_period"], s["period_tol"])
+            if start is not None:
+                res["rerun"][r] = True
+            if r == 0 and check is not None and same_attractor(
+                    row(res, 0), check, T, s["samples"], use_phase):
+                return {"matched": True}
+            if r > 0 and guess is not None and r + 1 < nv and same_attractor(
+                    row(res, r), row(guess, r), T, s["samples"], use_phase):
+                for k, v in res.items():
+                    if k not in ("x_start", "rerun"):
+                        v[r + 1:] = guess[k][r + 1:]
+                return res
         # continue the final state into the next value; restart from x0 after a failure
         ok = w["status"] == 0 and check_bound(w["x_end"], s["bound"])
         x = np.array(w["x_end"], dtype=float) if ok else x0.copy()
     return res
+
+
+def stitch(tasks: list, chains: list, guesses: dict, reruns: dict, run, x0, bound: float
+           ) -> tuple[dict, dict]:
+    """Make the chunk results those of one uninterrupted sequence per direction.
+
+    ``chains``: the task indices of each direction in order; ``guesses[i]``: chunk ``i`` run
+    from its guess (the first chunk of a chain from ``x0``: already exact); ``reruns[i]``:
+    chunk ``i`` rerun from a start known before (a resumed store), by its ``x_start``;
+    ``run(items) -> {i: result}`` runs stitching tasks ``(i, task)`` (in parallel).
+
+    In rounds: in the first, every chunk has its first value run from the state its
+    predecessor's guess hands on; in later ones, every chunk not yet confirmed whose
+    predecessor is confirmed, from its confirmed state. Where that window lies on the
+    attractor of the guess's first window (:func:`same_attractor`) the guess stands, else the
+    chunk is rerun from that state in the same task (until it rejoins the guess). Then, in
+    order, a chunk whose predecessor is confirmed and whose run used the predecessor's
+    confirmed state is confirmed: a rerun that rejoined its guess hands on the guess's state,
+    so the first round's check of the chunk after it stands. Each round confirms at least the
+    first unconfirmed chunk of every chain; where all borders agree, one round (one value per
+    border, in parallel) confirms them all. Returns ``(final, info)``:
+    ``final[i]`` the confirmed result, ``info[i]`` ``"first"``, ``"matched"`` or
+    ``"rerun"``.
+    """
+    final, info = {}, {}
+    tried: dict = {}        # (i, start bytes) -> result, or "matched"
+    latest = dict(guesses)  # the last result known of each chunk
+    for i, r in reruns.items():
+        tried[(i, np.asarray(r["x_start"], dtype=float).tobytes())] = latest[i] = r
+    for chain in chains:
+        final[chain[0]] = guesses[chain[0]]
+        info[chain[0]] = "first"
+    rounds = 0
+    while True:
+        # confirm, in order, what the runs so far allow
+        for chain in chains:
+            for k in range(1, len(chain)):
+                i, prev = chain[k], chain[k - 1]
+                if i in final:
+                    continue
+                if prev not in final:
+                    break
+                got = tried.get((i, handed_on(final[prev], x0, bound).tobytes()))
+                if got is None:
+                    break
+                final[i], info[i] = ((guesses[i], "matched") if isinstance(got, str)
+                                     else (got, "rerun"))
+                latest[i] = final[i]
+        todo, starts = [], {}
+        for chain in chains:
+            for k in range(1, len(chain)):
+                i, prev = chain[k], chain[k - 1]
+                if i in final:
+                    continue
+                if prev not in final and rounds:
+                    # after the first round only from a confirmed state: checks from states
+                    # that a rerun before them may still change would be repeated in every
+                    # round of a stretch of reruns (quadratic work)
+                    continue
+                xs = handed_on(final.get(prev, latest[prev]), x0, bound)
+                if (i, xs.tobytes()) in tried:
+                    continue
+                t = tasks[i]
+                starts[i] = xs
+                todo.append((i, {**t, "x_start": xs.tolist(), "warmup": 0,
+                                 "values": t["values"][t["warmup"]:],
+                                 "guess": guesses[i]}))
+        if not todo:
+            if all(i in final for chain in chains for i in chain):
+                return final, info
+            raise RuntimeError("sweep stitching made no progress")  # not expected
+        rounds += 1
+        for i, r in run(todo).items():
+            got = "matched" if r.get("matched") else r
+            tried[(i, starts[i].tobytes())] = got
+            latest[i] = guesses[i] if isinstance(got, str) else got
 
 
 # ======================================================================================
@@ -344,9 +590,12 @@ def sweep(model: ModelLike, param: str, values: ArrayLike, x0: StateLike | None 
         saltation matrices, one QR per period; maps: per iteration). Slower for flows.
     chunk_size : int, optional
         Values per chunk (default ``ceil(len(values) / 16)``, independent of the workers).
+        The result does not depend on it: the chunks, run in parallel from a guess, are
+        stitched into one sequence per direction (the module docstring of
+        ``pwsdyn.explore._sweep``); it sets the parallelism and what stitching costs.
     warmup : int
-        Values before a chunk's first value at which the chunk runs the transient first
-        (default 2). See the module docstring for how chunk borders can show.
+        Values before a chunk's first value at which the chunk's guess runs the transient
+        first, from ``x0`` (default 2): a better guess needs fewer reruns.
     workers : int, optional
         Threads running the chunks in this process (default: one per core; the compiled
         kernel releases the GIL, so they run in parallel and a script needs no ``__main__``
@@ -387,7 +636,8 @@ def sweep(model: ModelLike, param: str, values: ArrayLike, x0: StateLike | None 
           for maps; 0: none found);
         - ``events_per_period``: impacts, transitions, crossings and chattering sequences per
           period (maps: border crossings per iteration);
-        - ``stick_time``, ``slide_time``: time per period spent sticking / sliding;
+        - ``stick_time``, ``slide_time``: time per period spent sticking / sliding (a run
+          that starts sticking, as a ball put at rest on its table, counts from its start);
         - ``status``: the value of a :class:`pwsdyn.Status` member (its flags name them;
           :func:`pwsdyn.io.decode_status` gives the members): 0 success, the status of a
           failed run (maps: ``NO_PIECE_APPLIES``, ``NONFINITE``), ``DIVERGED`` (-1) or
@@ -396,9 +646,15 @@ def sweep(model: ModelLike, param: str, values: ArrayLike, x0: StateLike | None 
         - ``x_final``: the state handed on to the next value; ``steps``: integrator steps;
         - ``lyapunov`` (direction, param, exponent), with ``lyapunov=True`` (flows with
           sticking: exponents of the free motion, see :class:`pwsdyn.explore.LyapunovSpectrum`);
-        - ``chunk_start`` (direction, param): True at the first value of each chunk.
+        - ``chunk_start`` (direction, param): True at the first value of each chunk;
+          ``chunk_rerun``: True at the values rerun from the state the chunk before hands on
+          (the chunk's guess lay on another attractor), up to the value where the rerun
+          rejoined the guess's attractor.
 
-        Attributes hold the provenance (model name and hash, pwsdyn version, settings).
+        Attributes hold the provenance (model name and hash, pwsdyn version, settings) and
+        the cost of the stitching: ``stitch_borders`` (chunk borders checked),
+        ``stitch_reruns`` (chunks rerun) and ``stitch_values`` (values integrated again to
+        stitch: one per border checked and every value rerun).
 
     Raises
     ------
@@ -515,11 +771,16 @@ def sweep(model: ModelLike, param: str, values: ArrayLike, x0: StateLike | None 
                           "values": [float(vals[i]) for i in np.concatenate([warm, idx])],
                           "warmup": len(warm)})
 
-    results: dict[int, dict] = {}
+    guesses: dict[int, dict] = {}
+    reruns: dict[int, dict] = {}
+    nt = len(tasks)
+    chains = [[i for i, t in enumerate(tasks) if t["direction"] == d] for d in dirs]
     st = None
     chunk_attrs = _variable_attrs(model, settings)
     if store is not None:   # takes the store's lock, held until st.close()
-        st = ChunkStore(store, "sweep", model.name, model.hash, settings, len(tasks),
+        # slots 0 .. nt-1: the chunks run from their guess; nt + i: chunk i rerun from the
+        # state the chunk before it hands on (stored once confirmed)
+        st = ChunkStore(store, "sweep", model.name, model.hash, settings, 2 * nt,
                         attrs=cf_global_attrs(model, "sweep_chunk",
                                               f"chunk of a pwsdyn sweep of model {model.name}",
                                               "one chunk of a parameter sweep (pwsdyn.sweep); "
@@ -527,20 +788,35 @@ def sweep(model: ModelLike, param: str, values: ArrayLike, x0: StateLike | None 
     try:
         if st is not None:
             for i in st.done():
-                results[i] = _from_chunk_dataset(st.read(i))
+                (guesses if i < nt else reruns)[i % nt] = _from_chunk_dataset(st.read(i))
 
         def on_result(i, res):
-            results[i] = res
+            guesses[i] = res
             if st is not None:
                 st.write(i, _chunk_dataset(res, i, chunk_attrs))
 
-        todo = [i for i in range(len(tasks)) if i not in results]
+        todo = [i for i in range(nt) if i not in guesses]
         run_chunks(sweep_chunk, tasks, todo, on_result, workers=workers, client=client,
-                   scheduler=scheduler, progress=progress, desc="sweep", n_done=len(results))
+                   scheduler=scheduler, progress=progress, desc="sweep", n_done=len(guesses))
+
+        def run_stitch(items):
+            got = {}
+            run_chunks(sweep_chunk, [t for _, t in items], range(len(items)),
+                       lambda k, r: got.__setitem__(items[k][0], r), workers=workers,
+                       client=client, scheduler=scheduler, progress=False, desc="stitch")
+            return got
+
+        x0_arr = np.array(settings["x0"], dtype=float)
+        results, info = stitch(tasks, chains, guesses, reruns, run_stitch, x0_arr,
+                               settings["bound"])
+        if st is not None:
+            for i, how in info.items():
+                if how == "rerun" and i not in reruns:
+                    st.write(nt + i, _chunk_dataset(results[i], nt + i, chunk_attrs))
     finally:
         if st is not None:
             st.close()
-    ds = _assemble(model, vals, tasks, results, dirs, settings, lyapunov)
+    ds = _assemble(model, vals, tasks, results, dirs, settings, lyapunov, info)
     if out_path is not None:
         from .._netcdf import save_dataset
 
@@ -549,9 +825,10 @@ def sweep(model: ModelLike, param: str, values: ArrayLike, x0: StateLike | None 
 
 
 _CHUNK_VARS = ("section", "phase", "x_final", "lyapunov", "events_per_period", "stick_time",
-               "slide_time", "n_points", "period", "status", "steps")
+               "slide_time", "n_points", "period", "status", "steps", "x_start", "rerun")
 _CHUNK_DIMS = {"section": ("value", "sample", "state"), "phase": ("value", "sample"),
-               "x_final": ("value", "state"), "lyapunov": ("value", "state")}
+               "x_final": ("value", "state"), "lyapunov": ("value", "state"),
+               "x_start": ("state",)}
 
 
 def _variable_attrs(model, settings: dict) -> dict:
@@ -588,8 +865,9 @@ def _variable_attrs(model, settings: dict) -> dict:
         "lyapunov": {"long_name": "Lyapunov exponents, decreasing" + (
                          " (per iteration)" if is_map else " (per unit time)"),
                      **({"units": lu} if lu else {})},
-        "chunk_start": {"long_name": "first value of a chunk (a continuation restarts there "
-                                     "after its warm-up)"},
+        "chunk_start": {"long_name": "first value of a chunk"},
+        "chunk_rerun": {"long_name": "value rerun from the state the chunk before hands on "
+                                     "(the chunk's guess lay on another attractor)"},
     }
 
 
@@ -603,7 +881,8 @@ def _from_chunk_dataset(ds: xr.Dataset) -> dict:
     return {k: ds[k].values for k in _CHUNK_VARS}
 
 
-def _assemble(model, vals, tasks, results, dirs, settings, lyapunov) -> xr.Dataset:
+def _assemble(model, vals, tasks, results, dirs, settings, lyapunov, info=None
+              ) -> xr.Dataset:
     n = model.n_states
     nv = len(vals)
     maxp = settings["max_points"]
@@ -614,6 +893,9 @@ def _assemble(model, vals, tasks, results, dirs, settings, lyapunov) -> xr.Datas
     for k in ("n_points", "period", "status", "steps"):
         arr[k] = np.zeros((nd, nv), dtype=np.int64)
     chunk_start = np.zeros((nd, nv), dtype=bool)
+    chunk_rerun = np.zeros((nd, nv), dtype=bool)
+    info = info or {}
+    checks = reran = cost = 0
     for ti, task in enumerate(tasks):
         di = dirs.index(task["direction"])
         idx = np.asarray(task["index"])
@@ -621,7 +903,15 @@ def _assemble(model, vals, tasks, results, dirs, settings, lyapunov) -> xr.Datas
         for k in arr:
             arr[k][di, idx] = res[k]
         chunk_start[di, idx[0]] = True
+        how = info.get(ti, "first")
+        rows_rerun = np.asarray(res.get("rerun", np.zeros(len(idx))), dtype=bool)
+        chunk_rerun[di, idx] = rows_rerun
+        if how != "first":
+            checks += 1
+            reran += how == "rerun"
+            cost += int(rows_rerun.sum()) if how == "rerun" else 1
     arr["chunk_start"] = chunk_start
+    arr["chunk_rerun"] = chunk_rerun
     pname = settings["param"]
     vdim = pname
     is_map = bool(getattr(model, "is_map", False))
@@ -630,7 +920,7 @@ def _assemble(model, vals, tasks, results, dirs, settings, lyapunov) -> xr.Datas
     layout = {"section": ("sample", "state"), "x_final": ("state",), "phase": ("sample",),
               "lyapunov": ("exponent",)}
     names = ["section", "n_points", "period", "events_per_period", "stick_time", "slide_time",
-             "status", "x_final", "steps", "chunk_start"]
+             "status", "x_final", "steps", "chunk_start", "chunk_rerun"]
     if settings["section"] != "stroboscopic":
         names.append("phase")
     if lyapunov:
@@ -652,5 +942,10 @@ def _assemble(model, vals, tasks, results, dirs, settings, lyapunov) -> xr.Datas
                                f"(pwsdyn.sweep)"),
              "kind": "sweep", "parameter": pname,
              "section": settings["section"],
-             "settings": json.dumps(settings, sort_keys=True)}
+             "settings": json.dumps(settings, sort_keys=True),
+             # the stitching of the chunks into one sequence per direction (see the module
+             # docstring): borders checked, chunks rerun, and the values integrated for it
+             # (one per border checked, the values rerun; the guesses not counted)
+             "stitch_borders": int(checks), "stitch_reruns": int(reran),
+             "stitch_values": int(cost)}
     return xr.Dataset(data, coords=coords, attrs=attrs)

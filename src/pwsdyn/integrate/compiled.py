@@ -181,6 +181,10 @@ class RunResult:
         rows, ``event_x_before``/``event_x_after`` the states (``m x n``).
     samples_t, samples_x : numpy.ndarray or None
         Stroboscopic samples of a run with ``sample=``.
+    start_kind : int
+        The kind of discrete state the run started in (0 a mode, 1 sticking, 2 sliding), after
+        the start rule: a state at rest on an impact constraint starts sticking without any
+        event at ``t0``, and the per-period measures of the analyses count that time.
     jacobian : numpy.ndarray or None
         ``dx(t)/dx0`` of a variational run; ``transfer_matrices`` the flow Jacobian of each
         smooth segment and the full saltation matrix of each event.
@@ -190,7 +194,7 @@ class RunResult:
     """
 
     __slots__ = ("status", "t", "x", "event_t", "event_t_after", "samples_t", "samples_x",
-                 "jacobian", "transfer_matrices", "_raw", "_run", "_stats", "_model",
+                 "start_kind", "jacobian", "transfer_matrices", "_raw", "_run", "_stats", "_model",
                  "_events", "_xb", "_xa")
 
     # the columns below are views of (or, for the states, copies made once from) the
@@ -513,6 +517,7 @@ def run_compiled(cm, x, t0, t_end, p, opts, mode0=None, dkind0=None, didx0=None,
         r.t, r.x = float(raw.t), raw.y[:n]
     r.event_t, r.event_t_after = raw.ev_t, raw.ev_t2
     r._xb = r._xa = None
+    r.start_kind = int(dkind0)
     if sample is not None:
         r.samples_t, r.samples_x = raw.samples[:, 0].copy(), raw.samples[:, 1:].copy()
     else:
