@@ -210,3 +210,30 @@ def test_trajectory_and_metrics_see_a_sticking_start():
     assert str(tr.state[0]) == "stick:impact" and len(tr.events) == 0
     m = response_metrics(tr, "v")
     assert m.stick_time == pytest.approx(3.0, abs=1e-12)
+
+
+def test_x0_inside_a_wall_is_refused_like_simulate():
+    """A sweep whose first run would start inside an impact constraint refuses ``x0`` with
+    simulate's error (before, it ran the state behind the wall and reported no impacts)."""
+    with pytest.raises(pwsdyn.ArgumentError, match="inside the constraint"):
+        pwsdyn.sweep("impact-oscillator", "omega", [3.0, 3.1], {"x": 0.0, "v": 0.0},
+                     params={"sigma": -0.5}, progress=False, workers=1)
+    with pytest.raises(pwsdyn.ArgumentError, match="inside the constraint"):
+        pwsdyn.scan("impact-oscillator", {"omega": [3.0, 3.1], "sigma": [0.1, -0.5]},
+                    {"x": 0.0, "v": 0.0}, progress=False, workers=1)
+
+
+def test_a_wall_moved_onto_the_carried_state_pushes_it():
+    """Swept down in the gap ``sigma``, the wall (``x <= sigma``) passes the carried state,
+    which is then put on it (``readmit``). Below ``sigma = 0`` the spring's rest position
+    ``x = 0`` lies beyond the wall, so every admissible motion keeps hitting it: at least one
+    impact per period at every such value, and the final states admissible."""
+    sig = np.linspace(0.3, -0.5, 9)
+    ds = pwsdyn.sweep("impact-oscillator", "sigma", sig, {"x": 0.0, "v": 0.0},
+                      params={"omega": 3.0}, direction="down", progress=False, workers=1,
+                      transient=50, samples=20)
+    ev = ds.events_per_period.sel(direction="down").values
+    assert np.all(ds.status.values == 0)
+    assert np.all(ev[ds.sigma.values < -0.05] >= 1.0), ev
+    x_end = ds.x_final.sel(direction="down", state="x").values
+    assert np.all(x_end <= ds.sigma.values + 1e-8), x_end

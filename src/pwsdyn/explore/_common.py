@@ -51,17 +51,19 @@ def model_payload(model) -> dict:
 
 
 def readmit(ctx: ModelContext, t: float, x, p) -> np.ndarray:
-    """``x`` moved onto the admissible side of every impact surface it lies a small distance
-    behind, for a restart at time ``t`` (:func:`pwsdyn.integrate._start.start_state`, the rule
-    every run of :func:`pwsdyn.simulate` and the internal runner starts with).
+    """``x`` moved onto the admissible side of every impact surface it lies behind, for a
+    restart at time ``t`` (:func:`pwsdyn.integrate._start.start_state`, the rule every run of
+    :func:`pwsdyn.simulate` and the internal runner starts with).
 
     A state carried from one kernel run to the next (to the next parameter value, the next
     Lyapunov segment) may be sticking on an impact surface, ``h = 0`` up to round-off and the
-    tolerance the sticking motion holds it to. Within ``1e-8 (1 + |x|) max(1, |h_x|)`` behind
-    a surface (:data:`pwsdyn.integrate._start.ADMIT_BEHIND`: the kernel's sticking motion
-    drifts behind the wall by more than the tolerances) the state is put on it; the run then
-    starts sticking, with an impact or in free motion as the runner's start rule decides. A
-    state further behind is left alone.
+    tolerance the sticking motion holds it to, or the constraint may have moved onto it with
+    the parameter (an impact oscillator's gap ``sigma`` swept past the carried position). In
+    both cases the state is put on the surface, as a wall moved quasi-statically pushes the
+    body with it; the run then starts sticking, with an impact or in free motion as the
+    runner's start rule decides. (Left behind the wall, the kernel would integrate it there
+    without ever meeting the surface: a silent run with no impacts.) The first state of a
+    sweep is the user's ``x0`` and is checked, not moved (:func:`check_start`).
     """
     return start_of(ctx, t, x, p).x
 
@@ -69,7 +71,26 @@ def readmit(ctx: ModelContext, t: float, x, p) -> np.ndarray:
 def start_of(ctx: ModelContext, t: float, x, p) -> Start:
     """The start :func:`readmit` takes: the state and the discrete state (sticking on an
     impact surface, or regular) that a run from ``x`` at ``t`` begins in."""
-    return ctx.start(t, x, p)
+    return ctx.start(t, x, p, behind_tol=math.inf)
+
+
+def check_start(model, x0, p, pidx, starts, phase: float, period, what: str = "x0") -> None:
+    """Refuse ``x0`` where a run of a sweep or scan starts from it (the parameter values
+    ``starts`` of parameter ``pidx``, the others ``p``) and it lies inside an impact
+    constraint, with the error :func:`pwsdyn.simulate` gives for it: a run from there would
+    meet no surface and report a motion without impacts."""
+    if getattr(model, "is_map", False) or not model.events:
+        return
+    ctx = ModelContext(model, dict(zip(model.parameters, map(float, p))))
+    for value in starts:
+        pv = np.array(p, dtype=float)
+        pv[pidx] = float(value)
+        T = period if period is not None else model.forcing_period_at(pv)
+        try:
+            ctx.start(float(phase) * float(T), x0, pv, refuse=True, names=what)
+        except ArgumentError as exc:
+            raise ArgumentError(f"{exc} (at {list(model.parameters)[pidx]} = {float(value)!r}, "
+                                "where the sweep starts from it)") from None
 
 
 def period_estimate(points: np.ndarray, max_period: int, tol: float) -> int:

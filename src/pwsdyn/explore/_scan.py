@@ -26,7 +26,8 @@ from .._netcdf import (check_output_path, cf_global_attrs, flag_attrs, inverse_t
 from ..errors import ArgumentError
 from ..integrate.options import DEFAULTS, check_mode, integrator_options
 from ..model.spec import as_model
-from ._common import check_common, check_section, check_time_unit, model_payload
+from ._common import (check_common, check_section, check_start, check_time_unit,
+                      model_payload)
 from ._executor import run_chunks
 from ._store import ChunkStore
 from ._sweep import DIRECTIONS, LYAPUNOV_SAMPLES, SAMPLES, sweep_chunk
@@ -207,6 +208,13 @@ def scan(model: ModelLike, grid: Mapping[str, Any], x0: StateLike | None = None,
         if x0 is None:
             raise ArgumentError(f"give `x0`: model {model.name!r} has no [defaults] x0")
     x0v = V.state_vector(model, x0)
+    if not is_map:
+        # every row starts from x0 at its first value of p1 (both ends with direction="both")
+        firsts = {"up": vals1[:1], "down": vals1[-1:], "both": vals1[[0, -1]]}[direction]
+        q = p.copy()
+        for v2 in vals2:
+            q[i2] = v2
+            check_start(model, x0v, q, i1, firsts, phase, period)
     if max_period is None:
         max_period = max(1, min(samples // 4, 64))
     n = model.n_states

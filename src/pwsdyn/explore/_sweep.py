@@ -69,7 +69,8 @@ from ..integrate.compiled import ModelContext
 from ..integrate.trajectory import EVENT_KINDS, SWITCH_EVENT_KINDS, DiscreteState, EventLog
 from ._common import (check_common, check_section, check_time_unit, COUNTED_KINDS, DIVERGED,
                       SECTION_MISSED, check_bound, failed_status, model_payload,
-                      period_estimate, readmit, start_of, state_times)
+                      period_estimate, readmit, start_of, state_times,
+                      check_start)
 from ._executor import run_chunks
 from ._lyapunov import flow_segments
 from ._store import ChunkStore
@@ -730,6 +731,11 @@ def sweep(model: ModelLike, param: str, values: ArrayLike, x0: StateLike | None 
         if x0 is None:
             raise ArgumentError(f"give `x0`: model {model.name!r} has no [defaults] x0")
     x0v = V.state_vector(model, x0)
+    if not is_map:
+        # the first value of each direction starts from x0 as it is (later chunks' guesses
+        # from x0 are readmitted like carried states: a guess, checked by the stitching)
+        firsts = {"up": vals[:1], "down": vals[-1:], "both": vals[[0, -1]]}[direction]
+        check_start(model, x0v, p, pidx, firsts, phase, period)
     max_points = samples if max_points is None else max_points
     if max_period is None:
         max_period = max(1, min(samples // 4, 64))

@@ -831,11 +831,14 @@ class ModelContext:
         return full, proj
 
     # ---- runs ------------------------------------------------------------------------------
-    def start(self, t: float, x, p=None, *, behind_tol: float | None = None) -> Start:
+    def start(self, t: float, x, p=None, *, behind_tol: float | None = None,
+              refuse: bool = False, names: str | None = None) -> Start:
         """The start a run from ``x`` at ``t`` in the model's initial mode takes
         (``integrate._start.start_state``): the state, moved onto an impact
         constraint it lies within ``behind_tol`` (default ``ADMIT_BEHIND (1 + |x|)``) behind,
-        and the discrete state (sticking on it, or regular)."""
+        and the discrete state (sticking on it, or regular). ``refuse``: a state further
+        behind raises :class:`~pwsdyn.errors.ArgumentError` (calling it ``names``, default
+        ``x0``), as :func:`pwsdyn.simulate` does; otherwise it is left as it is."""
         x = np.array(x, dtype=float)
         model = self.model
         if self.is_map or not model.events:
@@ -845,7 +848,8 @@ class ModelContext:
             behind_tol = ADMIT_BEHIND * scale
         pv = self.p if p is None else np.asarray(p, dtype=float)
         return start_state(self.cm, self.etab, self.eact, self.stab, float(t), x, pv,
-                           int(model.initial_mode), behind_tol=behind_tol)
+                           int(model.initial_mode), behind_tol=behind_tol, refuse=refuse,
+                           names=names)
 
     def run(self, x0, state: KernelState | None = None, t0: float = 0.0,
             t_end: float | None = None, opts: Mapping | None = None, *, stop=None,
