@@ -24,6 +24,7 @@ import numpy as np
 from .. import _validate as V
 from ..errors import ArgumentError, Status
 from ..integrate.compiled import ModelContext, Start, load_kernel
+from ..integrate.options import check_mode, integrator_options
 
 #: Event kinds counted in "events per period" (state changes -- stick, release, slide start
 #: and end -- are reported as times instead).
@@ -72,6 +73,57 @@ def start_of(ctx: ModelContext, t: float, x, p) -> Start:
     """The start :func:`readmit` takes: the state and the discrete state (sticking on an
     impact surface, or regular) that a run from ``x`` at ``t`` begins in."""
     return ctx.start(t, x, p, behind_tol=math.inf)
+
+
+def sorted_values(label: str, values) -> np.ndarray:
+    """The values a sweep or scan runs over (``label`` names them in errors): a non-empty
+    sequence of distinct finite numbers, returned sorted."""
+    if V.is_real(values) or isinstance(values, (str, bytes)) or values is None:
+        raise ArgumentError(f"{label} must be a non-empty sequence of numbers, got "
+                            f"{V.describe(values)}")
+    vals = V.vector(label, values, finite=False)
+    if vals.size == 0:
+        raise ArgumentError(f"{label} must be a non-empty sequence of numbers, got "
+                            f"{V.describe(values)}")
+    if not np.all(np.isfinite(vals)):
+        raise ArgumentError(f"{label} must be finite, got {V.describe(values)}")
+    vals = np.sort(vals)
+    if np.any(np.diff(vals) == 0):
+        raise ArgumentError(f"{label} must be distinct")
+    return vals
+
+
+def check_run_kind(model, section: str, period, options: dict, caller: str) -> None:
+    """What a map or a flow accepts in a sweep or scan: a map records every iterate (no
+    section, no integrator options); a flow needs a known section, a time unit (its forcing
+    period or ``period``) and valid integrator options."""
+    if getattr(model, "is_map", False):
+        if section != "stroboscopic":
+            raise ArgumentError(f"model {model.name!r} is a map: every iterate is recorded; "
+                                "`section` applies to flows only")
+        if options:
+            raise ArgumentError(f"integrator options {sorted(options, key=str)} apply to "
+                                f"flows, not to map {model.name!r}")
+        return
+    check_section(model, section)
+    if period is None and model.forcing_period is None:
+        raise ArgumentError(f"model {model.name!r} is autonomous: give `period`, the time "
+                            "unit of `transient` and `samples`")
+    check_mode(model, integrator_options(options, caller))
+
+
+def start_vector(model, x0) -> np.ndarray:
+    """``x0`` as a state vector, the model's ``[defaults] x0`` when it is None."""
+    if x0 is None:
+        x0 = model.defaults.get("x0")
+        if x0 is None:
+            raise ArgumentError(f"give `x0`: model {model.name!r} has no [defaults] x0")
+    return V.state_vector(model, x0)
+
+
+def first_values(vals: np.ndarray, direction: str) -> np.ndarray:
+    """The values (sorted ``vals``) at which a sweep in ``direction`` starts from ``x0``."""
+    return {"up": vals[:1], "down": vals[-1:], "both": vals[[0, -1]]}[direction]
 
 
 def check_start(model, x0, p, pidx, starts, phase: float, period, what: str = "x0") -> None:

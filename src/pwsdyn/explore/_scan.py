@@ -24,10 +24,10 @@ from .. import _validate as V
 from .._netcdf import (check_output_path, cf_global_attrs, flag_attrs, inverse_time_units,
                        quantity_attrs, run_status_codes, state_attrs, state_coords, time_units)
 from ..errors import ArgumentError
-from ..integrate.options import DEFAULTS, check_mode, integrator_options
+from ..integrate.options import DEFAULTS
 from ..model.spec import as_model
-from ._common import (check_common, check_section, check_start, check_time_unit,
-                      model_payload)
+from ._common import (check_common, check_run_kind, check_start, check_time_unit,
+                      first_values, model_payload, sorted_values, start_vector)
 from ._executor import run_chunks
 from ._store import ChunkStore
 from ._sweep import DIRECTIONS, LYAPUNOV_SAMPLES, SAMPLES, sweep_chunk
@@ -53,23 +53,6 @@ def scan_row(task: dict) -> dict:
     if task["direction"] == "down":
         out = {k: v[::-1].copy() for k, v in out.items()}
     return out
-
-
-def _values(name: str, values) -> np.ndarray:
-    """A parameter's scan values: a non-empty sequence of distinct finite numbers, sorted."""
-    if V.is_real(values) or isinstance(values, (str, bytes)) or values is None:
-        raise ArgumentError(f"the values of {name!r} must be a non-empty sequence of numbers, "
-                            f"got {V.describe(values)}")
-    vals = V.vector(f"values of {name!r}", values, finite=False)
-    if vals.size == 0:
-        raise ArgumentError(f"the values of {name!r} must be a non-empty sequence of numbers, "
-                            f"got {V.describe(values)}")
-    if not np.all(np.isfinite(vals)):
-        raise ArgumentError(f"the values of {name!r} must be finite, got {V.describe(values)}")
-    vals = np.sort(vals)
-    if np.any(np.diff(vals) == 0):
-        raise ArgumentError(f"the values of {name!r} must be distinct")
-    return vals
 
 
 def scan(model: ModelLike, grid: Mapping[str, Any], x0: StateLike | None = None, *,
@@ -177,7 +160,8 @@ def scan(model: ModelLike, grid: Mapping[str, Any], x0: StateLike | None = None,
             raise ArgumentError(f"unknown parameter {V.describe(name)} for model "
                                 f"{model.name!r}; the keys of `grid` must be two of "
                                 f"{list(model.parameters)}")
-    vals1, vals2 = _values(p1, values1), _values(p2, values2)
+    vals1 = sorted_values(f"the values of {p1!r}", values1)
+    vals2 = sorted_values(f"the values of {p2!r}", values2)
     base = V.mapping("params", params)
     for name in (p1, p2):
         if name in base:
@@ -185,36 +169,16 @@ def scan(model: ModelLike, grid: Mapping[str, Any], x0: StateLike | None = None,
     p = model.parameter_vector(base)
     names = list(model.parameters)
     i1, i2 = names.index(p1), names.index(p2)
-    if is_map:
-        if section != "stroboscopic":
-            raise ArgumentError(f"model {model.name!r} is a map: every iterate is recorded; "
-                                "`section` applies to flows only")
-        if options:
-            raise ArgumentError(f"integrator options {sorted(options, key=str)} apply to "
-                                f"flows, not to map {model.name!r}")
-    else:
-        check_section(model, section)
-        if period is None and model.forcing_period is None:
-            raise ArgumentError(f"model {model.name!r} is autonomous: give `period`, the time "
-                                "unit of `transient` and `samples`")
-        check_mode(model, integrator_options(options, "scan()"))
+    check_run_kind(model, section, period, options, "scan()")
+    x0v = start_vector(model, x0)
+    if not is_map:
         q = p.copy()
         for v2 in vals2:
             q[i2] = v2
             check_time_unit(model, q, period, phase, transient + samples, pidx=i1,
                             values=vals1, param=p1)
-    if x0 is None:
-        x0 = model.defaults.get("x0")
-        if x0 is None:
-            raise ArgumentError(f"give `x0`: model {model.name!r} has no [defaults] x0")
-    x0v = V.state_vector(model, x0)
-    if not is_map:
-        # every row starts from x0 at its first value of p1 (both ends with direction="both")
-        firsts = {"up": vals1[:1], "down": vals1[-1:], "both": vals1[[0, -1]]}[direction]
-        q = p.copy()
-        for v2 in vals2:
-            q[i2] = v2
-            check_start(model, x0v, q, i1, firsts, phase, period)
+            # every row starts from x0 at its first value of p1 (both ends with "both")
+            check_start(model, x0v, q, i1, first_values(vals1, direction), phase, period)
     if max_period is None:
         max_period = max(1, min(samples // 4, 64))
     n = model.n_states

@@ -63,14 +63,15 @@ from ..errors import ArgumentError
 from .._netcdf import (check_output_path, cf_global_attrs, flag_attrs, inverse_time_units,
                        quantity_attrs, run_status_codes, state_attrs, state_coords, time_units)
 from ..errors import Status
-from ..integrate.options import DEFAULTS, check_mode, integrator_options
+from ..integrate.options import DEFAULTS
 from ..model.spec import as_model
 from ..integrate.compiled import ModelContext
 from ..integrate.trajectory import EVENT_KINDS, SWITCH_EVENT_KINDS, DiscreteState, EventLog
-from ._common import (check_common, check_section, check_time_unit, COUNTED_KINDS, DIVERGED,
+from ._common import (check_common, check_time_unit, COUNTED_KINDS, DIVERGED,
                       SECTION_MISSED, check_bound, failed_status, model_payload,
                       period_estimate, readmit, start_of, state_times,
-                      check_start)
+                      check_run_kind, check_start, first_values, sorted_values,
+                      start_vector)
 from ._executor import run_chunks
 from ._lyapunov import flow_segments
 from ._store import ChunkStore
@@ -694,48 +695,21 @@ def sweep(model: ModelLike, param: str, values: ArrayLike, x0: StateLike | None 
     if not isinstance(param, str) or param not in model.parameters:
         raise ArgumentError(f"unknown parameter {V.describe(param)} for model {model.name!r}; "
                             f"`param` must be one of {list(model.parameters)}")
-    if V.is_real(values) or isinstance(values, (str, bytes)) or values is None:
-        raise ArgumentError(f"`values` of {param!r} must be a non-empty sequence of numbers, "
-                            f"got {V.describe(values)}")
-    vals = V.vector("values", values, finite=False)
-    if vals.size == 0:
-        raise ArgumentError(f"`values` of {param!r} must be a non-empty sequence of numbers, got "
-                            f"{V.describe(values)}")
-    if not np.all(np.isfinite(vals)):
-        raise ArgumentError(f"`values` of {param!r} must be finite, got {V.describe(values)}")
-    vals = np.sort(vals)
-    if np.any(np.diff(vals) == 0):
-        raise ArgumentError(f"`values` of {param!r} must be distinct")
+    vals = sorted_values(f"`values` of {param!r}", values)
     base = V.mapping("params", params)
     if param in base:
         raise ArgumentError(f"`params` must not set the swept parameter {param!r}")
     p = model.parameter_vector(base)
     pidx = list(model.parameters).index(param)
-    if is_map:
-        if section != "stroboscopic":
-            raise ArgumentError(f"model {model.name!r} is a map: every iterate is recorded; "
-                                "`section` applies to flows only")
-        if options:
-            raise ArgumentError(f"integrator options {sorted(options, key=str)} apply to "
-                                f"flows, not to map {model.name!r}")
-    else:
-        check_section(model, section)
-        if period is None and model.forcing_period is None:
-            raise ArgumentError(f"model {model.name!r} is autonomous: give `period`, the time "
-                                "unit of `transient` and `samples`")
-        check_mode(model, integrator_options(options, "sweep()"))
+    check_run_kind(model, section, period, options, "sweep()")
+    if not is_map:
         check_time_unit(model, p, period, phase, transient + samples, pidx=pidx,
                         values=vals, param=param)
-    if x0 is None:
-        x0 = model.defaults.get("x0")
-        if x0 is None:
-            raise ArgumentError(f"give `x0`: model {model.name!r} has no [defaults] x0")
-    x0v = V.state_vector(model, x0)
+    x0v = start_vector(model, x0)
     if not is_map:
         # the first value of each direction starts from x0 as it is (later chunks' guesses
         # from x0 are readmitted like carried states: a guess, checked by the stitching)
-        firsts = {"up": vals[:1], "down": vals[-1:], "both": vals[[0, -1]]}[direction]
-        check_start(model, x0v, p, pidx, firsts, phase, period)
+        check_start(model, x0v, p, pidx, first_values(vals, direction), phase, period)
     max_points = samples if max_points is None else max_points
     if max_period is None:
         max_period = max(1, min(samples // 4, 64))
