@@ -154,6 +154,8 @@ def test_a_point_that_is_no_saddle_is_one_error_line(bcnf_file):
     assert "Traceback" not in res.output
     res = _run(["manifold", bcnf_file])        # no [defaults] x0 and no --x0
     assert res.exit_code == 2 and "--x0" in res.output, res.output
+    res = _run(["manifold", "relay-feedback"])        # autonomous: no stroboscopic section
+    assert res.exit_code == 1 and "autonomous" in res.output, res.output
 
 
 def test_help_lists_the_options():

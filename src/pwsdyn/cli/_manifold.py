@@ -130,6 +130,9 @@ def manifold_cmd(model, params, sets, x0, period, t0, transient, kind, arclength
               f"{', '.join(saddle.pieces)}")
         _echo("multipliers " + _multipliers(saddle.multipliers))
     else:
+        if mdl.forcing_period is None:      # before any shooting: the API would refuse it after
+            _fail(f"{mdl.name!r} is autonomous: its orbits have no stroboscopic section, the "
+                  "only section manifolds are grown on so far (maps and forced flows)")
         x0_val, t0, t_end = _run_defaults(mdl, run.x0, t0, None)
         with reported("no periodic orbit"):
             saddle = _find_orbit(run, x0_val, t0, t_end, transient or 0.0, None, period)
