@@ -171,6 +171,9 @@ def _draw(results, path, force):
     ax = fig.add_subplot()
     for k, m in enumerate(results):
         m.plot(ax=ax, saddle=k == 0)
+    if len(results[0].model.states) == 1:    # a one-state map is drawn along its axis
+        ax.set_xlabel(results[0].model.states[0])
+        ax.set_yticks([])
     ax.legend(loc="best")
     ax.set_title(f"{results[0].model.name}: saddle of period {results[0].period}")
     fmt = Path(path).suffix[1:].lower() or "png"
