@@ -68,8 +68,7 @@ commands on ``main``.
 
 from __future__ import annotations
 
-from . import (_explore, _manifold, _orbits, _scan,  # noqa: F401  (they register their
-               _simulate)                             # commands)
+from . import _explore, _manifold, _orbits, _scan, _simulate  # noqa: F401  (commands)
 from ._common import FALLBACK_T_END
 from ._main import main
 from ._output import NETCDF_SUFFIXES, _safe  # noqa: F401  (_safe: the one sanitiser)
