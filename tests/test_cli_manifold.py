@@ -126,6 +126,22 @@ def test_a_forced_flows_saddle_orbit_is_found_as_orbit_finds_it(tmp_path):
     assert _read(out).attrs["section"] == "stroboscopic"
 
 
+def test_a_figure_that_fails_costs_neither_manifold(bcnf_file, tmp_path, monkeypatch):
+    def broken(*args, **kwargs):
+        raise OSError("disk full")
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(pwsdyn.Manifold, "plot", broken)
+    res = _run(["manifold", bcnf_file, "--x0", "-0.5,0", "--kind", "both", "--arclength", "1",
+                "--plot", "fig.png"])
+    assert res.exit_code == 1, res.output
+    assert "disk full" in res.output and "fig.nc" in res.output
+    assert "fig-stable.nc" in res.output
+    assert _read(tmp_path / "fig.nc").attrs["manifold_kind"] == "unstable"
+    assert _read(tmp_path / "fig-stable.nc").attrs["manifold_kind"] == "stable"
+    assert not (tmp_path / "fig.png").exists()
+
+
 @pytest.mark.parametrize("args, words", [
     (["--kind", "sideways"], ["--kind", "sideways"]),
     (["--arclength", "-1"], ["--arclength", "positive"]),

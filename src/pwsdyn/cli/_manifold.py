@@ -18,7 +18,7 @@ from ._common import (_run_defaults, method_option, model_argument, output_optio
                       x0_option)
 from ._main import main
 from ._orbits import _find_orbit, _multipliers
-from ._output import _echo, _fail, _fmt, _save_data, _write_figures
+from ._output import _echo, _fail, _fmt, _rescue_data, _save_data, _write_figures
 
 
 def _stable_path(out):
@@ -152,6 +152,11 @@ def manifold_cmd(model, params, sets, x0, period, t0, transient, kind, arclength
     if plot is not None:
         problem = _write_figures([(plot, lambda: _draw(results, plot, force))], out,
                                  results[0].to_dataset)
+        if problem is not None and len(results) == 2 and out is None:
+            # the stable manifold is not lost either: next to the unstable one's rescue
+            saved, err = _rescue_data(results[1].to_dataset, _stable_path(plot))
+            problem += (f"; the stable manifold to {str(saved)!r}" if saved is not None
+                        else f"; the stable manifold could not be saved ({err})")
         if problem is not None:
             _fail(problem)
 
