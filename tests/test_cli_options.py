@@ -37,7 +37,7 @@ WHERE_THEY_APPLY = {
     "--no-progress": {"sweep", "scan", "basins", "continue", "grazing"},
     "--workers": {"sweep", "scan", "basins"},
     "--scheduler": {"sweep", "scan", "basins"},
-    "--t0": {"simulate", "orbit", "continue", "grazing"},
+    "--t0": {"simulate", "orbit", "continue", "grazing", "manifold"},
 }
 
 #: Shared options with no API default to compare with: not given means "nothing" (no value

@@ -151,6 +151,7 @@ MINIMAL = {
              "--to2", "1", "--num2", "2"],
     "continue": ["m", "--from", "0", "--to", "1"],
     "grazing": ["m", "--from", "0", "--to", "1"],
+    "manifold": ["m"],
 }
 
 
@@ -207,6 +208,11 @@ SAME_DEFAULT = [
     ("grazing", "--t0", pwsdyn.find_periodic_orbit, "t0"),
     ("grazing", "--period", pwsdyn.find_periodic_orbit, "period"),
     ("grazing", "--force", save_dataset, "overwrite"),
+    *[("manifold", flag, pwsdyn.manifold, name) for flag, name in (
+        ("--kind", "kind"), ("--arclength", "arclength"), ("--max-points", "max_points"),
+        ("--tol", "tol"), ("--period", "period"))],
+    ("manifold", "--t0", pwsdyn.find_periodic_orbit, "t0"),
+    ("manifold", "--force", pwsdyn.Manifold.save, "overwrite"),
     # the flag is the negation of the API's `progress` (see test_option_default_is_the_api's)
     ("sweep", "--no-progress", pwsdyn.sweep, "progress"),
     ("basins", "--no-progress", pwsdyn.basins, "progress"),
@@ -242,6 +248,8 @@ def test_every_option_gives_a_plain_value_when_not_given(command):
 SHOOTING = {**DEFAULTS, **SHOOTING_DEFAULTS}
 LIBRARY_DEFAULT = [(cmd, flag, DEFAULTS) for cmd in ("simulate", "sweep", "scan", "basins")
                    for flag in ("--rtol", "--atol", "--method", "--exact", "--sliding")] + \
+                  [("manifold", flag, DEFAULTS)     # the manifold's runs: pwsdyn.manifold's
+                   for flag in ("--rtol", "--atol", "--method", "--sliding")] + \
                   [(cmd, flag, SHOOTING) for cmd in ("orbit", "continue", "grazing")
                    for flag in ("--rtol", "--atol", "--method", "--sliding")]
 
@@ -270,12 +278,13 @@ def test_shooting_defaults_are_the_apis(tmp_path):
 
 
 def test_every_model_running_command_has_the_same_shared_options():
-    for command in ("simulate", "orbit", "sweep", "scan", "basins", "continue", "grazing"):
+    for command in ("simulate", "orbit", "sweep", "scan", "basins", "continue", "grazing",
+                    "manifold"):
         for flag in ("-p", "--param", "-s", "--set", "--x0", "--rtol", "--atol", "--method",
                      "--sliding", "--out", "--plot", "--force"):
             _option(command, flag)
         assert _option(command, "--set").hidden and not _option(command, "--param").hidden
-    for command in ("orbit", "sweep", "scan", "basins", "continue", "grazing"):
+    for command in ("orbit", "sweep", "scan", "basins", "continue", "grazing", "manifold"):
         assert _option("simulate", "--sliding").type.choices == \
             _option(command, "--sliding").type.choices
 

@@ -7,7 +7,9 @@ and basins of attraction (parallel on threads or Dask, resumable) and write thei
 figures; ``pwsdyn orbit MODEL``
 finds a periodic orbit by Newton shooting and prints its period, signature and Floquet
 multipliers; ``pwsdyn continue`` follows it in a parameter and ``pwsdyn grazing`` to its
-first graze, where it prints Nordmark's discontinuity map.
+first graze, where it prints Nordmark's discontinuity map; ``pwsdyn manifold`` finds a saddle
+(a map's periodic point, a forced flow's periodic orbit) and grows its stable and unstable
+manifolds.
 
 One name for one thing in every command that runs a model (``pwsdyn.cli._common``, whose
 ``prepare`` is the preamble they all share):
@@ -60,12 +62,13 @@ controls are shown as escapes (``\\x1b``, ``\\u202e``), so a model cannot drive 
 
 The package: ``_output`` (terminal output, output files), ``_common`` (the shared options
 and the preamble), ``_main`` (the group and ``models``) and one module per family of commands
-(``_simulate``, ``_explore``, ``_scan``, ``_orbits``), each registering its commands on ``main``.
+(``_simulate``, ``_explore``, ``_scan``, ``_orbits``, ``_manifold``), each registering its
+commands on ``main``.
 """
 
 from __future__ import annotations
 
-from . import _explore, _orbits, _scan, _simulate  # noqa: F401  (they register their commands)
+from . import _explore, _manifold, _orbits, _scan, _simulate  # noqa: F401  (commands)
 from ._common import FALLBACK_T_END
 from ._main import main
 from ._output import NETCDF_SUFFIXES, _safe  # noqa: F401  (_safe: the one sanitiser)
