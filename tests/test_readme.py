@@ -13,7 +13,7 @@ whitespace is free around punctuation and a further ``  # remark`` is not part o
 The test compares every printed line with its comment (``tests/_snippets.py`` has the rules
 in full), so a comment cannot claim what the code does not print.
 
-The blocks that run global analyses (sweeps, basins, Lyapunov spectra) take minutes on two
+The blocks that run global analyses (sweeps, scans, basins, Lyapunov spectra) take minutes on two
 cores: they are marked ``slow`` (CI runs them, ``.ci/run``); the others run by default.
 """
 
@@ -31,7 +31,7 @@ from _snippets import bare_values, check_printed, run_script, stated_lines  # no
 README = Path(__file__).resolve().parent.parent / "README.md"
 _BLOCK = re.compile(r"^```python[ \t]*\n(.*?)^```[ \t]*$", re.S | re.M)
 #: Calls that make a block a long one (global analyses).
-_LONG = re.compile(r"\b(sweep|basins|lyapunov_spectrum)\(")
+_LONG = re.compile(r"\b(sweep|scan|basins|lyapunov_spectrum)\(")
 
 
 def readme_blocks() -> list[tuple[int, str]]:

@@ -848,6 +848,10 @@ def _variable_attrs(model, settings: dict) -> dict:
         "chunk_start": {"long_name": "first value of a chunk"},
         "chunk_rerun": {"long_name": "value rerun from the state the chunk before hands on "
                                      "(the chunk's guess lay on another attractor)"},
+        # the chunk files' own: where the chunk's run started, and which of its values
+        # belong to a rerun from the state handed on (stitching)
+        "x_start": state_attrs(model, "state the chunk's run started from"),
+        "rerun": {"long_name": "value of a rerun from the state the chunk before hands on"},
     }
 
 
