@@ -242,6 +242,10 @@ def continue_cmd(model, params, sets, start, stop, x0, t0, periods, period, tran
         problem = _write_outputs(out, plot, branch.to_dataset, draw, force)
     if problem is not None:
         _fail(problem)
+    if branch.stop_status is not None and branch.stop_status.failed:
+        # the branch so far is written (above); that it ended before the span's end, and
+        # why, is the command's outcome
+        _fail(f"the branch ended early ({branch.stop_status}): {branch.stop_reason}")
 
 
 def _multipliers(values) -> str:

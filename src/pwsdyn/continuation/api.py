@@ -12,8 +12,9 @@ import numpy as np
 from .. import _validate as V
 from ..errors import ArgumentError, Status
 from ..model.spec import as_model
-from .branch import Branch, SpecialPoint
-from .engine import Continuation, ContinuationError, ContinuationSettings, null_space
+from .branch import CONTENT_HASH, Branch, SpecialPoint, content_hash
+from .engine import (STEP_FAILURES, Continuation, ContinuationError, ContinuationSettings,
+                     _failure_text, null_space)
 from .problems import (CURVE_KINDS, DIB_KINDS, BifurcationCurveProblem,
                        OrbitBranchProblem, equilibrium_problem)
 
@@ -70,7 +71,11 @@ def _run(problem, u0, lam0, settings, *, tangent=None, correct_start=True, progr
     reason, status = cont.stop_reason, cont.stop_status
     while (orbit and on_dib == "switch" and cont.stop_point is not None
            and len(points) < settings.max_points):
-        nxt = _after_graze(problems[-1], cont.stop_point, st, options or {}, points)
+        try:
+            nxt = _after_graze(problems[-1], cont.stop_point, st, options or {}, points)
+        except STEP_FAILURES as exc:
+            # the branch so far is kept: the failure is its end, not the caller's exception
+            nxt = f"the orbit past the graze could not be built ({_failure_text(exc)})"
         if isinstance(nxt, str):
             reason, status = f"{reason}; {nxt}", Status.SWITCH_FAILED
             break
@@ -418,16 +423,46 @@ def continue_equilibrium(model, x0, param: str, *, span=None, ds: float | None =
 def load_branch(path) -> Branch:
     """Read a branch written by :meth:`Branch.save`: its points, special points and the
     problem, so that it can be plotted, inspected and continued further
-    (``continue_orbit(model, branch, param)``)."""
+    (``continue_orbit(model, branch, param)``).
+
+    The file's content hash (``content_sha256``, written by :meth:`Branch.save`) is checked
+    first: a file changed after it was written, truncated, or missing what a branch needs is
+    refused with an :class:`~pwsdyn.ArgumentError` naming the file and what is wrong. A file
+    without a hash (written by an earlier pwsdyn) is read with a warning."""
     from .._netcdf import open_dataset
+
+    try:
+        ds = open_dataset(path)
+    except FileNotFoundError:
+        raise
+    except Exception as exc:   # h5py/netCDF4 raise OSError, KeyError, ValueError... alike
+        raise ArgumentError(f"{str(path)!r} is not a readable NetCDF file "
+                            f"({type(exc).__name__}: {exc})") from None
+    if ds.attrs.get("pwsdyn_type") != "branch":
+        raise ArgumentError(f"{str(path)!r} is not a branch file (pwsdyn_type = "
+                            f"{ds.attrs.get('pwsdyn_type')!r})")
+    stored = ds.attrs.get(CONTENT_HASH)
+    if stored is None:
+        import warnings
+
+        warnings.warn(f"{str(path)!r} carries no content hash (written by pwsdyn "
+                      f"{ds.attrs.get('pwsdyn_version', '?')}): its content is not checked",
+                      stacklevel=2)
+    elif str(stored) != content_hash(ds):
+        raise ArgumentError(f"{str(path)!r} was changed after it was written: its content "
+                            f"does not match its content hash (content_sha256)")
+    try:
+        return _branch_of_dataset(ds)
+    except Exception as exc:   # noqa: BLE001 -- any gap of the file is said as one error
+        raise ArgumentError(f"{str(path)!r} is not a complete branch file "
+                            f"({type(exc).__name__}: {exc})") from None
+
+
+def _branch_of_dataset(ds) -> Branch:
     from ..model import load_model
     from ..orbits.problem import OrbitProblem
     from .engine import Point
 
-    ds = open_dataset(path)
-    if ds.attrs.get("pwsdyn_type") != "branch":
-        raise ArgumentError(f"{str(path)!r} is not a branch file (pwsdyn_type = "
-                            f"{ds.attrs.get('pwsdyn_type')!r})")
     model = load_model(json.loads(ds.attrs["model_spec"]))
     param = ds.attrs["parameter"]
     params = json.loads(ds.attrs["params"])

@@ -1,0 +1,277 @@
+"""Branches that never lose work, go the direction asked, and files and resumes that can be
+relied on.
+
+* a failure inside a continuation step (the model refusing a predicted parameter, a segment
+  that cannot be integrated, a singular system) rejects the step and shrinks it; at ``ds_min``
+  the branch ends with its points and a reason, never with the caller's exception; the CLI
+  writes what it has and exits non-zero with the reason;
+* a branch file carries a content hash: a changed, truncated or incomplete file is refused with
+  pwsdyn's own error naming the file; a resumed branch or special point is checked against the
+  model it is continued with;
+* ``max_points`` is a hard bound; every argument of ``continue_bifurcation`` is checked.
+
+The branches in closed form are one-dimensional equilibria (``x' = p - x`` and
+``x' = p - x^2``: ``x = p`` and ``x = sqrt(p)``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import pwsdyn
+from pwsdyn import ArgumentError, Status
+from pwsdyn.continuation import Continuation, ContinuationSettings, load_branch
+from pwsdyn.newton import TrialRejected
+from pwsdyn.orbits import SegmentFailed
+
+
+def _flow(name, fields, params):
+    return {"name": name, "states": list(fields), "parameters": params,
+            "modes": {"m": dict(fields)}}
+
+
+FOLD = _flow("fold", {"x": "p - x**2"}, {"p": 1.0})
+LINE = _flow("line", {"x": "p - x"}, {"p": 1.0})
+
+
+# ======================================================================================
+# item 1: no computed point is ever lost
+# ======================================================================================
+
+class _Refusing:
+    """``F(u, lam) = u - lam`` (the branch ``u = lam``) whose evaluation fails below
+    ``lam = 0.5`` with ``error`` (what a model, an integrator or a linear solve raises
+    there)."""
+
+    size = 1
+    kind = "equilibrium"
+    parameter = "p"
+
+    def __init__(self, error, where="evaluate"):
+        self.error = error
+        self.where = where
+
+    def _check(self, lam, where):
+        if lam < 0.5 and where == self.where:
+            raise self.error
+
+    def evaluate(self, u, lam):
+        self._check(lam, "evaluate")
+        return np.array([u[0] - lam]), np.eye(1), np.array([-1.0])
+
+    def analyse(self, u, lam, evaluation=None):
+        self._check(lam, "analyse")
+        return {"stable": True, "admissible": True}
+
+    def test_functions(self, data):
+        return {}
+
+
+FAILURES = [ArgumentError("the forcing period must be positive"),
+            TrialRejected("segment 0 could not be integrated", "simulation"),
+            SegmentFailed(0, "the kernel stopped"),
+            np.linalg.LinAlgError("Singular matrix"),
+            FloatingPointError("overflow")]
+
+
+@pytest.mark.parametrize("where", ["evaluate", "analyse"])
+@pytest.mark.parametrize("error", FAILURES, ids=lambda e: type(e).__name__)
+def test_a_failure_inside_a_step_keeps_the_branch(error, where):
+    """Before, the exception left the engine and every point was lost; now the step is retaken
+    shorter until ``ds_min``, and the branch ends there with its points, a member and the
+    failure in words."""
+    st = ContinuationSettings(ds=-0.1, ds_max=0.1, ds_min=1e-4, span=(0.0, 2.0), locate=())
+    cont = Continuation(_Refusing(error, where), [1.0], 1.0, st)
+    pts = cont.run()
+    lam = np.array([p.lam for p in pts])
+    # every point on the branch u = lam, down to within ds_min of the refusing region
+    assert np.allclose([p.u[0] for p in pts], lam, atol=1e-12)
+    assert lam.min() >= 0.5 and lam.min() < 0.5 + 2e-4 * 4
+    assert cont.stop_status is Status.STEP_BELOW_DS_MIN
+    assert str(error) in cont.stop_reason
+
+
+@pytest.mark.slow
+def test_impact_oscillator_down_in_omega_reaches_the_span_end(tmp_path):
+    """The issue's reproduction: `pwsdyn continue impact-oscillator --param omega --from 2.5
+    --to 2.0` (defaults). Before: the corrector's first Newton step moved omega to -0.95, the
+    model refused the forcing period there, and the command wrote nothing. Now the step is
+    retaken shorter and the branch reaches the end of the span; the file is written."""
+    from click.testing import CliRunner
+
+    from pwsdyn.cli import main
+
+    out = tmp_path / "b.nc"
+    res = CliRunner().invoke(main, ["continue", "impact-oscillator", "--param", "omega",
+                                    "--from", "2.5", "--to", "2.0", "--no-progress",
+                                    "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    br = load_branch(out)
+    assert br.stop_status is Status.SPAN_END
+    assert abs(br.values.min() - 2.0) < 1e-12 and abs(br.values.max() - 2.5) < 1e-12
+
+
+@pytest.mark.slow
+def test_stick_slip_down_in_fs_passes_its_sliding_bifurcations():
+    """The issue's second reproduction: the zoo's stick-slip cycle continued down in Fs with
+    ds from 0.02 to 0.2 died at its first sliding bifurcation with a TypeError (the forcing
+    period of an autonomous model asked for where a segment is merged). Now it goes on past
+    the switching-sliding and the crossing-sliding points to the end of the span."""
+    from click.testing import CliRunner
+
+    from pwsdyn.cli import main
+
+    for ds in ("0.02", "0.2"):
+        res = CliRunner().invoke(main, ["continue", "stick-slip-oscillator", "--param", "Fs",
+                                        "--from", "1", "--to", "0.001", "--ds", ds,
+                                        "--no-progress"])
+        assert res.exit_code == 0, res.output
+        assert "SPAN_END" in res.output
+        assert res.output.count("\nSS ") == 1 and res.output.count("\nCS ") == 1
+
+
+def test_cli_writes_a_failed_branch_and_exits_nonzero(tmp_path, monkeypatch):
+    """A branch that ends before its span (here: the equilibrium problem refuses p < 0.5, as a
+    model refuses a parameter outside its domain) is written, drawn and reported, and the
+    command exits 1 with the reason."""
+    from click.testing import CliRunner
+
+    from pwsdyn.cli import main
+    from pwsdyn.continuation import problems
+
+    real = problems.EquilibriumProblem.evaluate
+
+    def refusing(self, u, lam):
+        if lam < 0.5:
+            raise ArgumentError("p must be at least 0.5 here")
+        return real(self, u, lam)
+
+    monkeypatch.setattr(problems.EquilibriumProblem, "evaluate", refusing)
+    path = tmp_path / "line.toml"
+    path.write_text('name = "line"\nstates = ["x"]\n[parameters]\np = 1.0\n'
+                    '[modes.m]\nx = "p - x"\n')
+    out, png = tmp_path / "b.nc", tmp_path / "b.png"
+    res = CliRunner().invoke(main, ["continue", str(path), "--param", "p", "--from", "1",
+                                    "--to", "0", "--equilibrium", "--x0", "1",
+                                    "--no-progress", "--out", str(out), "--plot", str(png)])
+    assert res.exit_code == 1, res.output
+    assert "STEP_BELOW_DS_MIN" in res.output and "p must be at least 0.5" in res.output
+    br = load_branch(out)
+    assert br.stop_status is Status.STEP_BELOW_DS_MIN and br.values.min() < 0.51
+    assert png.read_bytes()[:4] == b"\x89PNG"
+
+
+# ======================================================================================
+# item 8: branch files carry a content hash
+# ======================================================================================
+
+@pytest.fixture(scope="module")
+def fold_file(tmp_path_factory):
+    br = pwsdyn.continue_equilibrium(FOLD, [1.0], "p", span=(-1, 2), ds=-0.05, max_points=12)
+    return br, br.save(tmp_path_factory.mktemp("b") / "fold.nc")
+
+
+def test_a_branch_file_round_trips_with_its_hash(fold_file):
+    br, path = fold_file
+    back = load_branch(path)
+    assert np.array_equal(back.values, br.values)
+    ds = br.to_dataset()
+    assert len(ds.attrs["content_sha256"]) == 64
+
+
+def _rewritten(path, tmp_path, change):
+    from pwsdyn.io import open_dataset, save_dataset
+
+    ds = open_dataset(path)
+    change(ds)
+    out = tmp_path / "changed.nc"
+    save_dataset(ds, out, overwrite=True)
+    return out
+
+
+@pytest.mark.parametrize("change", [
+    lambda ds: ds.attrs.update(params=ds.attrs["params"].replace("1.0", "1.5")),
+    lambda ds: ds["p"].values.__setitem__(3, 0.123),
+    lambda ds: ds["u"].values.__setitem__((2, 0), 7.0),
+    lambda ds: ds["special"].values.__setitem__(1, "PD"),
+    lambda ds: ds.attrs.update(stop_reason="edited"),
+], ids=["params", "parameter", "unknowns", "special", "stop_reason"])
+def test_a_changed_branch_file_is_refused(fold_file, tmp_path, change):
+    """Before, a file whose parameters were edited after writing was accepted (and a resume
+    from it jumped to another branch without a word)."""
+    _, path = fold_file
+    bad = _rewritten(path, tmp_path, change)
+    with pytest.raises(ArgumentError, match="changed after it was written") as exc:
+        load_branch(bad)
+    assert "changed.nc" in str(exc.value)
+
+
+def test_a_truncated_or_incomplete_branch_file_is_refused(fold_file, tmp_path):
+    _, path = fold_file
+    data = path.read_bytes()
+    short = tmp_path / "short.nc"
+    short.write_bytes(data[:len(data) // 2])
+    with pytest.raises(ArgumentError, match="short.nc"):
+        load_branch(short)
+    # a variable missing, the hash rewritten to match: the file is incomplete
+    from pwsdyn.continuation.branch import content_hash
+
+    def drop(ds):
+        del ds["tangent"]
+        ds.attrs["content_sha256"] = content_hash(ds)
+
+    with pytest.raises(ArgumentError, match="not a complete branch file"):
+        load_branch(_rewritten(path, tmp_path, drop))
+
+
+def test_mutated_branch_files_fuzz(fold_file, tmp_path):
+    """Bit flips and truncations anywhere in the file: each is read back equal to the
+    original, or refused with pwsdyn's error (or warned about, where the flip hit the hash's
+    own name) -- never an internal exception, never a changed branch accepted silently."""
+    import warnings
+
+    br, path = fold_file
+    data = bytearray(path.read_bytes())
+    rng = np.random.default_rng(23)
+    internal, accepted_changed = [], 0
+    for trial in range(120):
+        buf = bytearray(data)
+        if trial % 4 == 0:
+            buf = buf[:int(rng.integers(0, len(buf)))]
+        else:
+            for _ in range(int(rng.integers(1, 4))):
+                i = int(rng.integers(0, len(buf)))
+                buf[i] ^= 1 << int(rng.integers(0, 8))
+        f = tmp_path / f"m{trial}.nc"
+        f.write_bytes(bytes(buf))
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                back = load_branch(f)
+            except ArgumentError:
+                continue
+            except Exception as exc:  # noqa: BLE001 -- counted
+                internal.append(f"{type(exc).__name__}: {exc}")
+                continue
+        same = (len(back) == len(br) and np.array_equal(back.values, br.values)
+                and all(np.array_equal(a.u, b.u) for a, b in zip(back.points, br.points))
+                and [p.special for p in back.points] == [p.special for p in br.points])
+        if not same and not caught:
+            accepted_changed += 1
+    assert internal == [] and accepted_changed == 0
+
+
+# ======================================================================================
+# item 8: max_points is a bound
+# ======================================================================================
+
+@pytest.mark.parametrize("n", [2, 3, 5, 8, 13])
+def test_max_points_is_a_hard_bound(n):
+    """The fold of x' = p - x^2 at p = 0: located in the step that reaches ``max_points``, it
+    joined the branch past the bound before."""
+    br = pwsdyn.continue_equilibrium(FOLD, [1.0], "p", span=(-1, 2), ds=-0.2, ds_max=0.4,
+                                     max_points=n)
+    assert len(br) <= n
