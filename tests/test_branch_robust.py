@@ -220,7 +220,10 @@ def test_a_truncated_or_incomplete_branch_file_is_refused(fold_file, tmp_path):
     from pwsdyn.continuation.branch import content_hash
 
     def drop(ds):
+        import json
+
         del ds["tangent"]
+        ds.attrs["content_sha256_variables"] = json.dumps(sorted(map(str, ds.variables)))
         ds.attrs["content_sha256"] = content_hash(ds)
 
     with pytest.raises(ArgumentError, match="not a complete branch file"):
@@ -268,10 +271,217 @@ def test_mutated_branch_files_fuzz(fold_file, tmp_path):
 # item 8: max_points is a bound
 # ======================================================================================
 
-@pytest.mark.parametrize("n", [2, 3, 5, 8, 13])
-def test_max_points_is_a_hard_bound(n):
-    """The fold of x' = p - x^2 at p = 0: located in the step that reaches ``max_points``, it
-    joined the branch past the bound before."""
-    br = pwsdyn.continue_equilibrium(FOLD, [1.0], "p", span=(-1, 2), ds=-0.2, ds_max=0.4,
-                                     max_points=n)
-    assert len(br) <= n
+def test_max_points_is_a_hard_bound():
+    """The fold of x' = p - x^2 at p = 0 is the 9th point of this branch: with max_points = 9
+    it is located in the step that reaches the bound, and the step's own point joined the
+    branch past it before (10 points)."""
+    for n in range(2, 24):
+        br = pwsdyn.continue_equilibrium(FOLD, [1.0], "p", span=(-1, 2), ds=-0.2, ds_max=0.4,
+                                         max_points=n)
+        assert len(br) <= n, n
+        if n >= 9:
+            assert [p.kind for p in br.special_points][0] == "LP"
+
+
+# ======================================================================================
+# items 4, 5: direction
+# ======================================================================================
+
+IO_MODEL = "impact-oscillator"
+
+
+def _io_start():
+    from _orbit_cases import io_orbit
+
+    return io_orbit("stable")       # the one-impact orbit at omega = 2.8
+
+
+def _increasing(br):
+    s = np.array([p.arclength for p in br.points])
+    return bool(np.all(np.diff(s) > 0))
+
+
+@pytest.fixture(scope="module")
+def io_both():
+    """From omega = 2.8 inside (2.6, 3.0), no ds: both sides."""
+    return pwsdyn.continue_orbit(IO_MODEL, _io_start(), "omega", span=(2.6, 3.0))
+
+
+def test_both_sides_by_default(io_both):
+    """Before: one side (up), the other half of the span never visited."""
+    br = io_both
+    assert abs(br.values.min() - 2.6) < 1e-12 and abs(br.values.max() - 3.0) < 1e-12
+    # one branch through the start, ordered by arclength, the start once
+    assert _increasing(br)
+    assert np.sum(np.abs(br.values - 2.8) < 1e-12) == 1
+    assert np.all(np.diff(br.values) > 0)          # no fold in (2.6, 3.0)
+    assert [p.kind for p in br.special_points] == ["EP", "EP"]
+    # every point on the closed-form one-impact orbit (tests/_orbit_cases.py)
+    from test_continuation import _io_state_error
+
+    assert _io_state_error(br) < 1e-8
+
+
+@pytest.mark.parametrize("kw, lo, hi", [({"direction": "up"}, 2.8, 3.0),
+                                        ({"direction": "down"}, 2.6, 2.8),
+                                        ({"ds": -0.02}, 2.6, 2.8),
+                                        ({"ds": 0.02}, 2.8, 3.0)])
+def test_one_side_when_asked(kw, lo, hi):
+    br = pwsdyn.continue_orbit(IO_MODEL, _io_start(), "omega", span=(2.6, 3.0),
+                               max_points=40, **kw)
+    assert abs(br.values.min() - lo) < 1e-12 and abs(br.values.max() - hi) < 1e-12
+
+
+def test_a_start_on_the_boundary_goes_into_the_span():
+    """The issue's case: from omega = 2.5 with span (2.0, 2.5) and no ds, two points and
+    "reached the end of span" before."""
+    orb = pwsdyn.find_periodic_orbit(IO_MODEL, [0.0, -0.5], params={"omega": 2.5})
+    br = pwsdyn.continue_orbit(IO_MODEL, orb, "omega", span=(2.0, 2.5))
+    assert abs(br.values.min() - 2.0) < 1e-12 and len(br) > 10
+
+
+def test_a_start_outside_the_span_is_refused():
+    """Before: accepted, special points outside the span reported."""
+    with pytest.raises(ArgumentError, match="outside `span`"):
+        pwsdyn.continue_orbit(IO_MODEL, _io_start(), "omega", span=(3.0, 3.5))
+    with pytest.raises(ArgumentError, match="direction"):
+        pwsdyn.continue_orbit(IO_MODEL, _io_start(), "omega", span=(2.6, 3.0), ds=-0.02,
+                              direction="up")
+    with pytest.raises(ArgumentError, match="direction"):
+        pwsdyn.continue_orbit(IO_MODEL, _io_start(), "omega", span=(2.6, 3.0),
+                              direction="sideways")
+
+
+def test_a_resumed_branch_goes_where_ds_says(io_both):
+    """Resumed from its last point (omega = 3.0, travelling up): a negative ds goes to smaller
+    values -- before it retraced the branch, which goes up there -- and the default goes on
+    up; the branch stays ordered by arclength."""
+    down = pwsdyn.continue_orbit(IO_MODEL, pwsdyn.continue_orbit(
+        IO_MODEL, _io_start(), "omega", span=(2.7, 2.8), direction="down"), "omega",
+        span=(2.5, 2.8), ds=-0.02)
+    assert abs(down.values.min() - 2.5) < 1e-12 and _increasing(down)
+    assert np.all(np.diff(down.values) < 0)
+    on = pwsdyn.continue_orbit(IO_MODEL, io_both, "omega", span=(2.6, 3.1), max_points=60)
+    assert abs(on.values.max() - 3.1) < 1e-12 and _increasing(on)
+
+
+def test_a_resume_or_special_point_of_another_model_is_refused(io_both):
+    """Before: continued with the other model, labelled with it, holding the first's data."""
+    spec = dict(pwsdyn.load_model(IO_MODEL).spec)
+    spec["parameters"] = {**spec["parameters"], "r": 0.5}
+    spec["name"] = "impact-oscillator-r05"
+    with pytest.raises(ArgumentError, match="continue it with its own model"):
+        pwsdyn.continue_orbit(spec, io_both, "omega", span=(2.6, 3.1))
+    with pytest.raises(ArgumentError, match="continue it with its own model"):
+        pwsdyn.continue_orbit(spec, io_both.special_points[-1], "omega", span=(2.6, 3.1))
+    changed = Branch_copy(io_both)
+    changed.points[-1].u = changed.points[-1].u + 1e-3
+    with pytest.raises(ArgumentError, match="does not solve its problem"):
+        pwsdyn.continue_orbit(IO_MODEL, changed, "omega", span=(2.6, 3.1))
+
+
+def Branch_copy(br):
+    from pwsdyn.continuation import Branch
+
+    return Branch(br.problem, [p.to_point() for p in br.points], stop_reason=br.stop_reason,
+                  stop_status=br.stop_status, settings=br.settings, model=br.model,
+                  problems=br.problems)
+
+
+# ======================================================================================
+# item 8: continue_bifurcation checks every argument
+# ======================================================================================
+
+@pytest.fixture(scope="module")
+def fake_pd():
+    """A special point to hand to continue_bifurcation (the arguments are checked before any
+    work; what the point is does not matter)."""
+    br = pwsdyn.continue_orbit(IO_MODEL, _io_start(), "omega", span=(2.7, 2.9), max_points=1)
+    br.points[0].special = "PD"
+    return br.special("PD")[0]
+
+
+@pytest.mark.parametrize("kw, match", [
+    ({"span2": "ab"}, "span2"),
+    ({"span2": (1.0, 0.0)}, "span2"),
+    ({"span2": (math.nan, 1.0)}, "span2"),
+    ({"span2": (0.0, 0.1)}, "outside `span2`"),
+    ({"span": (3.0, 3.5)}, "outside `span`"),
+    ({"span": "ab"}, "span"),
+    ({"ds": math.nan}, "ds"),
+    ({"max_points": 0}, "max_points"),
+    ({"direction": "left"}, "direction"),
+    ({"rtol": -1.0}, "rtol"),
+    ({"no_such_option": 1}, "no_such_option"),
+])
+def test_continue_bifurcation_checks_its_arguments(fake_pd, kw, match):
+    """Before: a string span2 gave numpy's UFuncTypeError, a reversed or NaN one a one-point
+    curve; a start outside span a one-point curve "reached the end of span"."""
+    with pytest.raises(ArgumentError, match=match):
+        pwsdyn.continue_bifurcation(IO_MODEL, fake_pd, ("omega", "sigma"), **kw)
+
+
+# ======================================================================================
+# item 8: the grazing API refuses what overflows
+# ======================================================================================
+
+def test_grazing_api_refuses_overflowing_parameters_and_gains():
+    """Parameters and gains of the friction impact oscillator's control design from 1e-300 to
+    1e308 in every combination drawn: each call returns finite numbers or refuses with
+    pwsdyn's error. Before: OverflowError (``omega**2``), ``math domain error`` (an arcsine
+    of a constraint that never leaves the mass) and silent NaN (``inf - inf`` in the law)."""
+    from pwsdyn.grazing.friction_impact import ControlGains, FrictionImpact
+
+    vals = [1e-300, 1e-8, 0.5, 1.0, 3.0, 1e8, 1e154, 1e200, 1e308, -1e308, -1e200]
+    names = ["m", "k", "Fs", "Fd", "a", "b", "omega", "e"]
+    rng = np.random.default_rng(8)
+    internal, nonfinite = [], []
+    for _ in range(400):
+        params = {str(k): float(rng.choice(vals))
+                  for k in rng.choice(names, size=int(rng.integers(0, 3)), replace=False)}
+        g = {k: float(rng.choice(vals)) for k in ["c_x", "c_a", "eps_1", "eps_2", "delta_1",
+                                                   "delta_2"]}
+        try:
+            fi = FrictionImpact.from_params(params)
+            gains = ControlGains(**g)
+        except ArgumentError:
+            continue
+        calls = [lambda: fi.linear_map(gains), lambda: fi.law_b(0.5, gains),
+                 lambda: fi.stick_map(0.5, gains=gains), lambda: fi.fixed_point(gains=gains),
+                 lambda: fi.fixed_point(exact=True, gains=gains),
+                 lambda: fi.excursion(0.5, gains), lambda: fi.fixed_point(),
+                 lambda: fi.residual_error(ControlGains(**{**g, "c_x": 0.5})),
+                 lambda: fi.stick_map(0.3, exact=True, gains=gains)]
+        for call in calls:
+            try:
+                out = call()
+            except ArgumentError:
+                continue
+            except Exception as exc:  # noqa: BLE001 -- counted
+                internal.append(f"{type(exc).__name__}: {exc}")
+                continue
+            nums = ([v for k, v in out.items() if k != "theta" and not isinstance(v, bool)]
+                    if isinstance(out, dict) else out)
+            if not np.all(np.isfinite(np.asarray(nums, dtype=float))):
+                nonfinite.append((params, g, out))
+    assert internal == [] and nonfinite == []
+
+
+def test_one_label_per_special_point_at_one_parameter_value():
+    """A fold and a branch point located at the parameter value of a discontinuity-induced
+    bifurcation (the relay's cycle: LP, BP and AS at one value) are its consequences: the
+    DIB's label alone remains, whichever order they were located in. Before, only one of
+    them lost its label."""
+    from pwsdyn.continuation.engine import Point
+
+    def pt(lam, kind):
+        return Point(u=np.zeros(1), lam=lam, tangent=np.array([0.0, 1.0]), special=kind)
+
+    for order in (["LP", "BP", "AS"], ["AS", "LP", "BP"], ["LP", "AS", "BP"]):
+        cont = Continuation(_Refusing(ArgumentError("-")), [1.0], 1.0)
+        cont.points = [pt(0.9, "")]
+        for k, kind in enumerate(order):
+            p = pt(1.0 + 1e-12 * k, kind)
+            cont._fold_at_special(p)
+            cont.points.append(p)
+        assert [p.special for p in cont.points if p.special] == ["AS"], order

@@ -612,6 +612,9 @@ class Branch:
         else:
             attrs["mode"] = self.problem.mode
         ds.attrs.update(attrs)
+        # the variables the hash covers: those of the branch (a file may carry more, as
+        # `pwsdyn grazing --out` adds the discontinuity map)
+        ds.attrs[CONTENT_COVERS] = json.dumps(sorted(str(k) for k in ds.variables))
         ds.attrs[CONTENT_HASH] = content_hash(ds)
         return ds
 
@@ -634,6 +637,8 @@ class Branch:
 
 #: The global attribute holding :func:`content_hash` of a branch file.
 CONTENT_HASH = "content_sha256"
+#: The global attribute naming the variables the hash covers (JSON list; itself covered).
+CONTENT_COVERS = "content_sha256_variables"
 #: Global attributes covered by the content hash: every one that :func:`pwsdyn.load_branch`
 #: rebuilds the branch, its model and its problems from (a file whose parameters were edited
 #: after writing would resume on another branch without a word).
@@ -646,12 +651,16 @@ _HASHED_ATTRS = ("pwsdyn_type", "kind", "parameter", "parameter2", "curve", "par
 def content_hash(ds) -> str:
     """SHA-256 of what a branch dataset holds: each variable's name, shape and values (numbers
     as float64, every NaN the same; strings as UTF-8), then the attributes of
-    ``_HASHED_ATTRS`` present. The same before writing and after reading back (NetCDF keeps
+    ``_HASHED_ATTRS`` present; the variables those named by the ``content_sha256_variables``
+    attribute (all where it is absent). The same before writing and after reading back (NetCDF keeps
     float64 and the integer flags exactly), so that any change to the file is seen."""
     import hashlib
 
     h = hashlib.sha256()
-    for name in sorted(str(k) for k in ds.variables):
+    covers = ds.attrs.get(CONTENT_COVERS)
+    names = json.loads(covers) if covers is not None else sorted(str(k) for k in ds.variables)
+    h.update(f"\0covers {covers}".encode())
+    for name in names:
         a = np.asarray(ds[name].values)
         h.update(f"\0var {name} {a.shape}\0".encode())
         if a.dtype.kind in "biuf":

@@ -473,13 +473,17 @@ class Continuation:
         # at the same parameter (the fold's arclength may differ: the unknowns that vanish
         # at the graze move like a square root there)
         near = 1e-8 * (1.0 + abs(p.lam))
+        generic = {"LP", "BP"}
         for q in reversed(self.points[-3:]):
-            if abs(q.lam - p.lam) > near:
+            if abs(q.lam - p.lam) > near or not q.special:
                 continue
-            generic = {"LP", "BP"}
-            if (p.special in generic) != (q.special in generic) and q.special:
-                (p if p.special in generic else q).special = ""
-                return
+            if (p.special in generic) != (q.special in generic):
+                if p.special in generic:
+                    p.special = ""
+                    return
+                # every fold and branch point there loses its label (one label per special
+                # point: the relay's cycle had LP, BP and AS at one parameter value)
+                q.special = ""
 
     def _tick(self):
         if self._bar is not None:
