@@ -485,3 +485,56 @@ def test_one_label_per_special_point_at_one_parameter_value():
             cont._fold_at_special(p)
             cont.points.append(p)
         assert [p.special for p in cont.points if p.special] == ["AS"], order
+
+
+# ======================================================================================
+# item 9: the graze from the impacting side; the diagram's default measure
+# ======================================================================================
+
+@pytest.fixture(scope="module")
+def impacting_to_graze():
+    """The one-impact orbit (omega = 2.8, eps = 0.1, r = 0.8) followed up in sigma until its
+    impact velocity vanishes: the graze at the free motion's amplitude."""
+    from _orbit_cases import io_orbit
+
+    return pwsdyn.continue_orbit(IO_MODEL, io_orbit("stable"), "sigma", span=(-0.6, 0.4),
+                                 ds=0.05, on_dib="stop")
+
+
+def test_a_graze_from_the_impacting_side_states_its_singularity(impacting_to_graze):
+    """Before: finite multipliers of order 1e12 at the graze (the saltation matrix's 1/v).
+    Its place: the free motion x'' + eps x' + x = sin(omega t) (the zoo model's forcing) has
+    amplitude R = 1 / sqrt((1 - omega^2)^2 + (eps omega)^2), where the stop grazes."""
+    br = impacting_to_graze
+    gr = br.special("GR")[0]
+    omega, eps = 2.8, 0.1
+    R = 1.0 / math.hypot(1 - omega**2, eps * omega)
+    assert abs(gr.value - R) < 1e-8
+    assert "@" in gr.key
+    assert gr.multipliers.size and np.all(np.isnan(gr.multipliers))
+    assert "saltation" in gr.point.data["singular"]
+    others = [p for p in br.points if p.special != "GR"]
+    assert all(np.all(np.isfinite(p.data["multipliers"])) for p in others)
+
+
+def test_the_default_diagram_is_continuous_through_a_graze():
+    """The README's branch in sigma through the graze (the stop moving into the free motion,
+    the impacting orbit born there): the section state jumps at the graze (the branch was
+    drawn as two pieces); the default measure, the largest x over the orbit, is continuous:
+    it equals min(sigma, R) up to the graze (the orbit touches the stop), then R."""
+    import matplotlib
+    matplotlib.use("Agg")
+    from pwsdyn.plot._branches import _branch_y
+
+    params = {"eps": 0.1, "omega": 2.8, "sigma": 0.45}
+    orbit = pwsdyn.find_periodic_orbit(IO_MODEL, [-0.006, -0.41], t0=0.0, params=params)
+    br = pwsdyn.continue_orbit(IO_MODEL, orbit, "sigma", span=(0.0, 0.45), ds=-0.02,
+                               max_points=40)
+    assert len(br.signatures) == 2
+    y, label = _branch_y(br, None)
+    assert label.startswith("max")
+    R = 1.0 / math.hypot(1 - 2.8**2, 0.1 * 2.8)
+    # sampled at 400 points per orbit: the maximum to ~(pi / 400)^2 / 2 of the amplitude
+    assert np.allclose(y, np.minimum(br.values, R), atol=5e-5 * R)
+    fig = br.plot()
+    assert fig.axes[0].get_ylabel().startswith("max")

@@ -169,8 +169,29 @@ def _run(problem, u0, lam0, settings, *, tangent=None, correct_start=True, progr
             q.signature_index = len(problems) - 1
         points += cont.points
         reason, status = cont.stop_reason, cont.stop_status
+    if orbit:
+        _singular_grazes(points)
     return Branch(problem, points, stop_reason=reason, stop_status=status, settings=settings,
                   model=model, problems=problems, origin=origin)
+
+
+#: Why a graze seen from the impacting side has no multipliers.
+GRAZE_SINGULAR = ("an impact at zero normal velocity: its saltation matrix is unbounded "
+                  "(its entries grow like the inverse of the velocity), so the orbit's "
+                  "multipliers are not defined at the graze seen from the impacting side")
+
+
+def _singular_grazes(points) -> None:
+    """A graze located by an impact's velocity monitor (``GR/<surface>@<segment>``: the
+    impacting side) states its singularity: the multipliers there are NaN, and
+    ``data["singular"]`` says why (numerically they were of order 1e12, a value of the
+    round-off in the vanishing velocity)."""
+    for p in points:
+        key = str(p.data.get("located", ""))
+        if p.special == "GR" and "@" in key:
+            mu = np.asarray(p.data.get("multipliers", ()), dtype=complex)
+            p.data["multipliers"] = np.full(mu.shape, complex(np.nan, np.nan))
+            p.data["singular"] = GRAZE_SINGULAR
 
 
 def _after_graze(bp, pt, settings, options, points=()):

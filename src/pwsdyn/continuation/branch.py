@@ -628,7 +628,8 @@ class Branch:
     def plot(self, y=None, *, ax=None, labels: bool = True, **kw):
         """Bifurcation diagram: the parameter against ``y`` (a state name, ``"period"``,
         ``"norm"``, ``"max:<state>"``, ``"min:<state>"`` or a function of the orbit at each
-        point; see :func:`pwsdyn.plot.plot_branch`), stable parts solid, unstable dashed,
+        point; see :func:`pwsdyn.plot.plot_branch`; default for orbits the largest value of
+        the first state over the orbit, continuous through grazes), stable parts solid, unstable dashed,
         non-admissible dotted, special points marked and labelled."""
         from ..plot import plot_branch
 
