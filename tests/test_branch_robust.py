@@ -538,3 +538,37 @@ def test_the_default_diagram_is_continuous_through_a_graze():
     assert np.allclose(y, np.minimum(br.values, R), atol=5e-5 * R)
     fig = br.plot()
     assert fig.axes[0].get_ylabel().startswith("max")
+
+
+# ======================================================================================
+# every special point exactly once, for ds over a 40x range, in both directions
+# ======================================================================================
+
+@pytest.mark.slow
+@pytest.mark.parametrize("ds", [0.005, 0.01, 0.02, 0.05, 0.2])
+def test_each_special_point_once_for_any_step_either_way(ds):
+    """The one-impact orbit's period doubling (going up, and coming back down from the end of
+    the span as a resumed branch) and its fold (going down): each exactly once, at its closed
+    form (tests/_orbit_cases.py) to 1e-8, for first steps from 0.005 to 0.2."""
+    from scipy.optimize import brentq
+
+    from _orbit_cases import io_one_impact
+    from test_continuation import _pd_value
+
+    w_pd = _pd_value(lambda w: io_one_impact(w, 1)[2], 4.2, 4.4)
+    w_lp = brentq(lambda w: io_one_impact(w, 1)[3], 2.1, 2.3, xtol=1e-15)
+    up = pwsdyn.continue_orbit(IO_MODEL, _io_start(), "omega", span=(2.8, 4.6), ds=ds,
+                               max_points=400)
+    kinds = [p.kind for p in up.special_points]
+    assert kinds == ["PD", "EP"], kinds
+    assert abs(up.special("PD")[0].value - w_pd) < 1e-8
+    back = pwsdyn.continue_orbit(IO_MODEL, up, "omega", span=(2.8, 4.6), ds=-ds,
+                                 max_points=800)
+    new = [p.kind for p in back.special_points if p.index >= len(up) - 1]
+    assert new == ["PD", "EP"], new
+    assert all(abs(p.value - w_pd) < 1e-8 for p in back.special("PD"))
+    down = pwsdyn.continue_orbit(IO_MODEL, _io_start(), "omega", span=(1.9, 2.8), ds=-ds,
+                                 max_points=400)
+    lp = down.special("LP")
+    assert len(lp) == 1 and abs(lp[0].value - w_lp) < 1e-8
+    assert [p.kind for p in down.special_points if p.kind not in ("LP", "EP")] == []
