@@ -572,3 +572,21 @@ def test_each_special_point_once_for_any_step_either_way(ds):
     lp = down.special("LP")
     assert len(lp) == 1 and abs(lp[0].value - w_lp) < 1e-8
     assert [p.kind for p in down.special_points if p.kind not in ("LP", "EP")] == []
+
+
+@pytest.mark.slow
+def test_grazing_command_says_when_its_orbit_is_unstable_or_of_period_k():
+    """The README's grazing example without its --x0: the settling run finds the period-2
+    attractor, and the orbit followed to the graze is unstable. Before, the command stated a
+    scenario "of a local attractor" about it; now it says what the orbit is."""
+    from click.testing import CliRunner
+
+    from pwsdyn.cli import main
+
+    res = CliRunner().invoke(main, ["grazing", "impact-oscillator", "--param", "sigma",
+                                    "--from", "0.45", "--to", "0.0", "-p", "omega=2.8",
+                                    "-p", "eps=0.1", "--no-progress"])
+    assert res.exit_code == 0, res.output
+    assert "of a local attractor" not in res.output
+    note = [ln for ln in res.output.splitlines() if ln.startswith("note")]
+    assert note and "unstable" in note[0] and "period 2" in note[0]
