@@ -590,3 +590,21 @@ def test_grazing_command_says_when_its_orbit_is_unstable_or_of_period_k():
     assert "of a local attractor" not in res.output
     note = [ln for ln in res.output.splitlines() if ln.startswith("note")]
     assert note and "unstable" in note[0] and "period 2" in note[0]
+
+
+def test_a_resumed_branch_honours_on_dib_and_integrator_options():
+    """Before: a resumed branch ran through the graze onto points that are not orbits of the
+    model (on_dib ignored) and dropped the integrator options given."""
+    from _orbit_cases import io_orbit
+
+    first = pwsdyn.continue_orbit(IO_MODEL, io_orbit("stable"), "sigma", span=(-0.6, 0.0),
+                                  ds=0.05)
+    more = pwsdyn.continue_orbit(IO_MODEL, first, "sigma", span=(-0.6, 0.4), on_dib="stop",
+                                 rtol=1e-11)
+    assert more.stop_status is Status.STOP_AT_SPECIAL_POINT
+    assert more.special_points[-1].kind == "GR" and more.admissible.all()
+    R = 1.0 / math.hypot(1 - 2.8**2, 0.1 * 2.8)
+    assert abs(more.special_points[-1].value - R) < 1e-8
+    last = more.points[-1]
+    assert more.problem_of(last).orbit_problem.opts["rtol"] == 1e-11
+    assert _increasing(more) and len(more) > len(first)
