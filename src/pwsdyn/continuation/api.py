@@ -89,10 +89,10 @@ def _sides(side, settings, direction):
         return side(step if direction == "up" else -step, settings.max_points)
     down = side(-step, max(1, (settings.max_points + 1) // 2))
     up = side(step, max(1, settings.max_points - len(down) + 1))
-    return _joined(down, up)
+    return _joined(down, up, settings)
 
 
-def _joined(down: Branch, up: Branch) -> Branch:
+def _joined(down: Branch, up: Branch, settings) -> Branch:
     """One branch from the two halves that leave the same start: the far end of ``down``
     first, arclength increasing through the start (at the arclength it has in ``up``), the
     tangents along that order; the start once."""
@@ -111,7 +111,7 @@ def _joined(down: Branch, up: Branch) -> Branch:
     last = failed[0] if failed else up
     reason = f"down: {down.stop_reason}; up: {up.stop_reason}"
     return Branch(down.problem, dpts[:0:-1] + upts, stop_reason=reason,
-                  stop_status=last.stop_status, settings=up.settings, model=up.model,
+                  stop_status=last.stop_status, settings=settings, model=up.model,
                   problems=problems, origin=up.origin)
 
 
