@@ -541,8 +541,6 @@ class Continuation:
                                              f"{X[-1]:.6g}, outside the span")
                 else:
                     v = self._tangent(X, vk)
-                    new = self._point(X, v, ds=ds, iterations=res.iterations,
-                                      arclength=prev.arclength + ds)
             except STEP_FAILURES as exc:
                 X, last_failure = None, _failure_text(exc)
             if X is not None:
@@ -551,6 +549,14 @@ class Continuation:
                 leaving = len(self.points) == 1 and bool(prev.special)
                 if angle > st.max_angle and ds > st.ds_min * 2 and not leaving:
                     X, last_failure = None, f"the tangent turned by {angle:.2f} rad"
+            if X is not None and st.span[0] <= X[-1] <= st.span[1]:
+                # the point's data (multipliers, monitors) may fail where the corrector did
+                # not (an integration of the variational equations): a failed step too
+                try:
+                    new = self._point(X, v, ds=ds, iterations=res.iterations,
+                                      arclength=prev.arclength + ds)
+                except STEP_FAILURES as exc:
+                    X, last_failure = None, _failure_text(exc)
             if X is None:
                 ds *= 0.5
                 continue
