@@ -39,7 +39,7 @@ sweep = pwsdyn.sweep(MODEL, "omega", omegas, {"x": -1.0, "v": 0.0}, params=param
 # doubling at ``omega = 4.32`` starts the period-two branch.
 traj = pwsdyn.simulate(MODEL, {"x": -1.0, "v": 0.0}, (0, 100), params={**params, "omega": 2.8})
 orbit = pwsdyn.PeriodicOrbit.from_trajectory(traj)
-up = pwsdyn.continue_orbit(MODEL, orbit, "omega", span=(2.0, 4.6))
+up = pwsdyn.continue_orbit(MODEL, orbit, "omega", span=(2.0, 4.6), direction="up")
 down = pwsdyn.continue_orbit(MODEL, orbit, "omega", span=(2.0, 4.6), ds=-0.01)
 pd = up.special("PD")[0]
 doubled = pwsdyn.continue_orbit(MODEL, pd, "omega", span=(2.0, 4.6))

@@ -89,6 +89,20 @@ def _orbit():
                                                               "omega": 2.8})
 
 
+@functools.lru_cache(maxsize=None)
+def _pd_point():
+    """The period doubling of the one-impact orbit at omega = 4.32 (a short branch to it)."""
+    from _orbit_cases import io_orbit
+
+    br = pwsdyn.continue_orbit(IO, io_orbit("stable"), "omega", span=(2.8, 4.34), ds=0.05)
+    return br.special("PD")[0]
+
+
+@functools.lru_cache(maxsize=None)
+def _branch():
+    return pwsdyn.continue_orbit(IO, _orbit(), "omega", span=(2.7, 2.9), max_points=3)
+
+
 #: A fold x' = p - x^2 (closed-form equilibria sqrt(p)).
 FOLD = {"name": "fold", "states": ["x"], "parameters": {"p": 1.0},
         "modes": {"m": {"x": "p - x**2"}}}
@@ -172,7 +186,18 @@ def _entries():
               dict(model=IO, orbit="ORBIT", param="omega", span=(2.7, 2.9), max_points=3),
               ["model", "orbit", "param", "span", "ds", "max_points", "params", "on_dib",
                "ds_min", "ds_max", "tol", "max_iter", "target_iter", "max_angle", "locate",
-               "locate_tol", "predictor", "max_arclength", "rtol"], [], Branch),
+               "locate_tol", "predictor", "max_arclength", "rtol", "direction"], [], Branch),
+        # a branch resumed: its own model, or another (refused), every argument fuzzed
+        Entry("continue_orbit(branch)", pwsdyn.continue_orbit, ("model", "orbit", "param"),
+              dict(model=IO, orbit="BRANCH", param="omega", span=(2.7, 2.95), max_points=3),
+              ["model", "orbit", "param", "span", "ds", "max_points", "on_dib", "direction",
+               "rtol"], [], Branch),
+        Entry("continue_bifurcation", pwsdyn.continue_bifurcation,
+              ("model", "special_point", "params"),
+              dict(model=IO, special_point="PDPOINT", params=("sigma", "omega"),
+                   span=(-0.55, -0.45), max_points=3),
+              ["model", "special_point", "params", "span", "span2", "ds", "max_points",
+               "direction", "ds_min", "ds_max", "tol", "rtol"], [], Branch),
         Entry("continue_equilibrium", pwsdyn.continue_equilibrium, ("model", "x0", "param"),
               dict(model=FOLD, x0=[1.0], param="p", span=(0.5, 1.5), max_points=4),
               ["model", "x0", "param", "span", "ds", "max_points", "params", "mode",
@@ -199,6 +224,10 @@ def _resolve(value):
         return _variational_trajectory()
     if isinstance(value, str) and value == "ORBIT":
         return _orbit()
+    if isinstance(value, str) and value == "BRANCH":
+        return _branch()
+    if isinstance(value, str) and value == "PDPOINT":
+        return _pd_point()
     return value
 
 

@@ -184,7 +184,8 @@ def io_branches():
     traj = pwsdyn.simulate(IO, {"x": -1.0, "v": 0.0}, (0, 100),
                            params={**IO_PARAMS, "omega": 2.8})
     orbit = pwsdyn.PeriodicOrbit.from_trajectory(traj)
-    up = pwsdyn.continue_orbit(IO, orbit, "omega", span=(2.0, 4.6))
+    # one side, up (the default follows both sides of the start)
+    up = pwsdyn.continue_orbit(IO, orbit, "omega", span=(2.0, 4.6), direction="up")
     down = pwsdyn.continue_orbit(IO, orbit, "omega", span=(2.0, 4.6), ds=-0.01)
     pd = up.special("PD")[0]
     doubled = pwsdyn.continue_orbit(IO, pd, "omega", span=(2.0, 4.6))

@@ -160,7 +160,11 @@ def _span(start, stop):
               help="First step in arclength (default min(0.02, abs(to - from) / 100)).")
 @click.option("--max-points", "max_points", type=int, default=200, show_default=True,
               help="Most points on the branch.")
-@click.option("--state", default=None, help="State plotted (default: the one that varies most).")
+@click.option("--y", "--state", "state", default=None,
+              help="What the figure plots against the parameter: a state at the section, "
+                   "max:STATE or min:STATE over the orbit, period or norm (default: "
+                   "max:<first state> for orbits, continuous through grazes; for equilibria "
+                   "the state that varies most).")
 @click.option("--on-dib", "on_dib", type=click.Choice(["switch", "stop", "continue"]),
               default="switch", show_default=True,
               help="At a graze: go on with the orbit's new event sequence, stop there, or keep "
@@ -242,6 +246,10 @@ def continue_cmd(model, params, sets, start, stop, x0, t0, periods, period, tran
         problem = _write_outputs(out, plot, branch.to_dataset, draw, force)
     if problem is not None:
         _fail(problem)
+    if branch.stop_status is not None and branch.stop_status.failed:
+        # the branch so far is written (above); that it ended before the span's end, and
+        # why, is the command's outcome
+        _fail(f"the branch ended early ({branch.stop_status}): {branch.stop_reason}")
 
 
 def _multipliers(values) -> str:
@@ -330,9 +338,22 @@ def grazing_cmd(model, params, sets, start, stop, x0, t0, periods, period, trans
     _echo("beta        " + ", ".join(f"{n_}={_fmt(v)}" for n_, v in zip(dm.names, dm.beta)))
     _echo("multipliers " + _multipliers(gr.multipliers))
     _echo("h_x P^n beta " + " ".join(f"{v:.3e}" for v in seq))
-    _echo(f"scenario    {dm.scenario}"
-          + (" of a local attractor" if dm.scenario == "persistence" else
-             " of the local attractor (a jump to a distant one, hysteresis)"))
+    # the scenario is about the orbit that grazes: an attractor's only if that orbit is
+    # stable and of period one (without --x0 the settling run may find another orbit)
+    before = branch.points[gr.index - 1] if gr.index > 0 else gr.point
+    stable = bool(before.data.get("stable", True))
+    k = int(getattr(gr.problem.orbit_problem, "periods", 1) or 1)
+    if stable:
+        _echo(f"scenario    {dm.scenario}"
+              + (" of a local attractor" if dm.scenario == "persistence" else
+                 " of the local attractor (a jump to a distant one, hysteresis)"))
+    else:
+        _echo(f"scenario    {dm.scenario} of a neighbourhood of the grazing orbit (it is "
+              f"unstable: no attractor grazes here)")
+    what = (["unstable"] if not stable else []) + ([f"of period {k}"] if k > 1 else [])
+    if what:
+        _echo(f"note        the orbit analysed is {' and '.join(what)} (forcing periods: "
+              f"{k}); to analyse another, start from it with --x0 and --periods")
 
     def draw():
         from ..plot import plot_orbit

@@ -11,9 +11,11 @@ import numpy as np
 
 from .. import _validate as V
 from ..errors import ArgumentError, Status
+from ..integrate.options import integrator_options
 from ..model.spec import as_model
-from .branch import Branch, SpecialPoint
-from .engine import Continuation, ContinuationError, ContinuationSettings, null_space
+from .branch import CONTENT_COVERS, CONTENT_HASH, Branch, SpecialPoint, content_hash
+from .engine import (STEP_FAILURES, Continuation, ContinuationError, ContinuationSettings,
+                     _failure_text, _span, null_space)
 from .problems import (CURVE_KINDS, DIB_KINDS, BifurcationCurveProblem,
                        OrbitBranchProblem, curve_locate, curve_stop_at, equilibrium_problem)
 
@@ -23,8 +25,6 @@ _SETTING_NAMES = {f.name for f in dataclasses.fields(ContinuationSettings)}
 def _split_options(options: dict, span, ds, max_points):
     """Continuation settings and the remaining (integrator) options, every value checked
     (an :class:`~pwsdyn.ArgumentError` naming it) before any work."""
-    from .engine import _span
-
     st = {k: options.pop(k) for k in list(options) if k in _SETTING_NAMES}
     lo, hi = _span(span)
     ds = V.number("ds", ds, allow_none=True)
@@ -50,12 +50,87 @@ def _split_options(options: dict, span, ds, max_points):
     return ContinuationSettings(ds=ds, span=(lo, hi), max_points=max_points, **st), options
 
 
+#: Which way a branch goes from its start: both sides of it, or one (the parameter up or
+#: down at the start).
+DIRECTIONS = ("both", "up", "down")
+
+
+def _direction(direction, ds, span, lam0, name):
+    """The sides to follow from ``lam0``: ``direction`` if given, else the sign of an
+    explicit ``ds`` (one side), else both. A start outside ``span`` is refused (its special
+    points would lie outside it); on the span's boundary only the side inside remains."""
+    if direction is not None:
+        direction = V.choice("direction", direction, DIRECTIONS)
+        if ds is not None and direction != "both" and (ds > 0) != (direction == "up"):
+            raise ArgumentError(f"`ds` = {ds} goes {'up' if ds > 0 else 'down'} but "
+                                f"direction = {direction!r}")
+    elif ds is not None:
+        direction = "up" if ds > 0 else "down"
+    else:
+        direction = "both"
+    lo, hi = span
+    if not lo <= lam0 <= hi:
+        raise ArgumentError(f"the start lies outside `span`: {name} = {lam0:.10g} is not in "
+                            f"({lo:.10g}, {hi:.10g})")
+    if direction == "both" and lam0 >= hi:
+        return "down"
+    if direction == "both" and lam0 <= lo:
+        return "up"
+    return direction
+
+
+def _sides(side, settings, direction):
+    """The branch from ``side(ds, max_points)`` (a :class:`Branch` from the start with the
+    step ``ds``, its sign the side) on the side(s) ``direction`` asks for; on both, the two
+    joined through the start in the order of arclength, ``max_points`` shared."""
+    step = abs(settings.ds)
+    if direction != "both":
+        return side(step if direction == "up" else -step, settings.max_points)
+    down = side(-step, max(1, (settings.max_points + 1) // 2))
+    up = side(step, max(1, settings.max_points - len(down) + 1))
+    return _joined(down, up, settings)
+
+
+def _joined(down: Branch, up: Branch, settings) -> Branch:
+    """One branch from the two halves that leave the same start: the far end of ``down``
+    first, arclength increasing through the start (at the arclength it has in ``up``), the
+    tangents along that order; the start once."""
+    dpts = [p.to_point() for p in down.points]
+    upts = [p.to_point() for p in up.points]
+    s0 = upts[0].arclength
+    for p in dpts:
+        p.arclength = 2.0 * s0 - p.arclength
+        p.tangent = -p.tangent
+    nd = len(down.problems)
+    for p in upts:
+        if p.signature_index:
+            p.signature_index += nd - 1
+    problems = list(down.problems) + list(up.problems[1:])
+    failed = [b for b in (down, up) if b.stop_status is not None and b.stop_status.failed]
+    last = failed[0] if failed else up
+    reason = f"down: {down.stop_reason}; up: {up.stop_reason}"
+    return Branch(down.problem, dpts[:0:-1] + upts, stop_reason=reason,
+                  stop_status=last.stop_status, settings=settings, model=up.model,
+                  problems=problems, origin=up.origin)
+
+
+def _oriented(tangent, ds):
+    """``tangent`` turned so that the parameter moves the way the sign of ``ds`` says
+    (negative: to smaller values); where the parameter does not move along it (a fold),
+    along the direction it had, turned by the sign."""
+    t = np.asarray(tangent, dtype=float)
+    if abs(t[-1]) > 1e-9 * np.linalg.norm(t):
+        return t if (t[-1] > 0) == (ds > 0) else -t
+    return t * np.sign(ds)
+
+
 #: Kinds of discontinuity-induced bifurcations at which an orbit branch changes signature.
 ON_DIB = ("switch", "stop", "continue")
 
 
 def _run(problem, u0, lam0, settings, *, tangent=None, correct_start=True, progress=False,
-         model=None, start_kind="", on_dib="continue", options=None, origin=""):
+         model=None, start_kind="", on_dib="continue", options=None, origin="",
+         arclength0=0.0):
     """Follow a branch; on an orbit branch with ``on_dib="switch"`` go on past each graze
     with the orbit's new signature, ``"stop"`` end there, ``"continue"`` keep the signature
     (points past the graze are not admissible)."""
@@ -64,13 +139,17 @@ def _run(problem, u0, lam0, settings, *, tangent=None, correct_start=True, progr
     if orbit and on_dib in ("switch", "stop"):
         st = dataclasses.replace(settings, stop_at=tuple(settings.stop_at) + DIB_KINDS)
     cont = Continuation(problem, u0, lam0, st, tangent=tangent, correct_start=correct_start,
-                        progress=progress, start_kind=start_kind)
+                        progress=progress, start_kind=start_kind, arclength0=arclength0)
     cont.run()
     points, problems = list(cont.points), [problem]
     reason, status = cont.stop_reason, cont.stop_status
     while (orbit and on_dib == "switch" and cont.stop_point is not None
            and len(points) < settings.max_points):
-        nxt = _after_graze(problems[-1], cont.stop_point, st, options or {}, points)
+        try:
+            nxt = _after_graze(problems[-1], cont.stop_point, st, options or {}, points)
+        except STEP_FAILURES as exc:
+            # the branch so far is kept: the failure is its end, not the caller's exception
+            nxt = f"the orbit past the graze could not be built ({_failure_text(exc)})"
         if isinstance(nxt, str):
             reason, status = f"{reason}; {nxt}", Status.SWITCH_FAILED
             break
@@ -89,8 +168,29 @@ def _run(problem, u0, lam0, settings, *, tangent=None, correct_start=True, progr
             q.signature_index = len(problems) - 1
         points += cont.points
         reason, status = cont.stop_reason, cont.stop_status
+    if orbit:
+        _singular_grazes(points)
     return Branch(problem, points, stop_reason=reason, stop_status=status, settings=settings,
                   model=model, problems=problems, origin=origin)
+
+
+#: Why a graze seen from the impacting side has no multipliers.
+GRAZE_SINGULAR = ("an impact at zero normal velocity: its saltation matrix is unbounded "
+                  "(its entries grow like the inverse of the velocity), so the orbit's "
+                  "multipliers are not defined at the graze seen from the impacting side")
+
+
+def _singular_grazes(points) -> None:
+    """A graze located by an impact's velocity monitor (``GR/<surface>@<segment>``: the
+    impacting side) states its singularity: the multipliers there are NaN, and
+    ``data["singular"]`` says why (numerically they were of order 1e12, a value of the
+    round-off in the vanishing velocity)."""
+    for p in points:
+        key = str(p.data.get("located", ""))
+        if p.special == "GR" and "@" in key:
+            mu = np.asarray(p.data.get("multipliers", ()), dtype=complex)
+            p.data["multipliers"] = np.full(mu.shape, complex(np.nan, np.nan))
+            p.data["singular"] = GRAZE_SINGULAR
 
 
 def _after_graze(bp, pt, settings, options, points=()):
@@ -125,7 +225,8 @@ def _after_graze(bp, pt, settings, options, points=()):
 
 def continue_orbit(model, orbit, param: str, *, span=None, ds: float | None = None,
                    max_points: int = 200, params=None, on_dib: str = "switch",
-                   progress: bool = False, **options) -> Branch:
+                   direction: str | None = None, progress: bool = False,
+                   **options) -> Branch:
     """Follow a periodic orbit in a parameter by pseudo-arclength continuation.
 
     Folds (``LP``), period doublings (``PD``), Neimark-Sacker points (``NS``), branch points
@@ -150,16 +251,24 @@ def continue_orbit(model, orbit, param: str, *, span=None, ds: float | None = No
     param : str
         The parameter continued.
     span : (float, float), optional
-        The parameter's range; the branch ends on its boundary.
+        The parameter's range; the branch ends on its boundary. The start must lie in it.
     ds : float, optional
-        First step in arclength; negative to start towards smaller parameter values.
-        Default ``min(0.02, 0.01 (hi - lo))``.
+        First step in arclength. Given, its sign chooses one side of the start (negative:
+        towards smaller parameter values; from a branch or a special point of the same branch,
+        too). Default ``min(0.02, 0.01 (hi - lo))``, on both sides.
     max_points : int
-        Most points (the start and the special points included).
+        Most points (the start and the special points included; a hard bound).
     params : dict, optional
         Other parameter values (default the orbit's).
     on_dib : {'switch', 'stop', 'continue'}
         What happens at a discontinuity-induced bifurcation (a graze).
+    direction : {'both', 'up', 'down'}, optional
+        From an orbit: follow the branch on both sides of the start (the default without
+        ``ds``; the branch ordered by arclength through the start, ``max_points`` shared), or
+        on one, the parameter going up or down. A start on the boundary of ``span`` goes into
+        it. From a branch (resumed from its last point) or a special point of the same
+        branch, the branch goes on in its direction of travel unless ``ds`` or ``"up"`` /
+        ``"down"`` say otherwise.
     progress : bool
         Show a progress bar.
     **options
@@ -182,17 +291,21 @@ def continue_orbit(model, orbit, param: str, *, span=None, ds: float | None = No
     model = as_model(model, kind="flow", caller="continue_orbit()")
     param = _parameter(model, param)
     on_dib = V.choice("on_dib", on_dib, ON_DIB)
+    if direction is not None:
+        V.choice("direction", direction, DIRECTIONS)
     if params is not None:
         model.parameter_vector(params)          # names and values checked
     settings, options = _split_options(dict(options), span, ds, max_points)
+    ds = None if ds is None else settings.ds
     if options:
-        from ..integrate.simulate import integrator_options
-
         integrator_options(options, "continue_orbit()")
     if isinstance(orbit, Branch):
-        return _resume(orbit, model, param, settings, progress)
+        return _resume(orbit, model, param, settings, progress, ds=ds, direction=direction,
+                       on_dib=on_dib, options=options)
     if isinstance(orbit, SpecialPoint):
-        return _from_special(orbit, model, param, settings, progress, params, options, on_dib)
+        _same_model(orbit.branch, model, "the special point")
+        return _from_special(orbit, model, param, settings, progress, params, options, on_dib,
+                             ds=ds, direction=direction)
     from ..orbits import PeriodicOrbit
 
     if not isinstance(orbit, PeriodicOrbit):
@@ -204,8 +317,25 @@ def continue_orbit(model, orbit, param: str, *, span=None, ds: float | None = No
     if options:
         prob = _with_options(prob, options)
     u = _reduce_phase(prob, u)
-    return _run(OrbitBranchProblem(prob), u, float(prob.p0[0]), settings, progress=progress,
-                model=model, on_dib=on_dib, options=options)
+    lam0 = float(prob.p0[0])
+    way = _direction(direction, ds, settings.span, lam0, param)
+    bp = OrbitBranchProblem(prob)
+
+    def side(step, n):
+        return _run(bp, u, lam0, dataclasses.replace(settings, ds=step, max_points=n),
+                    progress=progress, model=model, on_dib=on_dib, options=options)
+
+    return _sides(side, settings, way)
+
+
+def _same_model(branch, model, what):
+    """A branch or special point continued with another model than its own is refused (its
+    unknowns mean nothing there)."""
+    own = getattr(branch, "model", None)
+    if own is not None and getattr(own, "hash", None) != model.hash:
+        raise ArgumentError(f"{what} is of model {own.name!r} (hash {own.hash}), not of "
+                            f"{model.name!r} (hash {model.hash}): continue it with its own "
+                            f"model")
 
 
 def _reduce_phase(prob, u):
@@ -239,7 +369,7 @@ def _with_options(prob, options):
 
 
 def _from_special(sp: SpecialPoint, model, param, settings, progress, params, options,
-                  on_dib="switch"):
+                  on_dib="switch", *, ds=None, direction=None):
     br = sp.branch
     if br.kind != "orbit":
         raise ArgumentError(f"continue_orbit needs a special point of an orbit branch, got one "
@@ -256,8 +386,16 @@ def _from_special(sp: SpecialPoint, model, param, settings, progress, params, op
         prob = op.replace(params=all_params, parameters=[param])
         if options:
             prob = _with_options(prob, options)
-        return _run(OrbitBranchProblem(prob), pt.u, all_params[param], settings,
-                    progress=progress, model=model, on_dib=on_dib, options=options)
+        way = _direction(direction, ds, settings.span, all_params[param], param)
+        bp = OrbitBranchProblem(prob)
+
+        def side(step, n):
+            return _run(bp, pt.u, all_params[param],
+                        dataclasses.replace(settings, ds=step, max_points=n),
+                        progress=progress, model=model, on_dib=on_dib, options=options)
+
+        return _sides(side, settings, way)
+    _direction("up" if direction == "both" else direction, ds, settings.span, pt.lam, param)
     if sp.kind == "PD":
         return _switch_period_doubling(sp, model, settings, progress, options, on_dib)
     if sp.kind in DIB_KINDS:
@@ -274,8 +412,12 @@ def _from_special(sp: SpecialPoint, model, param, settings, progress, params, op
     if sp.kind == "BP":
         J = np.column_stack(base.evaluate(pt.u, pt.lam)[1:])
         return _switch_branch_point(base, pt, J, model, settings, progress, on_dib)
+    # the same branch from the point: on in its direction of travel, or the way ds or
+    # direction says (negative: to smaller values, not back along the branch)
+    way = ds if ds is not None else {"up": 1.0, "down": -1.0}.get(direction)
+    tangent = pt.tangent if way is None else _oriented(pt.tangent, way)
     return _run(base, pt.u, pt.lam, dataclasses.replace(settings, ds=abs(settings.ds)),
-                tangent=pt.tangent * np.sign(settings.ds), correct_start=False,
+                tangent=tangent, correct_start=False,
                 progress=progress, model=model, start_kind=sp.kind, on_dib=on_dib,
                 options=options, origin=sp.kind)
 
@@ -332,22 +474,66 @@ def _switch_branch_point(problem, pt, J, model, settings, progress, on_dib="cont
                 start_kind="BP", on_dib=on_dib, origin="BP")
 
 
-def _resume(branch: Branch, model, param, settings, progress):
+def _resume(branch: Branch, model, param, settings, progress, *, ds=None, direction=None,
+            on_dib="switch", options=None):
+    """The branch continued from its last point, with its own problem (the integrator
+    options given replace its own), ``on_dib`` as asked, on in its direction of travel or the
+    way ``ds`` / ``direction`` say. The branch must be of ``model`` and its last point must
+    solve its problem (a file is checked when it is read; a branch in memory may have been
+    changed)."""
     if param != branch.parameter:
         raise ArgumentError(f"the branch continues {branch.parameter!r}, not {param!r}")
-    last = branch.points[-1]
+    _same_model(branch, model, "the branch")
+    if not len(branch):
+        raise ArgumentError("the branch has no points to continue from")
+    last = branch.points[-1].to_point()
     problem = branch.problem_of(last)
-    st = dataclasses.replace(settings, ds=math.copysign(
-        max(abs(last.ds), settings.ds_min) if last.ds else abs(settings.ds), settings.ds))
-    cont = Continuation(problem, last.u, last.lam, st,
-                        tangent=last.tangent * (1.0 if st.ds > 0 else -1.0),
-                        correct_start=False, progress=progress, arclength0=last.arclength)
-    cont.run()
-    for q in cont.points:
-        q.signature_index = last.signature_index
-    return Branch(branch.problem, branch.points[:-1] + cont.points,
-                  stop_reason=cont.stop_reason, stop_status=cont.stop_status, settings=st,
-                  model=model, problems=branch.problems, origin=branch.origin)
+    if options and hasattr(problem, "orbit_problem") and not getattr(problem, "curve", ""):
+        problem = OrbitBranchProblem(_with_options(problem.orbit_problem, options))
+    _check_solves(problem, last, settings)
+    way = ds if ds is not None else {"up": 1.0, "down": -1.0}.get(direction)
+    lo, hi = settings.span
+    if not lo <= last.lam <= hi:
+        raise ArgumentError(f"the branch's last point lies outside `span`: {param} = "
+                            f"{last.lam:.10g} is not in ({lo:.10g}, {hi:.10g})")
+    tangent = last.tangent if way is None else _oriented(last.tangent, way)
+    step = max(abs(last.ds), settings.ds_min) if last.ds else abs(settings.ds)
+    st = dataclasses.replace(settings, ds=min(step, settings.ds_max))
+    new = _run(problem, last.u, last.lam, st, tangent=tangent, correct_start=False,
+               progress=progress, model=model, on_dib=on_dib, options=options,
+               arclength0=last.arclength, origin=branch.origin)
+    problems = list(branch.problems)
+    if problem is branch.problem_of(last):
+        first = last.signature_index
+    else:
+        # other integrator options: the points from here on solve the new problem
+        problems.append(problem)
+        first = len(problems) - 1
+    base = len(problems) - 1
+    problems += list(new.problems[1:])
+    pts = [p.to_point() for p in new.points]
+    for q in pts:
+        q.signature_index = first if q.signature_index == 0 else base + q.signature_index
+    return Branch(branch.problem, [p.to_point() for p in branch.points][:-1] + pts,
+                  stop_reason=new.stop_reason, stop_status=new.stop_status, settings=st,
+                  model=model, problems=problems, origin=branch.origin)
+
+
+def _check_solves(problem, point, settings):
+    """Refuse a point that does not solve ``problem`` to the corrector's tolerance (times a
+    margin for integrator options other than those it was computed with): a branch changed
+    after it was computed, or one of another problem."""
+    try:
+        F = np.asarray(problem.evaluate(point.u, point.lam)[0], dtype=float)
+    except STEP_FAILURES as exc:
+        raise ArgumentError(f"the branch's last point cannot be evaluated with its problem "
+                            f"({_failure_text(exc)})") from None
+    scale = 1.0 + max(float(np.max(np.abs(point.u), initial=0.0)), abs(point.lam))
+    res = float(np.max(np.abs(F), initial=0.0)) / scale
+    if not res <= 1e3 * settings.tol:
+        raise ArgumentError(f"the branch's last point does not solve its problem (residual "
+                            f"{res:.3g} > {1e3 * settings.tol:.3g}): the branch was changed "
+                            f"or belongs to another problem")
 
 
 def continue_equilibrium(model, x0, param: str, *, span=None, ds: float | None = None,
@@ -412,16 +598,56 @@ def continue_equilibrium(model, x0, param: str, *, span=None, ds: float | None =
 def load_branch(path) -> Branch:
     """Read a branch written by :meth:`Branch.save`: its points, special points and the
     problem, so that it can be plotted, inspected and continued further
-    (``continue_orbit(model, branch, param)``)."""
+    (``continue_orbit(model, branch, param)``).
+
+    The file's content hash (``content_sha256``, written by :meth:`Branch.save`) is checked
+    first: a file changed after it was written, truncated, or missing what a branch needs is
+    refused with an :class:`~pwsdyn.ArgumentError` naming the file and what is wrong. A file
+    without a hash (written by an earlier pwsdyn) is read with a warning."""
     from .._netcdf import open_dataset
+
+    try:
+        ds = open_dataset(path)
+    except FileNotFoundError:
+        raise
+    except Exception as exc:   # h5py/netCDF4 raise OSError, KeyError, ValueError... alike
+        raise ArgumentError(f"{str(path)!r} is not a readable NetCDF file "
+                            f"({type(exc).__name__}: {exc})") from None
+    if ds.attrs.get("pwsdyn_type") != "branch":
+        raise ArgumentError(f"{str(path)!r} is not a branch file (pwsdyn_type = "
+                            f"{ds.attrs.get('pwsdyn_type')!r})")
+    stored = ds.attrs.get(CONTENT_HASH)
+    if stored is None:
+        import warnings
+
+        warnings.warn(f"{str(path)!r} carries no content hash (written by pwsdyn "
+                      f"{ds.attrs.get('pwsdyn_version', '?')}): its content is not checked",
+                      stacklevel=2)
+    try:
+        if stored is not None:
+            if str(stored) != content_hash(ds):
+                raise ArgumentError(f"{str(path)!r} was changed after it was written: its "
+                                    f"content does not match its content hash "
+                                    f"(content_sha256)")
+            # only what the hash covers is read (a file may carry more: the discontinuity
+            # map `pwsdyn grazing --out` adds)
+            covered = set(json.loads(ds.attrs.get(CONTENT_COVERS, "[]")))
+            ds = ds.drop_vars([k for k in ds.data_vars if k not in covered])
+        return _branch_of_dataset(ds)
+    except ArgumentError as exc:
+        if str(path) in str(exc):
+            raise
+        raise ArgumentError(f"{str(path)!r} is not a complete branch file ({exc})") from None
+    except Exception as exc:   # noqa: BLE001 -- any gap of the file is said as one error
+        raise ArgumentError(f"{str(path)!r} is not a complete branch file "
+                            f"({type(exc).__name__}: {exc})") from None
+
+
+def _branch_of_dataset(ds) -> Branch:
     from ..model import load_model
     from ..orbits.problem import OrbitProblem
     from .engine import Point
 
-    ds = open_dataset(path)
-    if ds.attrs.get("pwsdyn_type") != "branch":
-        raise ArgumentError(f"{str(path)!r} is not a branch file (pwsdyn_type = "
-                            f"{ds.attrs.get('pwsdyn_type')!r})")
     model = load_model(json.loads(ds.attrs["model_spec"]))
     param = ds.attrs["parameter"]
     params = json.loads(ds.attrs["params"])
@@ -489,7 +715,8 @@ def load_branch(path) -> Branch:
 
 def continue_bifurcation(model, special_point: SpecialPoint, params, *, span=None, span2=None,
                          ds: float | None = None, max_points: int = 200,
-                         progress: bool = False, **options) -> Branch:
+                         direction: str | None = None, progress: bool = False,
+                         **options) -> Branch:
     """Follow a fold (``LP``), period doubling (``PD``), Neimark-Sacker point (``NS``), or a
     discontinuity-induced bifurcation (graze ``GR``, grazing-, switching- or adding-sliding
     ``GS``, ``SS``, ``AS``) of a periodic orbit in two parameters: the curve of that bifurcation in the
@@ -510,11 +737,13 @@ def continue_bifurcation(model, special_point: SpecialPoint, params, *, span=Non
         continuation parameter of the curve (``Branch.values``), the second is solved for
         along it (``Branch.values_of(name)``).
     span : (float, float), optional
-        Range of the first parameter; the curve ends on its boundary.
+        Range of the first parameter; the curve ends on its boundary. The start must lie in
+        it.
     span2 : (float, float), optional
-        Range of the second; the curve stops when it leaves it.
-    ds, max_points, progress, **options
-        As :func:`continue_orbit`.
+        Range of the second; the curve stops when it leaves it. The start must lie in it.
+    ds, max_points, direction, progress, **options
+        As :func:`continue_orbit`: by default the curve is followed on both sides of the
+        special point (in the first parameter), ordered by arclength through it.
 
     Returns
     -------
@@ -540,7 +769,18 @@ def continue_bifurcation(model, special_point: SpecialPoint, params, *, span=Non
     if base.parameter not in (p1, p2):
         raise ArgumentError(f"the special point lies on a branch in {base.parameter!r}; it must "
                             f"be one of `params` {params!r}")
+    _same_model(sp.branch, model, "the special point")
+    if direction is not None:
+        V.choice("direction", direction, DIRECTIONS)
+    try:
+        lo2, hi2 = _span(span2)
+    except ArgumentError as exc:
+        raise ArgumentError(str(exc).replace("`span`", "`span2`").replace(
+            "span[", "span2[")) from None
     settings, options = _split_options(dict(options), span, ds, max_points)
+    ds = None if ds is None else settings.ds
+    if options:
+        integrator_options(options, "continue_bifurcation()")
     # the codimension-two points of the curve (and the DIBs met on it); a Neimark-Sacker
     # curve ends where it turns into neutral saddles
     settings = dataclasses.replace(settings, locate=curve_locate(sp.kind),
@@ -554,11 +794,19 @@ def continue_bifurcation(model, special_point: SpecialPoint, params, *, span=Non
     curve = BifurcationCurveProblem(prob, sp.kind,
                                     key=sp.key if sp.kind in DIB_KINDS else "")
     U0 = np.append(sp.point.u, all_params[p2])
-    cont = Continuation(curve, U0, all_params[p1], settings, progress=progress)
-    lo2, hi2 = (-math.inf, math.inf) if span2 is None else span2
-    for pt in cont:
-        if not lo2 <= pt.u[-1] <= hi2:
-            cont._stop(Status.SPAN2_LEFT, f"{p2} left span2 ({lo2:.10g}, {hi2:.10g})")
-            break
-    return Branch(curve, cont.points, stop_reason=cont.stop_reason,
-                  stop_status=cont.stop_status, settings=settings, model=model)
+    if not lo2 <= all_params[p2] <= hi2:
+        raise ArgumentError(f"the start lies outside `span2`: {p2} = {all_params[p2]:.10g} is "
+                            f"not in ({lo2:.10g}, {hi2:.10g})")
+    way = _direction(direction, ds, settings.span, all_params[p1], p1)
+
+    def side(step, n):
+        st = dataclasses.replace(settings, ds=step, max_points=n)
+        cont = Continuation(curve, U0, all_params[p1], st, progress=progress)
+        for pt in cont:
+            if not lo2 <= pt.u[-1] <= hi2:
+                cont._stop(Status.SPAN2_LEFT, f"{p2} left span2 ({lo2:.10g}, {hi2:.10g})")
+                break
+        return Branch(curve, cont.points, stop_reason=cont.stop_reason,
+                      stop_status=cont.stop_status, settings=st, model=model)
+
+    return _sides(side, settings, way)

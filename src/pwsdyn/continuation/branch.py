@@ -636,6 +636,10 @@ class Branch:
         else:
             attrs["mode"] = self.problem.mode
         ds.attrs.update(attrs)
+        # the variables the hash covers: those of the branch (a file may carry more, as
+        # `pwsdyn grazing --out` adds the discontinuity map)
+        ds.attrs[CONTENT_COVERS] = json.dumps(sorted(str(k) for k in ds.variables))
+        ds.attrs[CONTENT_HASH] = content_hash(ds)
         return ds
 
     def save(self, path, *, overwrite: bool = False):
@@ -648,11 +652,53 @@ class Branch:
     def plot(self, y=None, *, ax=None, labels: bool = True, **kw):
         """Bifurcation diagram: the parameter against ``y`` (a state name, ``"period"``,
         ``"norm"``, ``"max:<state>"``, ``"min:<state>"`` or a function of the orbit at each
-        point; see :func:`pwsdyn.plot.plot_branch`), stable parts solid, unstable dashed,
+        point; see :func:`pwsdyn.plot.plot_branch`; default for orbits the largest value of
+        the first state over the orbit, continuous through grazes), stable parts solid, unstable dashed,
         non-admissible dotted, special points marked and labelled."""
         from ..plot import plot_branch
 
         return plot_branch(self, y=y, ax=ax, labels=labels, **kw)
+
+
+#: The global attribute holding :func:`content_hash` of a branch file.
+CONTENT_HASH = "content_sha256"
+#: The global attribute naming the variables the hash covers (JSON list; itself covered).
+CONTENT_COVERS = "content_sha256_variables"
+#: Global attributes covered by the content hash: every one that :func:`pwsdyn.load_branch`
+#: rebuilds the branch, its model and its problems from (a file whose parameters were edited
+#: after writing would resume on another branch without a word).
+_HASHED_ATTRS = ("pwsdyn_type", "kind", "parameter", "parameter2", "curve", "params",
+                 "settings", "stop_reason", "stop_status", "origin", "model_hash",
+                 "model_spec", "signature", "signatures", "periods", "periods_of_signatures",
+                 "t_refs", "states0", "options", "mode")
+
+
+def content_hash(ds) -> str:
+    """SHA-256 of what a branch dataset holds: each variable's name, shape and values (numbers
+    as float64, every NaN the same; strings as UTF-8), then the attributes of
+    ``_HASHED_ATTRS`` present; the variables those named by the ``content_sha256_variables``
+    attribute (all where it is absent). The same before writing and after reading back (NetCDF keeps
+    float64 and the integer flags exactly), so that any change to the file is seen."""
+    import hashlib
+
+    h = hashlib.sha256()
+    covers = ds.attrs.get(CONTENT_COVERS)
+    names = json.loads(covers) if covers is not None else sorted(str(k) for k in ds.variables)
+    h.update(f"\0covers {covers}".encode())
+    for name in names:
+        a = np.asarray(ds[name].values)
+        h.update(f"\0var {name} {a.shape}\0".encode())
+        if a.dtype.kind in "biuf":
+            b = np.array(a, dtype=np.float64)
+            b[np.isnan(b)] = np.nan
+            h.update(np.ascontiguousarray(b).tobytes())
+        else:
+            flat = [v.decode() if isinstance(v, bytes) else str(v) for v in a.ravel().tolist()]
+            h.update("\x1f".join(flat).encode("utf-8", "surrogatepass"))
+    for key in _HASHED_ATTRS:
+        if key in ds.attrs:
+            h.update(f"\0attr {key}\0{ds.attrs[key]}".encode("utf-8", "surrogatepass"))
+    return h.hexdigest()
 
 
 def _json_float(v):

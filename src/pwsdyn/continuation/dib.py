@@ -338,7 +338,9 @@ def _merge_next(op, u, lam, seg: int, event):
     t_j, x_j, T_j = segs[j]
     T_k = segs[k][2]
     # where the merged segment is the first one, it starts a period before the dropped one
-    P = op.period_value(np.array([lam])) if k == 0 else 0.0
+    # (an autonomous orbit has no forcing period: its period is its segments' durations)
+    P = 0.0 if k != 0 else (op.period_value(np.array([lam])) if op.forced
+                            else float(sum(seg_[2] for seg_ in segs)))
     segs[k] = [t_j - P, x_j, T_j + T_k]
     del segs[j]
     del sig[j]

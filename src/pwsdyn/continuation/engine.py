@@ -50,8 +50,20 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..errors import ArgumentError, Status
+from ..errors import ArgumentError, PwsdynError, Status
 from ..newton import TrialRejected, newton
+from ..orbits import SegmentFailed
+
+#: What a trial step may raise where the problem cannot be evaluated: the model refusing a
+#: predicted parameter (an :class:`~pwsdyn.ArgumentError` of its domain), a segment that
+#: cannot be integrated, a singular linear system, an overflow. Each rejects the step (it is
+#: retaken shorter): no failure inside a step ends the branch without its points.
+STEP_FAILURES = (PwsdynError, TrialRejected, SegmentFailed, np.linalg.LinAlgError,
+                 ArithmeticError, ValueError)
+
+
+def _failure_text(exc) -> str:
+    return f"{type(exc).__name__}: {getattr(exc, 'message', '') or exc}"
 
 
 @dataclass(frozen=True)
@@ -334,7 +346,7 @@ class Continuation:
             dX = np.linalg.lstsq(jac(X), -G, rcond=None)[0]
             try:
                 G1 = fun(X + dX)
-            except TrialRejected:
+            except STEP_FAILURES:
                 return X, res
             if np.max(np.abs(G1)) <= np.max(np.abs(G)):
                 res.x = X + dX
@@ -345,6 +357,15 @@ class Continuation:
     # the start
     # ------------------------------------------------------------------------------
     def _start(self):
+        try:
+            return self._start_point()
+        except ContinuationError:
+            raise
+        except STEP_FAILURES as exc:
+            raise ContinuationError(f"the start cannot be evaluated at the parameter value "
+                                    f"{self._lam0:.10g}: {_failure_text(exc)}") from None
+
+    def _start_point(self):
         st = self.settings
         u = self._u0
         lam = self._lam0
@@ -426,7 +447,7 @@ class Continuation:
             yield first
         try:
             while not self.stop_reason:
-                for p in self._step():
+                for p in self._bounded(self._step()):
                     self._fold_at_special(p)
                     self.points.append(p)
                     self._tick()
@@ -435,6 +456,15 @@ class Continuation:
             if self._bar is not None:
                 self._bar.close()
                 self._bar = None
+
+    def _bounded(self, out: list) -> list:
+        """``out`` cut to the room ``max_points`` leaves: special points located in the last
+        step count like any other (the bound is hard)."""
+        room = self.settings.max_points - len(self.points)
+        if len(out) > room:
+            out = out[:max(room, 0)]
+            self._stop(Status.MAX_POINTS, f"max_points = {self.settings.max_points} reached")
+        return out
 
     def _fold_at_special(self, p: Point) -> None:
         """A fold (or a branch point) located at the very point of another special point
@@ -447,13 +477,17 @@ class Continuation:
         # at the same parameter (the fold's arclength may differ: the unknowns that vanish
         # at the graze move like a square root there)
         near = 1e-8 * (1.0 + abs(p.lam))
+        generic = {"LP", "BP"}
         for q in reversed(self.points[-3:]):
-            if abs(q.lam - p.lam) > near:
+            if abs(q.lam - p.lam) > near or not q.special:
                 continue
-            generic = {"LP", "BP"}
-            if (p.special in generic) != (q.special in generic) and q.special:
-                (p if p.special in generic else q).special = ""
-                return
+            if (p.special in generic) != (q.special in generic):
+                if p.special in generic:
+                    p.special = ""
+                    return
+                # every fold and branch point there loses its label (one label per special
+                # point: the relay's cycle had LP, BP and AS at one parameter value)
+                q.special = ""
 
     def _tick(self):
         if self._bar is not None:
@@ -500,22 +534,33 @@ class Continuation:
             Xp = Xk + ds * d
             try:
                 X, res = self._correct_on(Xp, vk, vk @ Xk + ds)
-            except TrialRejected as exc:
-                X, last_failure = None, exc.message
-            else:
                 if X is None:
-                    last_failure = f"corrector: {res.reason}"
-            if X is not None:
-                try:
+                    last_failure = f"corrector: {res.reason}" + (
+                        f" ({res.message})" if getattr(res, "message", "") else "")
+                elif not _near_span(X[-1], st.span, ds):
+                    # the corrector left the span by more than a step: it has jumped (a
+                    # Newton step on the hyperplane with a small parameter component of the
+                    # tangent); a shorter step keeps it on the branch
+                    X, last_failure = None, (f"the corrector went to {self._lam_name()} = "
+                                             f"{X[-1]:.6g}, outside the span")
+                else:
                     v = self._tangent(X, vk)
-                except TrialRejected as exc:
-                    X, last_failure = None, exc.message
+            except STEP_FAILURES as exc:
+                X, last_failure = None, _failure_text(exc)
             if X is not None:
                 angle = math.acos(min(1.0, max(-1.0, float(v @ vk))))
                 # leaving a branch point the start direction is not the new branch's tangent
                 leaving = len(self.points) == 1 and bool(prev.special)
                 if angle > st.max_angle and ds > st.ds_min * 2 and not leaving:
                     X, last_failure = None, f"the tangent turned by {angle:.2f} rad"
+            if X is not None and st.span[0] <= X[-1] <= st.span[1]:
+                # the point's data (multipliers, monitors) may fail where the corrector did
+                # not (an integration of the variational equations): a failed step too
+                try:
+                    new = self._point(X, v, ds=ds, iterations=res.iterations,
+                                      arclength=prev.arclength + ds)
+                except STEP_FAILURES as exc:
+                    X, last_failure = None, _failure_text(exc)
             if X is None:
                 ds *= 0.5
                 continue
@@ -532,8 +577,6 @@ class Continuation:
                 out.append(end)
             return out + self._stop(Status.SPAN_END, f"the parameter reached the end of "
                                     f"span ({lo:.10g}, {hi:.10g})")
-        arc = prev.arclength + ds
-        new = self._point(X, v, ds=ds, iterations=res.iterations, arclength=arc)
         if not (len(self.points) == 1 and prev.special):
             # leaving a special point (a branch switch, a restart there), the test functions
             # are zero at the start: its own zero is not located again. A monitor that dips
@@ -579,14 +622,14 @@ class Continuation:
         e[-1] = 1.0
         try:
             Xb, res = self._correct_on(Xg, e, bound)
-        except TrialRejected:
+            if Xb is None:
+                return None
+            v = self._tangent(Xb, prev.tangent)
+            ds = float(prev.tangent @ (Xb - prev.X))
+            return self._point(Xb, v, ds=ds, iterations=res.iterations,
+                               arclength=prev.arclength + ds)
+        except STEP_FAILURES:
             return None
-        if Xb is None:
-            return None
-        v = self._tangent(Xb, prev.tangent)
-        ds = float(prev.tangent @ (Xb - prev.X))
-        return self._point(Xb, v, ds=ds, iterations=res.iterations,
-                           arclength=prev.arclength + ds)
 
     # ------------------------------------------------------------------------------
     # special points
@@ -742,7 +785,7 @@ class Continuation:
             for Xg in (predict(sig), Xa + sig * chord):
                 try:
                     X, res = self._correct_on(Xg, e, float(e @ Xg))
-                except TrialRejected:
+                except STEP_FAILURES:
                     X = None
                 if X is not None and np.linalg.norm(X - Xg) > 0.05 * L:
                     X = None
@@ -755,9 +798,12 @@ class Continuation:
                 continue
             # at a branch point the bordered system that gives the tangent is singular: the
             # branch's direction there is that of the Hermite curve
-            tv = direction(sig) if kind == "BP" else self._tangent(X, a.tangent)
             arc = a.arclength + sig * (b.arclength - a.arclength)
-            p = self._point(X, tv, ds=sig * L, iterations=res.iterations, arclength=arc)
+            try:
+                tv = direction(sig) if kind == "BP" else self._tangent(X, a.tangent)
+                p = self._point(X, tv, ds=sig * L, iterations=res.iterations, arclength=arc)
+            except STEP_FAILURES:
+                break
             f = p.tests.get(kind)
             if f is None or not math.isfinite(f):
                 break
@@ -775,6 +821,13 @@ class Continuation:
                     fa *= 0.5
                 side = 1
         return best
+
+
+def _near_span(lam: float, span, ds: float) -> bool:
+    """Whether ``lam`` lies within one step ``|ds|`` of ``span`` (a corrected point beyond
+    that has jumped off the branch, which moves ``lam`` by at most the arclength)."""
+    lo, hi = span
+    return lo - abs(ds) <= lam <= hi + abs(ds)
 
 
 def _null_vector(A):

@@ -127,6 +127,23 @@ LAW_PARAMETERS = ("c_x", "c_a", "a_star", "eps_1", "eps_2", "delta_1", "delta_2"
 _NAMES = ("m", "k", "Fs", "Fd", "a", "b", "omega", "e")
 
 
+def _finite(what: str, compute):
+    """``compute()``, refused with an :class:`~pwsdyn.ArgumentError` where it overflows or is
+    not a finite number (parameters or gains too large for the formulas of the thesis to
+    be evaluated in floating point)."""
+    try:
+        with np.errstate(over="raise", invalid="raise", divide="raise"):
+            value = compute()
+    except (OverflowError, ZeroDivisionError, FloatingPointError, ValueError) as exc:
+        raise ArgumentError(f"{what} cannot be evaluated at these parameters and gains "
+                            f"({exc})") from None
+    vals = np.atleast_1d(np.asarray(value, dtype=float))
+    if not np.all(np.isfinite(vals)):
+        raise ArgumentError(f"{what} is not a finite number at these parameters and gains "
+                            f"(they overflow the formulas): got {value}")
+    return value
+
+
 @dataclass(frozen=True)
 class ControlGains:
     """Gains and measurement errors of the control law (thesis eq. 5.3, 5.5, 5.11).
@@ -208,7 +225,10 @@ class FrictionImpact:
             raise ArgumentError(f"static friction Fs = {vals['Fs']:g} must be at least the "
                                 f"dynamic one Fd = {vals['Fd']:g} (thesis eq. 5.4)")
         ref = vals["b"] + vals["Fd"] / vals["k"] if a_ref is None else V.number("a_ref", a_ref)
-        return cls(a_ref=ref, **vals)
+        obj = cls(a_ref=ref, **vals)
+        for name in ("scale", "Omega", "sigma", "a_star", "a_star_star", "gamma", "a_scaled"):
+            _finite(name, lambda: getattr(obj, name))
+        return obj
 
     # -- scaling ------------------------------------------------------------------------
     @property
@@ -261,9 +281,14 @@ class FrictionImpact:
             return self.b
         g = gains
         d = self.k * (self.a - self.a_ref) / self.Fd
-        bt = (self.k * self.a_ref / self.Fd - 1 + (1 - g.c_a) * ((1 + g.eps_1) * d + g.delta_1)
-              + (1 - 2 * g.c_x / self.gamma) * ((1 + g.eps_2) * (1 - x) + g.delta_2))
-        return bt * self.scale
+
+        def b():
+            bt = (self.k * self.a_ref / self.Fd - 1
+                  + (1 - g.c_a) * ((1 + g.eps_1) * d + g.delta_1)
+                  + (1 - 2 * g.c_x / self.gamma) * ((1 + g.eps_2) * (1 - x) + g.delta_2))
+            return bt * self.scale
+
+        return _finite("the law's constraint position b", b)
 
     # -- the stick-position map ----------------------------------------------------------
     def stick_map(self, x, *, exact: bool = False, gains: ControlGains | None = None):
@@ -282,7 +307,7 @@ class FrictionImpact:
         """
         if not exact:
             mu, c = self.linear_map(gains)
-            return 1 + mu * (np.asarray(x, float) - 1) + c
+            return _finite("the stick map", lambda: 1 + mu * (np.asarray(x, float) - 1) + c)
         xs = np.atleast_1d(np.asarray(x, float))
         out = np.array([self.excursion(xi, gains)["x_next"] for xi in xs])
         return out if np.ndim(x) else float(out[0])
@@ -299,10 +324,10 @@ class FrictionImpact:
             g0 = self.m * self.a_star * self.omega**2 * (1 + self.e)**2 / (2 * self.Fd)
             return g0 - 1, -g0 * d0
         g = gains
-        mu = 2 * g.c_x - 1 + (2 * g.c_x - gam) * g.eps_2
-        c = (-gam * (g.c_a + (g.c_a - 1) * g.eps_1) * d - gam * (g.c_a - 1) * g.delta_1
-             + (gam - 2 * g.c_x) * g.delta_2)
-        return mu, c
+        return _finite("the linear map (mu, c)", lambda: (
+            2 * g.c_x - 1 + (2 * g.c_x - gam) * g.eps_2,
+            (-gam * (g.c_a + (g.c_a - 1) * g.eps_1) * d - gam * (g.c_a - 1) * g.delta_1
+             + (gam - 2 * g.c_x) * g.delta_2)))
 
     def fixed_point(self, *, exact: bool = False,
                     gains: ControlGains | None = None) -> tuple[float, float]:
@@ -320,7 +345,7 @@ class FrictionImpact:
             if mu == 1.0:
                 raise ArgumentError("the lowest-order map has multiplier 1: no isolated fixed "
                                     "point")
-            xs = 1 + c / (1 - mu)
+            xs = _finite("the fixed point", lambda: 1 + c / (1 - mu))
             if xs > self.sigma or self.a_scaled - self._bt(xs, gains) <= xs:
                 raise ArgumentError(f"the lowest-order map's fixed point x = {xs:.6g} is not "
                                     f"an impacting stick position (a = {self.a:g})")
@@ -329,11 +354,12 @@ class FrictionImpact:
         # reversal (x_max > 1) and b~(x) = B0 + B1 x affine in x (the law), squares to
         # (3 - x)^2 = (x + 1)^2 + K (a~^2 - ((1 + B1) x + B0)^2):
         #   K (1 + B1)^2 x^2 + (2 K (1 + B1) B0 - 8) x + K B0^2 + 8 - K a~^2 = 0.
-        K = (1 + self.e)**2 * self.Omega**2
+        K = _finite("(1 + e)^2 Omega^2", lambda: (1 + self.e)**2 * self.Omega**2)
         B0 = self._bt(0.0, gains)
-        B1 = self._bt(1.0, gains) - B0
-        roots = np.roots([K * (1 + B1)**2, 2 * K * (1 + B1) * B0 - 8,
-                          K * B0**2 + 8 - K * self.a_scaled**2])
+        B1 = _finite("the law's slope", lambda: self._bt(1.0, gains) - B0)
+        coef = _finite("the fixed-point quadratic", lambda: np.array(
+            [K * (1 + B1)**2, 2 * K * (1 + B1) * B0 - 8, K * B0**2 + 8 - K * self.a_scaled**2]))
+        roots = np.roots(coef)
         roots = np.sort_complex(roots)
         real = [r.real for r in roots if abs(r.imag) < 1e-12 and r.real < 1.0]
         if not real:
@@ -381,9 +407,13 @@ class FrictionImpact:
         if x + bt >= at:
             return {"theta": math.nan, "v_plus": 0.0, "x_max": x, "x_next": x,
                     "duration": 0.0, "reversed": False}
+        if not x + bt > -at:
+            raise ArgumentError(f"at x = {x:g} the constraint (b~ = {bt:.6g}, a~ = {at:.6g}) "
+                                f"never leaves the mass: the closed-form map does not apply")
         theta = math.asin((x + bt) / at)          # rising branch: cos(theta) > 0
-        vp = (1 + e) * at * Om * math.cos(theta)  # eq. 3.5 with the mass at rest
-        R = math.hypot(x + 1, vp)                 # the up-slip ellipse about -1
+        vp = _finite("the impact velocity",        # eq. 3.5 with the mass at rest
+                     lambda: (1 + e) * at * Om * math.cos(theta))
+        R = _finite("the slip amplitude", lambda: math.hypot(x + 1, vp))  # ellipse about -1
         xm = R - 1
         phi0 = math.atan2(vp, x + 1)              # its angle: x + 1 = R cos(phi0 - tau)
         ts_up = np.linspace(0.0, phi0, samples + 1)[1:]
@@ -435,12 +465,16 @@ class FrictionImpact:
         d = self.k * (self.a - self.a_ref) / self.Fd
         if not first_order:
             xs, _ = self.fixed_point(gains=gains)
-            return abs(1 - gam * gains.c_a * d - xs)
+            return _finite("the residual error", lambda: abs(1 - gam * gains.c_a * d - xs))
         g = gains
-        mult = gam * (g.c_a + (g.c_a - 1) * g.eps_1 + g.c_a * (1 - gam) * g.eps_2) * d
-        add = gam * (g.c_a - 1) * g.delta_1 + (1 - gam) * g.delta_2
-        # 5.9 and 5.12 at c_x = 1/2: x* - 1 = -mult - add (to first order in the errors)
-        return abs(mult - gam * g.c_a * d + add)
+
+        def first():
+            mult = gam * (g.c_a + (g.c_a - 1) * g.eps_1 + g.c_a * (1 - gam) * g.eps_2) * d
+            add = gam * (g.c_a - 1) * g.delta_1 + (1 - gam) * g.delta_2
+            # 5.9 and 5.12 at c_x = 1/2: x* - 1 = -mult - add (to first order in the errors)
+            return abs(mult - gam * g.c_a * d + add)
+
+        return _finite("the residual error", first)
 
     # -- models --------------------------------------------------------------------------
     def params(self) -> dict:

@@ -89,6 +89,10 @@ def _marked(ax, kind: str, xy) -> bool:
 def _branch_y(branch, y):
     """The quantity plotted against the parameter and its axis label."""
     names = list(branch.problem.state_names)
+    if y is None and branch.kind == "orbit" and names:
+        # the largest value of the first state over the orbit: continuous through a graze,
+        # where the section state jumps (the branch would be drawn as two pieces)
+        y = f"max:{names[0]}"
     if callable(y):
         if branch.kind != "orbit":
             raise ArgumentError("`y` as a function is a measure of an orbit: the branch is of "
@@ -152,8 +156,9 @@ def plot_branch(branch, y=None, path: str | Path | None = None, *, ax: Axes | No
         orbits, ``"period"``, ``"max:<state>"`` / ``"min:<state>"`` (over the whole orbit:
         continuous across a graze, where the section state jumps) or a function of the
         :class:`~pwsdyn.PeriodicOrbit` at each point (its name, underscores as spaces, labels
-        the axis). Default: the state that varies most along the branch; for a
-        two-parameter curve (:func:`pwsdyn.continue_bifurcation`) its second parameter, so
+        the axis). Default: for orbits ``"max:<first state>"`` (continuous through grazes and
+        sliding bifurcations), for equilibria the state that varies most along the branch; for
+        a two-parameter curve (:func:`pwsdyn.continue_bifurcation`) its second parameter, so
         that the curve is drawn in the parameter plane (also ``y`` = that parameter's name).
     path : str or Path, optional
         Also save the figure there.
