@@ -207,7 +207,7 @@ def shear_pd():
     return model, br
 
 
-def test_period_doubling_reports_its_coefficient(shear_pd):
+def test_period_doubling_reports_its_coefficient(shear_pd, tmp_path):
     _, br = shear_pd
     pd = br.special("PD")
     assert len(pd) == 1
@@ -215,6 +215,11 @@ def test_period_doubling_reports_its_coefficient(shear_pd):
     c = flip_coefficient(g1=pd[0].value, g2=1.0)
     assert c > 0 and abs(pd[0].point.data["coefficient"] - c) < 1e-7
     assert pd[0].point.data["criticality"] == "supercritical"
+    # the branch file keeps the coefficient and the criticality
+    br.save(tmp_path / "pd.nc")
+    back = pwsdyn.load_branch(tmp_path / "pd.nc").special("PD")[0].point.data
+    assert back["coefficient"] == pd[0].point.data["coefficient"]
+    assert back["criticality"] == "supercritical"
 
 
 def test_generalized_period_doubling_on_a_period_doubling_curve(shear_pd):

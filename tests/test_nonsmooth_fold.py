@@ -105,7 +105,7 @@ def test_closed_form_is_consistent():
     assert _roots(0.1 * (1 - 1e-12))[0] < 1e-9 and 0.0999 < Af < 0.1
 
 
-def test_down_the_impacting_branch_through_the_fold_and_the_graze(model):
+def test_down_the_impacting_branch_through_the_fold_and_the_graze(model, tmp_path):
     """From the stable impacting orbit at A = 1 down in A: the smooth fold, the small-velocity
     orbits up to the graze at A = d / R1 = 0.1 (a non-smooth fold), then the non-impacting
     orbit down to the end of the span (before: the branch stopped at the graze, 'the orbit of
@@ -121,6 +121,11 @@ def test_down_the_impacting_branch_through_the_fold_and_the_graze(model):
     assert abs(_impact_velocity(br, lp.index) - vf) < 1e-7
     assert abs(gr.value - 0.1) < 1e-10 and gr.key == "GR/impact@0"
     assert gr.nonsmooth_fold and not lp.nonsmooth_fold and "non-smooth fold" in repr(gr)
+    # the branch file keeps it (before, a loaded branch lost what the graze was)
+    br.save(tmp_path / "b.nc")
+    back = pwsdyn.load_branch(tmp_path / "b.nc")
+    assert [(sp.kind, sp.nonsmooth_fold) for sp in back.special_points] == [
+        ("LP", False), ("GR", True), ("EP", False)]
     assert ep.value == pytest.approx(0.05)
     assert br.admissible.all()
     after = [i for i, p in enumerate(br.points) if i > gr.index]

@@ -13,7 +13,8 @@ from .. import _validate as V
 from ..errors import ArgumentError, Status
 from ..integrate.options import integrator_options
 from ..model.spec import as_model
-from .branch import CONTENT_COVERS, CONTENT_HASH, Branch, SpecialPoint, content_hash
+from .branch import (CONTENT_COVERS, CONTENT_HASH, Branch, SpecialPoint, content_hash,
+                     special_data_from_text)
 from .engine import (STEP_FAILURES, Continuation, ContinuationError, ContinuationSettings,
                      _failure_text, _span, null_space)
 from .problems import (CURVE_KINDS, DIB_KINDS, BifurcationCurveProblem,
@@ -694,6 +695,8 @@ def _branch_of_dataset(ds) -> Branch:
                 "reason": str(ds["reason"].values[i])}
         if "period" in ds:
             data["period"] = float(ds["period"].values[i])
+        if "special_data" in ds:
+            data.update(special_data_from_text(str(ds["special_data"].values[i])))
         if getattr(problem, "parameter2", None):
             data[problem.parameter2] = float(ds[problem.parameter2].values[i])
         tests = {k[5:].replace(":", "/"): float(ds[k].values[i]) for k in ds.data_vars

@@ -596,6 +596,11 @@ class Branch:
         if self.kind == "orbit":
             ds["period"] = ("point", np.array([d.get("period", np.nan) for d in c.data],
                                               dtype=float))
+        extra = [special_data_text(d) for d in c.data]
+        if any(extra):
+            ds["special_data"] = ("point", string_array(extra), {
+                "long_name": "what a special point carries besides its kind (JSON: "
+                             + ", ".join(SPECIAL_DATA) + "; empty: nothing)"})
         if self.curve:
             ds[self.parameter2] = ("point", self.values_of(self.parameter2),
                                    quantity_attrs(m, self.parameter2))
@@ -699,6 +704,51 @@ def content_hash(ds) -> str:
         if key in ds.attrs:
             h.update(f"\0attr {key}\0{ds.attrs[key]}".encode("utf-8", "surrogatepass"))
     return h.hexdigest()
+
+
+#: What a special point's data holds besides the point's own columns, kept in branch files
+#: (variable ``special_data``): a graze that is a non-smooth fold, the normal-form
+#: coefficient of a PD or NS point and whether it is super- or subcritical, the curves that
+#: meet at a codimension-two point and the curve it lies on.
+SPECIAL_DATA = ("nonsmooth_fold", "coefficient", "criticality", "meets", "curve")
+
+
+def special_data_text(data: dict) -> str:
+    """The ``SPECIAL_DATA`` entries of a point's data as JSON ("" when it has none)."""
+    out = {}
+    for k in SPECIAL_DATA:
+        if k not in data:
+            continue
+        v = data[k]
+        if isinstance(v, (bool, np.bool_)):
+            out[k] = bool(v)
+        elif isinstance(v, (tuple, list)):
+            out[k] = [str(x) for x in v]
+        elif isinstance(v, (int, float, np.number)):
+            out[k] = float(v) if math.isfinite(float(v)) else str(float(v))
+        else:
+            out[k] = str(v)
+    return json.dumps(out, sort_keys=True) if out else ""
+
+
+def special_data_from_text(text: str) -> dict:
+    """The inverse of :func:`special_data_text` (``meets`` as a tuple, numbers as floats)."""
+    if not text:
+        return {}
+    raw = json.loads(text)
+    if not isinstance(raw, dict) or not set(raw) <= set(SPECIAL_DATA):
+        raise ValueError(f"special_data {text!r} is not an object of {SPECIAL_DATA}")
+    out = {}
+    for k, v in raw.items():
+        if k == "meets":
+            out[k] = tuple(str(x) for x in v)
+        elif k == "nonsmooth_fold":
+            out[k] = bool(v)
+        elif k == "coefficient":
+            out[k] = float(v)
+        else:
+            out[k] = str(v)
+    return out
 
 
 def _json_float(v):
