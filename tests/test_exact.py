@@ -234,3 +234,37 @@ def test_command_line_exact_flag():
     assert res.exit_code == 0, res.output
     res = runner.invoke(main, ["simulate", "stick-slip-oscillator", "--exact"])
     assert res.exit_code != 0 and "affine" in res.output
+
+
+def test_written_out_taylor_terms_equal_the_loop_bit_for_bit():
+    # the exact step of two states and one forcing frequency sums its series on scalars
+    # (steppers._exact_terms5, for speed); it must give the loop's terms exactly (same sums
+    # in the same order), and the sum must be exp(h M) z (scipy's expm: to 1e-14, rounding
+    # of ~20 terms of size <= 1)
+    from pwsdyn.integrate._kernel.steppers import _exact_terms, _exact_terms5
+
+    rng = np.random.default_rng(7)
+    for trial in range(50):
+        M = np.zeros((2, 5, 5))
+        M[1, :2, :] = rng.normal(size=(2, 5))
+        M[1, 3, 4], M[1, 4, 3] = -2.9, 2.9
+        if trial % 5 == 0:
+            M[1, 0, :] = 0.0     # exact zeros: (+0.0) + (-0.0) must stay as in the loop
+            M[1, 1, 2] = -0.0
+        wt = np.ones((2, 5))
+        h = 1.0 / np.abs(M[1]).sum(axis=1).max()
+        z0 = rng.normal(size=5)
+        z0[2] = 1.0
+        zmax = np.abs(z0).max()
+        outs = []
+        for five in (False, True):
+            z, v, Q, y = z0.copy(), np.zeros(5), np.zeros((2, 20)), z0[:2].copy()
+            if five:
+                k = _exact_terms5(M, wt, 1, h, z, Q, y, zmax, 20)
+            else:
+                k = _exact_terms(M, wt, 1, 5, 2, h, z, v, Q, y, zmax, 20)
+            outs.append((k, Q.view(np.int64).copy(), y.view(np.int64).copy(), y.copy()))
+        assert outs[0][0] == outs[1][0]
+        np.testing.assert_array_equal(outs[0][1], outs[1][1])
+        np.testing.assert_array_equal(outs[0][2], outs[1][2])
+        np.testing.assert_allclose(outs[1][3], (expm(h * M[1]) @ z0)[:2], rtol=0, atol=1e-14)

@@ -107,6 +107,22 @@ def _exact_step(M, sc, wt, md, nz, n, t, y, h, z, v, Q, ynew):
     for i in range(n):
         ynew[i] = y[i]
     ncol = Q.shape[1]
+    if nz == 5 and n == 2:
+        # two states and one forcing frequency (the impact oscillator, the ball on a table,
+        # a forced friction oscillator): the same series with the same sums in the same
+        # order, its terms in registers (``_exact_terms5``)
+        k = _exact_terms5(M, wt, md, h, z, Q, ynew, zmax, ncol)
+    else:
+        k = _exact_terms(M, wt, md, nz, n, h, z, v, Q, ynew, zmax, ncol)
+    for kk in range(k - 1, ncol):
+        for i in range(n):
+            Q[i, kk] = 0.0
+
+
+@_hot_inline
+def _exact_terms(M, wt, md, nz, n, h, z, v, Q, ynew, zmax, ncol):
+    """The Taylor terms of ``_exact_step`` from ``z`` (any size): into ``Q`` and summed
+    into ``ynew``. Returns one past the number of terms."""
     k = 1
     while k <= ncol:
         # v = (h / k) M z, then z = v (z holds the previous term)
@@ -126,9 +142,83 @@ def _exact_step(M, sc, wt, md, nz, n, t, y, h, z, v, Q, ynew):
         k += 1
         if big <= 1e-18 * zmax or k > _EXACT_TERMS:
             break
-    for kk in range(k - 1, ncol):
-        for i in range(n):
-            Q[i, kk] = 0.0
+    return k
+
+
+@_hot_inline
+def _exact_terms5(M, wt, md, h, z, Q, ynew, zmax, ncol):
+    """``_exact_terms`` for ``nz = 5``, ``n = 2``, written out on scalars: the loop over
+    arrays stores each term and reloads ``z`` and ``M`` after every store (the compiler cannot
+    tell that the arrays do not alias), measured 2x the cost of this version, which forms
+    each sum in the same order (``0.0 + M_i0 z_0 + ... + M_i4 z_4``, left to right) and so
+    gives the same terms bit for bit. Leaves the last term in ``z``."""
+    z0 = z[0]
+    z1 = z[1]
+    z2 = z[2]
+    z3 = z[3]
+    z4 = z[4]
+    m00, m01, m02, m03, m04 = M[md, 0, 0], M[md, 0, 1], M[md, 0, 2], M[md, 0, 3], M[md, 0, 4]
+    m10, m11, m12, m13, m14 = M[md, 1, 0], M[md, 1, 1], M[md, 1, 2], M[md, 1, 3], M[md, 1, 4]
+    m20, m21, m22, m23, m24 = M[md, 2, 0], M[md, 2, 1], M[md, 2, 2], M[md, 2, 3], M[md, 2, 4]
+    m30, m31, m32, m33, m34 = M[md, 3, 0], M[md, 3, 1], M[md, 3, 2], M[md, 3, 3], M[md, 3, 4]
+    m40, m41, m42, m43, m44 = M[md, 4, 0], M[md, 4, 1], M[md, 4, 2], M[md, 4, 3], M[md, 4, 4]
+    w0, w1, w2, w3, w4 = wt[md, 0], wt[md, 1], wt[md, 2], wt[md, 3], wt[md, 4]
+    y0 = ynew[0]
+    y1 = ynew[1]
+    k = 1
+    while k <= ncol:
+        c = h / k
+        # (the sums start at 0.0 as in _exact_terms: 0.0 + (-0.0) is +0.0)
+        a0 = 0.0 + m00 * z0
+        a0 = a0 + m01 * z1
+        a0 = a0 + m02 * z2
+        a0 = a0 + m03 * z3
+        a0 = a0 + m04 * z4
+        a1 = 0.0 + m10 * z0
+        a1 = a1 + m11 * z1
+        a1 = a1 + m12 * z2
+        a1 = a1 + m13 * z3
+        a1 = a1 + m14 * z4
+        a2 = 0.0 + m20 * z0
+        a2 = a2 + m21 * z1
+        a2 = a2 + m22 * z2
+        a2 = a2 + m23 * z3
+        a2 = a2 + m24 * z4
+        a3 = 0.0 + m30 * z0
+        a3 = a3 + m31 * z1
+        a3 = a3 + m32 * z2
+        a3 = a3 + m33 * z3
+        a3 = a3 + m34 * z4
+        a4 = 0.0 + m40 * z0
+        a4 = a4 + m41 * z1
+        a4 = a4 + m42 * z2
+        a4 = a4 + m43 * z3
+        a4 = a4 + m44 * z4
+        z0 = c * a0
+        z1 = c * a1
+        z2 = c * a2
+        z3 = c * a3
+        z4 = c * a4
+        big = max(0.0, abs(z0) * w0)
+        big = max(big, abs(z1) * w1)
+        big = max(big, abs(z2) * w2)
+        big = max(big, abs(z3) * w3)
+        big = max(big, abs(z4) * w4)
+        Q[0, k - 1] = z0
+        Q[1, k - 1] = z1
+        y0 += z0
+        y1 += z1
+        k += 1
+        if big <= 1e-18 * zmax or k > _EXACT_TERMS:
+            break
+    ynew[0] = y0
+    ynew[1] = y1
+    z[0] = z0
+    z[1] = z1
+    z[2] = z2
+    z[3] = z3
+    z[4] = z4
+    return k
 
 
 @_hot
