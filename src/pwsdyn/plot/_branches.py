@@ -89,9 +89,11 @@ def _marked(ax, kind: str, xy) -> bool:
 def _branch_y(branch, y):
     """The quantity plotted against the parameter and its axis label."""
     names = list(branch.problem.state_names)
-    if y is None and branch.kind == "orbit" and names:
+    if (y is None and branch.kind == "orbit" and names
+            and getattr(branch, "parameter2", None) is None):
         # the largest value of the first state over the orbit: continuous through a graze,
-        # where the section state jumps (the branch would be drawn as two pieces)
+        # where the section state jumps (the branch would be drawn as two pieces); a
+        # two-parameter curve is drawn in its parameter plane instead (below)
         y = f"max:{names[0]}"
     if callable(y):
         if branch.kind != "orbit":
