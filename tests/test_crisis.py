@@ -1,0 +1,86 @@
+"""Boundary crises of one-dimensional maps located from the geometry (issue 25).
+
+The skew tent map ``x -> mu + a x (x <= 0), mu - b x (x > 0)`` (the 1-D border-collision
+normal form) with ``mu > 0``, ``a > 1``, ``b > 1``: its attractor is the interval
+``[f(mu), mu] = [mu (1 - b), mu]`` (both pieces expanding, so it is chaotic); its basin's lower
+boundary is the repelling fixed point of the left piece ``x_L = mu / (1 - a) < 0``, the upper
+one that point's right preimage ``(mu - x_L) / b``. The edge ``f(mu)`` reaches ``x_L`` when
+``mu (1 - b) = mu / (1 - a)``, i.e. ``(a - 1)(b - 1) = 1``: the crisis is at
+``b_c = a / (a - 1)`` (for fixed ``a``) or ``a_c = b / (b - 1)`` (for fixed ``b``), independent
+of ``mu``. Below, ``[f(mu), mu]`` maps into itself (``f(f(mu)) >= f(mu)`` exactly when
+``(a - 1)(b - 1) <= 1``); above, the part of the attractor left of ``x_L`` escapes to minus
+infinity, which the brute-force check confirms.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import pwsdyn
+from pwsdyn.errors import ArgumentError
+from pwsdyn.manifolds import Crisis, ManifoldError, locate_crisis
+
+TENT = {"name": "skew-tent", "kind": "map", "states": ["x"],
+        "parameters": {"mu": 1.0, "a": 1.5, "b": 2.0},
+        "pieces": [{"name": "L", "condition": "x <= 0", "map": {"x": "mu + a*x"}},
+                   {"name": "R", "map": {"x": "mu - b*x"}}]}
+
+
+def tent_orbits(x, mu, a, b, n):
+    """Iterate many initial conditions at once; ``True`` where the orbit stayed bounded (never
+    below the left fixed point's 1e6 multiple)."""
+    x = np.array(x, dtype=float)
+    alive = np.ones(x.shape, bool)
+    for _ in range(n):
+        x = np.where(x <= 0, mu + a * x, mu - b * x)
+        alive &= x > -1e6 * (1 + mu)
+        x = np.where(alive, x, 0.0)
+    return alive
+
+
+def test_the_skew_tent_maps_crisis_in_b_against_its_closed_form():
+    a, mu = 1.5, 1.0
+    c = locate_crisis(TENT, "b", (2.0, 3.5), x0=[0.1], params={"a": a, "mu": mu}, tol=1e-12)
+    bc = a / (a - 1)
+    assert isinstance(c, Crisis) and c.kind == "boundary"
+    # brentq to xtol 1e-12 on a contact function linear in b (slope mu): 1e-10 covers its
+    # rounding; the acceptance is 1e-6
+    assert abs(c.value - bc) < 1e-10
+    assert c.bracket[0] < bc < c.bracket[1]
+    # the saddle is the left piece's fixed point mu / (1 - a) with multiplier a
+    assert c.saddle.period == 1 and c.saddle.pieces == ("L",)
+    assert abs(c.saddle.x[0] - mu / (1 - a)) < 1e-12
+    assert abs(c.saddle.multipliers[0] - a) < 1e-12
+    # where they touch: x_L itself (met by f(mu) = f^2(0)) or its right preimage (met by mu)
+    xl = mu / (1 - a)
+    assert min(abs(c.point[0] - xl), abs(c.point[0] - (mu - xl) / bc)) < 1e-9
+
+
+def test_the_crisis_in_a_against_its_closed_form_and_mu_scaling():
+    b, mu = 2.5, 0.3
+    c = locate_crisis(TENT, "a", (1.2, 2.5), x0=[0.05], params={"b": b, "mu": mu}, tol=1e-12)
+    assert abs(c.value - b / (b - 1)) < 1e-10
+    assert abs(c.saddle.x[0] - mu / (1 - c.value)) < 1e-9
+
+
+def test_brute_force_bounded_below_and_escaping_above():
+    a, mu = 1.5, 1.0
+    c = locate_crisis(TENT, "b", (2.0, 3.5), x0=[0.1], params={"a": a, "mu": mu})
+    x0 = np.linspace(-1.9, 0.9, 400)       # inside the basin (x_L, (mu - x_L) / b) = (-2, 1)
+    # below: every orbit stays in the basin for 20000 iterations
+    assert tent_orbits(x0, mu, a, c.value - 1e-2, 20000).all()
+    # above: the hole left of x_L has width ~1e-2 in an interval of width ~3, so an orbit
+    # leaves after some hundreds of iterations; 20000 leave none behind
+    assert not tent_orbits(x0, mu, a, c.value + 1e-2, 20000).any()
+
+
+def test_no_crisis_in_the_span_and_a_two_dimensional_map_are_reported():
+    with pytest.raises(ManifoldError, match="stays bounded"):
+        locate_crisis(TENT, "b", (2.0, 2.5), x0=[0.1], steps=3, transient=100,
+                      iterations=100)
+    plane = {"name": "plane", "kind": "map", "states": ["x", "y"], "parameters": {"mu": 1.0},
+             "pieces": [{"name": "P", "map": {"x": "mu - x*x + y", "y": "0.3*x"}}]}
+    with pytest.raises(ArgumentError, match="one-dimensional"):
+        locate_crisis(plane, "mu", (1.0, 2.0), x0=[0.0, 0.0])
+    assert pwsdyn.locate_crisis is locate_crisis and pwsdyn.Crisis is Crisis
