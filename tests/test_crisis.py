@@ -75,6 +75,21 @@ def test_brute_force_bounded_below_and_escaping_above():
     assert not tent_orbits(x0, mu, a, c.value + 1e-2, 20000).any()
 
 
+def test_a_smooth_critical_point_the_logistic_maps_crisis_at_r_4():
+    # x -> r x (1 - x): the edge is the critical point's image r / 4, the basin is [0, 1] (the
+    # repelling fixed point 0, multiplier r, and its preimage 1); they touch at r = 4 exactly,
+    # where f^2(1/2) = f(1) = 0 as well, so either contact may be the one reported
+    log = {"name": "logistic", "kind": "map", "states": ["x"], "parameters": {"r": 3.9},
+           "pieces": [{"name": "P", "map": {"x": "r*x*(1 - x)"}}]}
+    c = locate_crisis(log, "r", (3.9, 4.2), x0=[0.3], tol=1e-12)
+    # the contact function is smooth with a nonzero slope in r; the critical point is found
+    # to 1e-15 and enters the edge quadratically, so 1e-10 is loose
+    assert abs(c.value - 4.0) < 1e-10
+    assert abs(c.edge[1] - 0.5) < 1e-12
+    assert abs(c.saddle.x[0]) < 1e-12 and abs(c.saddle.multipliers[0] - 4.0) < 1e-9
+    assert min(abs(c.point[0]), abs(c.point[0] - 1.0)) < 1e-9
+
+
 def test_no_crisis_in_the_span_and_a_two_dimensional_map_are_reported():
     with pytest.raises(ManifoldError, match="stays bounded"):
         locate_crisis(TENT, "b", (2.0, 2.5), x0=[0.1], steps=3, transient=100,

@@ -6,7 +6,7 @@ bounded by repelling periodic points and their preimages (the 1-D stable sets of
 A boundary crisis is the parameter at which an edge first touches such a point (Grebogi, Ott
 & Yorke 1983): the contact function ``g(p) = s(p) - F^k(c(p))`` (signed so that it is
 positive while the attractor is bounded) changes sign there and is root-found by
-:func:`scipy.optimize.brentq`. Escape is only used to bracket the value on a coarse sweep;
+``scipy.optimize.brentq``. Escape is only used to bracket the value on a coarse sweep;
 the value itself never comes from escape times, whose scaling near a crisis makes them a poor
 measure of it.
 """
@@ -254,7 +254,7 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
     domain) brackets the crisis. There, the attractor's edges (images ``F^k(c)``, ``k <= 6``,
     of its border points ``c`` and its pieces' critical points, each found to adjacent floats)
     and its basin's boundary points (repelling periodic points of the given ``periods`` and
-    their preimages) are found; the crisis is the root, by :func:`scipy.optimize.brentq` to
+    their preimages) are found; the crisis is the root, by ``scipy.optimize.brentq`` to
     ``tol``, of the first contact function ``saddle point - edge`` that changes sign in the
     bracket, each continued in the parameter by Newton.
 
