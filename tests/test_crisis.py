@@ -90,6 +90,40 @@ def test_a_smooth_critical_point_the_logistic_maps_crisis_at_r_4():
     assert min(abs(c.point[0]), abs(c.point[0] - 1.0)) < 1e-9
 
 
+# The cubic map x -> r x - x^3 is odd: for r < r_i its attractors are symmetric twins on either
+# side of the repelling fixed point 0. The positive one is [f^2(x_c), f(x_c)], x_c =
+# sqrt(r / 3) the critical point, f(x_c) = (2 r / 3) sqrt(r / 3); (0, sqrt(r)) maps into
+# itself while f(x_c) < sqrt(r) (the positive preimage of 0). They merge (an interior crisis:
+# the extent doubles) when f(x_c) = sqrt(r), i.e. 2 r / (3 sqrt 3) = 1, r_i = 3 sqrt(3) / 2.
+# The merged attractor [-f(x_c), f(x_c)] is destroyed (a boundary crisis) when f(x_c) reaches
+# the period-2 saddle sqrt(r + 1) (f(s) = -s): at r = 3, f(1) = 2 = sqrt(4).
+CUBIC = {"name": "cubic", "kind": "map", "states": ["x"], "parameters": {"r": 2.5},
+         "pieces": [{"name": "P", "map": {"x": "r*x - x**3"}}]}
+
+
+def test_an_interior_crisis_the_cubic_maps_attractors_merge_at_3_sqrt3_over_2():
+    ri = 1.5 * np.sqrt(3.0)
+    c = locate_crisis(CUBIC, "r", (2.45, 2.75), x0=[0.6], tol=1e-12)
+    # a smooth contact function with a nonzero slope: 1e-10 leaves room for its rounding
+    assert c.kind == "interior" and abs(c.value - ri) < 1e-10
+    assert abs(c.saddle.x[0]) < 1e-10 and abs(c.saddle.multipliers[0] - ri) < 1e-9
+    assert abs(c.edge[1] - np.sqrt(ri / 3)) < 1e-12
+    # brute force: below, orbits from (0, sqrt r) stay positive; above, every one crosses
+    x = np.linspace(0.05, 1.5, 300)
+    for r, crossed in ((ri - 1e-2, False), (ri + 1e-2, True)):
+        y, neg = x.copy(), np.zeros(x.shape, bool)
+        for _ in range(20000):
+            y = r * y - y ** 3
+            neg |= y < 0
+        assert neg.all() if crossed else not neg.any()
+
+
+def test_the_cubic_maps_boundary_crisis_at_r_3_on_the_period_two_saddle():
+    c = locate_crisis(CUBIC, "r", (2.7, 3.2), x0=[0.6], tol=1e-12)
+    assert c.kind == "boundary" and abs(c.value - 3.0) < 1e-10
+    assert c.saddle.period == 2 and abs(abs(c.saddle.x[0]) - 2.0) < 1e-10
+
+
 def test_no_crisis_in_the_span_and_a_two_dimensional_map_are_reported():
     with pytest.raises(ManifoldError, match="stays bounded"):
         locate_crisis(TENT, "b", (2.0, 2.5), x0=[0.1], steps=3, transient=100,

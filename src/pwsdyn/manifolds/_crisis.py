@@ -1,10 +1,13 @@
-"""Boundary crises of one-dimensional piecewise-smooth maps, located from the geometry.
+"""Boundary and interior crises of one-dimensional piecewise-smooth maps, located from the
+geometry.
 
 An attractor of a 1-D map is bounded by iterates of its border points (where the piece
 changes) and of its smooth pieces' critical points: its edges are ``F^k(c)``. Its basin is
 bounded by repelling periodic points and their preimages (the 1-D stable sets of the saddles).
 A boundary crisis is the parameter at which an edge first touches such a point (Grebogi, Ott
-& Yorke 1983): the contact function ``g(p) = s(p) - F^k(c(p))`` (signed so that it is
+& Yorke 1983); an interior crisis the one at which it touches a repelling point inside its
+basin, beyond which the attractor suddenly widens (as two symmetric attractors merge when
+they reach the fixed point between them). Either way the contact function ``g(p) = s(p) - F^k(c(p))`` (signed so that it is
 positive while the attractor is bounded) changes sign there and is root-found by
 ``scipy.optimize.brentq``. Escape is only used to bracket the value on a coarse sweep;
 the value itself never comes from escape times, whose scaling near a crisis makes them a poor
@@ -37,7 +40,8 @@ class Crisis:
     value : float
         The parameter at which the attractor's edge touches the saddle's stable set.
     kind : str
-        ``"boundary"`` (the attractor is destroyed beyond ``value``).
+        ``"boundary"`` (the attractor is destroyed beyond ``value``: its orbit leaves) or
+        ``"interior"`` (it suddenly widens: its extent jumps).
     saddle : PeriodicPoint
         The repelling periodic point whose stable set is touched, at ``value``, with its
         multipliers.
@@ -45,7 +49,8 @@ class Crisis:
         Where they touch: the point of the saddle's stable set (the saddle itself or one of its
         preimages) met by the attractor's edge, at ``value``.
     bracket : tuple of float
-        The sweep's last value with a bounded attractor and first without.
+        The sweep's value before the crisis was seen and the one at which it was (the orbit
+        left, or the extent jumped).
     edge : tuple
         ``(k, c)``: the edge is the ``k``-th image of the border or critical point ``c`` (at
         ``value``).
@@ -180,7 +185,15 @@ class _Contact:
                 a, b = c0 - d, c0 + d
             c = _border(sec, a, b)
         else:
-            c = _critical(sec, c0 - 1e-3, c0 + 1e-3)
+            def slope(x):
+                return sec.evaluate(np.array([x]), True)[2][0, 0]
+
+            d = 1e-3 * (1 + abs(c0))
+            while slope(c0 - d) * slope(c0 + d) > 0:
+                d *= 2
+                if d > 1e3 * (1 + abs(c0)):
+                    return np.nan, None
+            c = _critical(sec, c0 - d, c0 + d)
         point = sad.x[0] if self.pre < 0 else _preimage(sec, sad.x[0], pt0, self.pre)
         if point is None:
             return np.nan, None
@@ -243,15 +256,58 @@ def _candidates(ctx, p, samples, periods, seeds) -> list:
     return out
 
 
+def _jumped(before, after, jump) -> bool:
+    """The attractor's extent grew by more than the factor ``jump`` and by more than a tenth
+    of its size (so that a period doubling from a point, width zero, is not a widening)."""
+    w0 = float(before.max() - before.min())
+    w1 = float(after.max() - after.min())
+    scale = max(float(np.max(np.abs(after))), 1e-300)
+    return w1 > jump * w0 and w1 - w0 > 0.1 * scale
+
+
+def _locate(ctx, bounded, p_hi, periods, tol, back: int = 4):
+    """The contact root between one of the last bounded values of the sweep and ``p_hi``: the
+    last one first, then up to ``back`` earlier ones (an attractor whose orbit has not left
+    yet within the iterations can already be past the crisis)."""
+    for p_lo, samples in bounded[::-1][:back + 1]:
+        cands = _candidates(ctx, p_lo, samples, periods, 1.0)
+        cands.sort(key=lambda t: t[0])
+        best = None
+        for g_lo, cand in cands:
+            if g_lo < 0:
+                continue
+            g_hi, _ = cand.evaluate(ctx, p_hi)
+            if not np.isfinite(g_hi) or g_hi > 0:
+                continue
+            history = []
+
+            def g(q, cand=cand, history=history):
+                v, _ = cand.evaluate(ctx, q)
+                history.append((q, v))
+                return v
+
+            try:
+                root = brentq(g, p_lo, p_hi, xtol=tol)
+            except (ValueError, RuntimeError):
+                continue
+            if best is None or abs(root - p_lo) < abs(best[0] - p_lo):
+                best = (root, cand, history, p_lo)
+        if best is not None:
+            return best
+    return None
+
+
 def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float = 1e-12,
                   steps: int = 41, transient: int = 2000, iterations: int = 2000,
-                  periods=(1, 2), escape: float = 1e8) -> "Crisis":
-    """A boundary crisis of a one-dimensional map's attractor, located from the geometry.
+                  periods=(1, 2), escape: float = 1e8, jump: float = 1.5) -> "Crisis":
+    """A boundary or interior crisis of a one-dimensional map's attractor, located from the
+    geometry.
 
     The attractor reached from ``x0`` is followed through ``span`` on ``steps`` values (each
     started from the last state of the previous one, as :func:`pwsdyn.sweep` does for maps);
     the first value at which the orbit leaves (diverges beyond ``escape`` or leaves the map's
-    domain) brackets the crisis. There, the attractor's edges (images ``F^k(c)``, ``k <= 6``,
+    domain: a boundary crisis) or the attractor's extent grows by the factor ``jump`` (an
+    interior crisis) brackets the crisis. There, the attractor's edges (images ``F^k(c)``, ``k <= 6``,
     of its border points ``c`` and its pieces' critical points, each found to adjacent floats)
     and its basin's boundary points (repelling periodic points of the given ``periods`` and
     their preimages) are found; the crisis is the root, by ``scipy.optimize.brentq`` to
@@ -280,6 +336,11 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
         Periods of the saddles considered.
     escape : float
         An orbit with ``|x|`` beyond it has left.
+    jump : float
+        The growth factor of the attractor's extent between two values that is a sudden
+        widening (also by more than a tenth of the attractor's magnitude, so that a period
+        doubling is not one); a widening with no contact in its bracket (a period doubling, a
+        window's end at a saddle of another period) is passed over.
 
     Returns
     -------
@@ -288,7 +349,7 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
     Raises
     ------
     ManifoldError
-        The attractor survives the whole span, or no contact of an edge with a saddle's stable
+        The attractor survives the whole span without widening, or no contact of an edge with a saddle's stable
         set changes sign in the bracket.
     """
     model = as_model(model, kind="map", caller="locate_crisis()")
@@ -305,49 +366,38 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
         x0 = (model.spec.get("defaults") or {}).get("x0")
     x = V.state_vector(model, x0).astype(float)
     a, b = (float(v) for v in span)
+    jump = V.positive("jump", jump)
     ctx = _Context(model, param, params)
     values = np.linspace(a, b, steps)
-    last = None
-    for i, p in enumerate(values):
+    bounded = []        # (value, samples) of the sweep so far
+    for p in values:
         samples = _attractor(ctx.section(p), x, transient, iterations, escape)
         if samples is None:
+            kind = "boundary"
+        elif bounded and _jumped(bounded[-1][1], samples, jump):
+            kind = "interior"
+        else:
+            bounded.append((float(p), samples))
+            x = np.array([samples[-1]])
+            continue
+        if not bounded:
+            raise ManifoldError(f"locate_crisis(): no bounded attractor at {param} = {a}")
+        found = _locate(ctx, bounded, float(p), periods, tol)
+        if found is not None:
             break
-        last = (p, samples)
+        if kind == "boundary":
+            raise ManifoldError(f"locate_crisis(): the attractor leaves between {param} = "
+                                f"{bounded[-1][0]} and {p}, but no edge meets a saddle's "
+                                "stable set there")
+        # a jump without a contact (a period doubling, a window's end far from any saddle
+        # found): go on following the new attractor
+        bounded.append((float(p), samples))
         x = np.array([samples[-1]])
     else:
-        raise ManifoldError(f"locate_crisis(): the attractor stays bounded over {param} in "
-                            f"[{a}, {b}]")
-    if last is None:
-        raise ManifoldError(f"locate_crisis(): no bounded attractor at {param} = {a}")
-    p_lo, samples = last
-    p_hi = float(p)
-    cands = _candidates(ctx, p_lo, samples, periods, 1.0)
-    cands.sort(key=lambda t: t[0])
-    best = None
-    for g_lo, cand in cands:
-        if g_lo < 0:
-            continue
-        g_hi, _ = cand.evaluate(ctx, p_hi)
-        if not np.isfinite(g_hi) or g_hi > 0:
-            continue
-        history = []
-
-        def g(q, cand=cand, history=history):
-            v, _ = cand.evaluate(ctx, q)
-            history.append((q, v))
-            return v
-
-        try:
-            root = brentq(g, p_lo, p_hi, xtol=tol)
-        except ValueError:
-            continue
-        if best is None or root < best[0]:
-            best = (root, cand, history)
-    if best is None:
-        raise ManifoldError(f"locate_crisis(): the attractor leaves between {param} = {p_lo} "
-                            f"and {p_hi}, but no edge meets a saddle's stable set there")
-    root, cand, history = best
+        raise ManifoldError(f"locate_crisis(): no crisis found over {param} in [{a}, {b}] (the "
+                            "attractor stays bounded without a sudden widening)")
+    root, cand, history, p_lo = found
     _, (sad, point, c) = cand.evaluate(ctx, root)
-    return Crisis(model=model, param=param, value=float(root), kind="boundary", saddle=sad,
-                  point=np.array([point]), bracket=(float(p_lo), p_hi), edge=(cand.k, c),
+    return Crisis(model=model, param=param, value=float(root), kind=kind, saddle=sad,
+                  point=np.array([point]), bracket=(p_lo, float(p)), edge=(cand.k, c),
                   preimage=int(cand.pre >= 0), history=history)
