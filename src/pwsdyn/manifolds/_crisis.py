@@ -7,11 +7,11 @@ bounded by repelling periodic points and their preimages (the 1-D stable sets of
 A boundary crisis is the parameter at which an edge first touches such a point (Grebogi, Ott
 & Yorke 1983); an interior crisis the one at which it touches a repelling point inside its
 basin, beyond which the attractor suddenly widens (as two symmetric attractors merge when
-they reach the fixed point between them). Either way the contact function ``g(p) = s(p) - F^k(c(p))`` (signed so that it is
-positive while the attractor is bounded) changes sign there and is root-found by
-``scipy.optimize.brentq``. Escape is only used to bracket the value on a coarse sweep;
-the value itself never comes from escape times, whose scaling near a crisis makes them a poor
-measure of it.
+they reach the fixed point between them). Either way the contact function
+``g(p) = s(p) - F^k(c(p))`` (signed so that it is positive before the crisis) changes sign
+there and is root-found by ``scipy.optimize.brentq``. Escape (or a jump in the extent) is
+only used to bracket the value on a coarse sweep; the value itself never comes from escape
+times, whose scaling near a crisis makes them a poor measure of it.
 """
 
 from __future__ import annotations
@@ -221,6 +221,11 @@ def _candidates(ctx, p, samples, periods, seeds) -> list:
             e = _edge(sec, c, k)
             if np.isfinite(e):
                 edges.append((k, kind_c, c, e))
+    if edges:
+        # the attractor's hull is that of its edges (exact), which a short record of its
+        # orbit may not have reached: a point inside it is not on the basin's boundary
+        lo = min(lo, min(e for *_, e in edges))
+        hi = max(hi, max(e for *_, e in edges))
     saddles = []
     starts = np.linspace(lo - seeds * width, hi + seeds * width, 41)
     for period in periods:
@@ -307,12 +312,14 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
     started from the last state of the previous one, as :func:`pwsdyn.sweep` does for maps);
     the first value at which the orbit leaves (diverges beyond ``escape`` or leaves the map's
     domain: a boundary crisis) or the attractor's extent grows by the factor ``jump`` (an
-    interior crisis) brackets the crisis. There, the attractor's edges (images ``F^k(c)``, ``k <= 6``,
-    of its border points ``c`` and its pieces' critical points, each found to adjacent floats)
-    and its basin's boundary points (repelling periodic points of the given ``periods`` and
-    their preimages) are found; the crisis is the root, by ``scipy.optimize.brentq`` to
-    ``tol``, of the first contact function ``saddle point - edge`` that changes sign in the
-    bracket, each continued in the parameter by Newton.
+    interior crisis) brackets the crisis. There, the attractor's edges (images ``F^k(c)``,
+    ``k <= 6``, of its border points ``c`` and its pieces' critical points, each found to
+    adjacent floats) and its basin's boundary points (repelling periodic points of the given
+    ``periods`` and their preimages) are found; the crisis is the root, by
+    ``scipy.optimize.brentq`` to ``tol``, of the first contact function ``saddle point - edge``
+    that changes sign in the bracket, each continued in the parameter by Newton. When none
+    does (an orbit slow to find the way out leaves only well past the crisis), earlier values
+    of the sweep are tried as the bracket's lower end.
 
     Parameters
     ----------
@@ -349,8 +356,8 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
     Raises
     ------
     ManifoldError
-        The attractor survives the whole span without widening, or no contact of an edge with a saddle's stable
-        set changes sign in the bracket.
+        The attractor survives the whole span without widening, or no contact of an edge with
+        a saddle's stable set changes sign in the bracket of its escape.
     """
     model = as_model(model, kind="map", caller="locate_crisis()")
     if model.n_states != 1:
@@ -382,7 +389,10 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
             continue
         if not bounded:
             raise ManifoldError(f"locate_crisis(): no bounded attractor at {param} = {a}")
-        found = _locate(ctx, bounded, float(p), periods, tol)
+        # an orbit leaving is certain to be past the crisis: every earlier value may be the
+        # bracket's other end; a widening is only compared with the last few
+        found = _locate(ctx, bounded, float(p), periods, tol,
+                        back=len(bounded) if kind == "boundary" else 4)
         if found is not None:
             break
         if kind == "boundary":
