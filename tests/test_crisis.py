@@ -99,6 +99,34 @@ def test_a_smooth_critical_point_the_logistic_maps_crisis_at_r_4():
     assert min(abs(c.point[0]), abs(c.point[0] - 1.0)) < 1e-9
 
 
+# Nordmark's square-root map (the zoo's sqrt-map): x -> mu + lam x (x <= 0), mu - sqrt(x)
+# (x > 0), with lam > 1. Its edges are f(0) = mu and f(mu) = mu - sqrt(mu); the left piece's
+# fixed point x_L = mu / (1 - lam) < 0 repels, and [f(mu), mu] maps into itself while
+# f(mu) >= x_L, i.e. sqrt(mu) lam / (lam - 1) >= 1: the attractor exists for
+# mu >= mu_c = ((lam - 1) / lam)^2 and is destroyed below (the square root's edge, -sqrt(mu),
+# outruns x_L ~ -mu as mu decreases).
+
+@pytest.mark.parametrize("lam", [1.5, 2.0, 3.0])
+def test_nordmarks_square_root_map_crisis_against_its_closed_form(lam):
+    muc = ((lam - 1) / lam) ** 2
+    # a decreasing span: the attractor exists at its start
+    c = locate_crisis("sqrt-map", "mu", (2 * muc, 0.5 * muc), params={"lam": lam}, tol=1e-13)
+    # the saddle is found by Newton to a residual of 1e-12, which bounds the contact's
+    # accuracy: 1e-10 (the acceptance is 1e-6)
+    assert c.kind == "boundary" and abs(c.value - muc) < 1e-10
+    assert c.saddle.pieces == ("no_impact",) and abs(c.saddle.multipliers[0] - lam) < 1e-12
+    assert abs(c.point[0] - muc / (1 - lam)) < 1e-10
+    # brute force: orbits from [f(mu), mu] stay bounded just above mu_c, all leave below
+    for mu, bounded in ((muc * (1 + 1e-2), True), (muc * (1 - 1e-2), False)):
+        x = np.linspace(mu - np.sqrt(mu), mu, 300)
+        alive = np.ones(x.shape, bool)
+        for _ in range(20000):
+            x = np.where(x <= 0, mu + lam * x, mu - np.sqrt(np.abs(x)))
+            alive &= x > -1e6
+            x = np.where(alive, x, 0.0)
+        assert alive.all() if bounded else not alive.any()
+
+
 # The cubic map x -> r x - x^3 is odd: for r < r_i its attractors are symmetric twins on either
 # side of the repelling fixed point 0. The positive one is [f^2(x_c), f(x_c)], x_c =
 # sqrt(r / 3) the critical point, f(x_c) = (2 r / 3) sqrt(r / 3); (0, sqrt(r)) maps into
