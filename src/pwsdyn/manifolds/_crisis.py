@@ -358,6 +358,14 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
     ManifoldError
         The attractor survives the whole span without widening, or no contact of an edge with
         a saddle's stable set changes sign in the bracket of its escape.
+
+    Examples
+    --------
+    >>> c = locate_crisis("sqrt-map", "mu", (0.5, 0.125), params={"lam": 2.0})
+    >>> c.kind, round(c.value, 9)   # mu_c = ((lam - 1) / lam)^2
+    ('boundary', 0.25)
+    >>> round(float(c.point[0]), 9)     # the edge mu - sqrt(mu) meets mu / (1 - lam)
+    -0.25
     """
     model = as_model(model, kind="map", caller="locate_crisis()")
     if model.n_states != 1:
