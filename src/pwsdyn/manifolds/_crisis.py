@@ -180,8 +180,10 @@ class _Contact:
         if self.kind_c == "border":
             d = 1e-6 * (1 + abs(c0))
             a, b = c0 - d, c0 + d
-            while _piece(sec, a) == _piece(sec, b) and d < 1e3 * (1 + abs(c0)):
+            while _piece(sec, a) == _piece(sec, b):
                 d *= 4
+                if d > 1e3 * (1 + abs(c0)):
+                    return np.nan, None      # the border is gone: no contact to follow
                 a, b = c0 - d, c0 + d
             c = _border(sec, a, b)
         else:
