@@ -38,6 +38,7 @@ _LAZY = {
     "discontinuity_map": "grazing", "design_control": "grazing",
     "Manifold": "manifolds", "ManifoldError": "manifolds", "PeriodicPoint": "manifolds",
     "find_periodic_point": "manifolds", "manifold": "manifolds",
+    "Crisis": "manifolds", "locate_crisis": "manifolds",
 }
 
 __all__ = ["ArgumentError", "ExpressionError", "ModelError", "OutputExistsError", "PwsdynError",
@@ -49,8 +50,8 @@ if TYPE_CHECKING:  # what static checkers and IDEs see; at run time see __getatt
     from .explore import basins, lyapunov_spectrum, scan, sweep
     from .grazing import design_control, discontinuity_map
     from .integrate import EventRecord, Trajectory, simulate
-    from .manifolds import (Manifold, ManifoldError, PeriodicPoint, find_periodic_point,
-                            manifold)
+    from .manifolds import (Crisis, Manifold, ManifoldError, PeriodicPoint,
+                            find_periodic_point, locate_crisis, manifold)
     from .model import Model, compile_model, load_model, with_discrete_control, zoo_names
     from .orbits import OrbitError, PeriodicOrbit, RecurrenceWarning, find_periodic_orbit
     from .stability import (SectionNotReachedError, floquet_multipliers, monodromy,

@@ -1,0 +1,423 @@
+"""Boundary and interior crises of one-dimensional piecewise-smooth maps, located from the
+geometry.
+
+An attractor of a 1-D map is bounded by iterates of its border points (where the piece
+changes) and of its smooth pieces' critical points: its edges are ``F^k(c)``. Its basin is
+bounded by repelling periodic points and their preimages (the 1-D stable sets of the saddles).
+A boundary crisis is the parameter at which an edge first touches such a point (Grebogi, Ott
+& Yorke 1983); an interior crisis the one at which it touches a repelling point inside its
+basin, beyond which the attractor suddenly widens (as two symmetric attractors merge when
+they reach the fixed point between them). Either way the contact function
+``g(p) = s(p) - F^k(c(p))`` (signed so that it is positive before the crisis) changes sign
+there and is root-found by ``scipy.optimize.brentq``. Escape (or a jump in the extent) is
+only used to bracket the value on a coarse sweep; the value itself never comes from escape
+times, whose scaling near a crisis makes them a poor measure of it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import brentq
+
+from .. import _validate as V
+from ..errors import ArgumentError
+from ..model.spec import as_model
+from ._points import ManifoldError, PeriodicPoint, find_periodic_point
+from ._sections import MapSection
+
+
+@dataclass(eq=False)
+class Crisis:
+    """A crisis of an attractor, located in one parameter.
+
+    Attributes
+    ----------
+    model : MapModel
+    param : str
+        The parameter varied.
+    value : float
+        The parameter at which the attractor's edge touches the saddle's stable set.
+    kind : str
+        ``"boundary"`` (the attractor is destroyed beyond ``value``: its orbit leaves) or
+        ``"interior"`` (it suddenly widens: its extent jumps).
+    saddle : PeriodicPoint
+        The repelling periodic point whose stable set is touched, at ``value``, with its
+        multipliers.
+    point : numpy.ndarray, shape (n,)
+        Where they touch: the point of the saddle's stable set (the saddle itself or one of its
+        preimages) met by the attractor's edge, at ``value``.
+    bracket : tuple of float
+        The sweep's value before the crisis was seen and the one at which it was (the orbit
+        left, or the extent jumped).
+    edge : tuple
+        ``(k, c)``: the edge is the ``k``-th image of the border or critical point ``c`` (at
+        ``value``).
+    preimage : int
+        ``0`` when the edge touches the saddle itself, ``1`` when it touches a preimage of it.
+    history : list of tuple
+        ``(parameter, contact)`` of every evaluation of the contact function.
+    """
+
+    model: object
+    param: str
+    value: float
+    kind: str
+    saddle: PeriodicPoint
+    point: np.ndarray
+    bracket: tuple
+    edge: tuple
+    preimage: int
+    history: list = field(default_factory=list)
+
+    def __repr__(self):
+        return (f"Crisis({self.model.name!r}, {self.kind}, {self.param}={self.value:.12g}, "
+                f"point={self.point.tolist()}, saddle period {self.saddle.period})")
+
+
+def _attractor(sec: MapSection, x, transient: int, iterations: int, escape: float):
+    """Iterate; the recorded samples, or ``None`` when the orbit leaves (no piece applies,
+    not finite, beyond ``escape``)."""
+    x = np.array(x, dtype=float)
+    out = np.empty(iterations)
+    for i in range(transient + iterations):
+        x, sig, _ = sec.evaluate(x)
+        if sig is None or abs(x[0]) > escape:
+            return None
+        if i >= transient:
+            out[i - transient] = x[0]
+    return out
+
+
+def _repelling(pt) -> bool:
+    """Every multiplier outside the unit circle: in one dimension, a point of a basin's
+    boundary (its stable set is itself and its preimages)."""
+    return bool(np.all(np.abs(pt.multipliers) > 1 + 1e-9))
+
+
+def _piece(sec, x) -> int:
+    _, sig, _ = sec.evaluate(np.array([x]))
+    return -1 if sig is None else sig[0]
+
+
+def _special_points(sec, samples) -> list:
+    """Border points (bisection, to adjacent floats, between samples in different pieces) and
+    critical points (a sign change of the derivative inside one piece) among the samples."""
+    xs = np.unique(samples)
+    pieces = [_piece(sec, x) for x in xs]
+    out = []
+    for a, b, pa, pb in zip(xs[:-1], xs[1:], pieces[:-1], pieces[1:]):
+        if pa != pb:
+            out.append(("border", _border(sec, a, b)))
+        else:
+            da = sec.evaluate(np.array([a]), True)[2][0, 0]
+            db = sec.evaluate(np.array([b]), True)[2][0, 0]
+            if da * db < 0:
+                out.append(("critical", _critical(sec, a, b)))
+    return out
+
+
+def _border(sec, a, b) -> float:
+    pa = _piece(sec, a)
+    for _ in range(200):
+        m = 0.5 * (a + b)
+        if m in (a, b):
+            break
+        if _piece(sec, m) == pa:
+            a = m
+        else:
+            b = m
+    return a
+
+
+def _critical(sec, a, b) -> float:
+    return brentq(lambda x: sec.evaluate(np.array([x]), True)[2][0, 0], a, b, xtol=1e-15)
+
+
+def _edge(sec, c, k) -> float:
+    y = np.array([c], dtype=float)
+    for _ in range(k):
+        y, sig, _ = sec.evaluate(y)
+        if sig is None:
+            return np.nan
+    return float(y[0])
+
+
+def _preimage(sec, target, x, piece, tol=1e-14, max_iter=60):
+    """A preimage of ``target`` by Newton on ``F(x) - target`` from ``x``, required to stay on
+    ``piece``; ``None`` otherwise."""
+    x = float(x)
+    for _ in range(max_iter):
+        y, sig, J = sec.evaluate(np.array([x]), True)
+        if sig is None or sig[0] != piece or J[0, 0] == 0:
+            return None
+        r = y[0] - target
+        if abs(r) <= tol * (1 + abs(target)):
+            return x
+        x -= r / J[0, 0]
+    return None
+
+
+class _Contact:
+    """One candidate contact: edge ``F^k(c)`` against the saddle (``pre = -1``) or its
+    preimage on piece ``pre``; continued in the parameter from the nearest evaluated value."""
+
+    def __init__(self, k, kind_c, side, period, pre):
+        self.k, self.kind_c, self.side, self.period, self.pre = k, kind_c, side, period, pre
+        self.known = {}    # parameter -> (c, saddle x, point)
+
+    def evaluate(self, ctx, p):
+        near = min(self.known, key=lambda q: abs(q - p))
+        c0, s0, pt0 = self.known[near]
+        sec = ctx.section(p)
+        try:
+            sad = find_periodic_point(sec.model, [s0], self.period, params=sec.params)
+        except ManifoldError:
+            return np.nan, None
+        if not _repelling(sad):
+            return np.nan, None
+        if self.kind_c == "border":
+            d = 1e-6 * (1 + abs(c0))
+            a, b = c0 - d, c0 + d
+            while _piece(sec, a) == _piece(sec, b):
+                d *= 4
+                if d > 1e3 * (1 + abs(c0)):
+                    return np.nan, None      # the border is gone: no contact to follow
+                a, b = c0 - d, c0 + d
+            c = _border(sec, a, b)
+        else:
+            def slope(x):
+                return sec.evaluate(np.array([x]), True)[2][0, 0]
+
+            d = 1e-3 * (1 + abs(c0))
+            while slope(c0 - d) * slope(c0 + d) > 0:
+                d *= 2
+                if d > 1e3 * (1 + abs(c0)):
+                    return np.nan, None
+            c = _critical(sec, c0 - d, c0 + d)
+        point = sad.x[0] if self.pre < 0 else _preimage(sec, sad.x[0], pt0, self.pre)
+        if point is None:
+            return np.nan, None
+        e = _edge(sec, c, self.k)
+        self.known[p] = (c, sad.x[0], point)
+        return self.side * (point - e), (sad, point, c)
+
+
+class _Context:
+    def __init__(self, model, param, params):
+        self.model, self.param, self.params = model, param, dict(params or {})
+
+    def section(self, p):
+        return MapSection(self.model, {**self.params, self.param: float(p)}, 1)
+
+
+def _candidates(ctx, p, samples, periods, seeds) -> list:
+    sec = ctx.section(p)
+    lo, hi = float(samples.min()), float(samples.max())
+    width = max(hi - lo, 1e-12)
+    specials = _special_points(sec, samples)
+    edges = []
+    for kind_c, c in specials:
+        for k in range(1, 7):
+            e = _edge(sec, c, k)
+            if np.isfinite(e):
+                edges.append((k, kind_c, c, e))
+    if edges:
+        # the attractor's hull is that of its edges (exact), which a short record of its
+        # orbit may not have reached: a point inside it is not on the basin's boundary
+        lo = min(lo, min(e for *_, e in edges))
+        hi = max(hi, max(e for *_, e in edges))
+    saddles = []
+    starts = np.linspace(lo - seeds * width, hi + seeds * width, 41)
+    for period in periods:
+        for s in starts:
+            try:
+                pt = find_periodic_point(sec.model, [s], period, params=sec.params)
+            except ManifoldError:
+                continue
+            if not _repelling(pt):
+                continue
+            # a point of a shorter cycle dividing the period is that cycle, already found
+            if any(period % q.period == 0 and np.min(np.abs(q.cycle[:, 0] - pt.x[0]))
+                   < 1e-9 * (1 + abs(pt.x[0])) for q in saddles):
+                continue
+            saddles.append(pt)
+    out = []
+    for sad in saddles:
+        targets = [(-1, sad.x[0])]
+        for s in starts:
+            pc = _piece(sec, s)
+            x = _preimage(sec, sad.x[0], s, pc)
+            if x is not None and abs(x - sad.x[0]) > 1e-9 * (1 + abs(x)) and all(
+                    abs(x - t) > 1e-9 * (1 + abs(x)) for _, t in targets):
+                targets.append((pc, x))
+        for pre, t in targets:
+            if lo < t < hi:
+                continue       # inside the attractor: not on its basin's boundary
+            side = 1.0 if t > hi else -1.0
+            for k, kind_c, c, e in edges:
+                cand = _Contact(k, kind_c, side, sad.period, pre)
+                cand.known[p] = (c, sad.x[0], t)
+                out.append((side * (t - e), cand))
+    return out
+
+
+def _jumped(before, after, jump) -> bool:
+    """The attractor's extent grew by more than the factor ``jump`` and by more than a tenth
+    of its size (so that a period doubling from a point, width zero, is not a widening)."""
+    w0 = float(before.max() - before.min())
+    w1 = float(after.max() - after.min())
+    scale = max(float(np.max(np.abs(after))), 1e-300)
+    return w1 > jump * w0 and w1 - w0 > 0.1 * scale
+
+
+def _locate(ctx, bounded, p_hi, periods, tol, back: int = 4):
+    """The contact root between one of the last bounded values of the sweep and ``p_hi``: the
+    last one first, then up to ``back`` earlier ones (an attractor whose orbit has not left
+    yet within the iterations can already be past the crisis)."""
+    for p_lo, samples in bounded[::-1][:back + 1]:
+        cands = _candidates(ctx, p_lo, samples, periods, 1.0)
+        cands.sort(key=lambda t: t[0])
+        best = None
+        for g_lo, cand in cands:
+            if g_lo < 0:
+                continue
+            g_hi, _ = cand.evaluate(ctx, p_hi)
+            if not np.isfinite(g_hi) or g_hi > 0:
+                continue
+            history = []
+
+            def g(q, cand=cand, history=history):
+                v, _ = cand.evaluate(ctx, q)
+                history.append((q, v))
+                return v
+
+            try:
+                root = brentq(g, p_lo, p_hi, xtol=tol)
+            except (ValueError, RuntimeError):
+                continue
+            if best is None or abs(root - p_lo) < abs(best[0] - p_lo):
+                best = (root, cand, history, p_lo)
+        if best is not None:
+            return best
+    return None
+
+
+def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float = 1e-12,
+                  steps: int = 41, transient: int = 2000, iterations: int = 2000,
+                  periods=(1, 2), escape: float = 1e8, jump: float = 1.5) -> "Crisis":
+    """A boundary or interior crisis of a one-dimensional map's attractor, located from the
+    geometry.
+
+    The attractor reached from ``x0`` is followed through ``span`` on ``steps`` values (each
+    started from the last state of the previous one, as :func:`pwsdyn.sweep` does for maps);
+    the first value at which the orbit leaves (diverges beyond ``escape`` or leaves the map's
+    domain: a boundary crisis) or the attractor's extent grows by the factor ``jump`` (an
+    interior crisis) brackets the crisis. There, the attractor's edges (images ``F^k(c)``,
+    ``k <= 6``, of its border points ``c`` and its pieces' critical points, each found to
+    adjacent floats) and its basin's boundary points (repelling periodic points of the given
+    ``periods`` and their preimages) are found; the crisis is the root, by
+    ``scipy.optimize.brentq`` to ``tol``, of the first contact function ``saddle point - edge``
+    that changes sign in the bracket, each continued in the parameter by Newton. When none
+    does (an orbit slow to find the way out leaves only well past the crisis), earlier values
+    of the sweep are tried as the bracket's lower end.
+
+    Parameters
+    ----------
+    model : MapModel, str, path or dict
+        A one-dimensional map model (``kind = "map"``).
+    param : str
+        The parameter varied.
+    span : (float, float)
+        Start and end values; the attractor at the start must be bounded.
+    x0 : sequence or dict, optional
+        Initial state (default: the model's ``[defaults] x0``).
+    params : dict, optional
+        The other parameters' values.
+    tol : float
+        Absolute tolerance on the located value.
+    steps : int
+        Values in the bracketing sweep.
+    transient, iterations : int
+        Iterations discarded, then recorded, at each value of the sweep.
+    periods : sequence of int
+        Periods of the saddles considered.
+    escape : float
+        An orbit with ``|x|`` beyond it has left.
+    jump : float
+        The growth factor of the attractor's extent between two values that is a sudden
+        widening (also by more than a tenth of the attractor's magnitude, so that a period
+        doubling is not one); a widening with no contact in its bracket (a period doubling, a
+        window's end at a saddle of another period) is passed over.
+
+    Returns
+    -------
+    Crisis
+
+    Raises
+    ------
+    ManifoldError
+        The attractor survives the whole span without widening, or no contact of an edge with
+        a saddle's stable set changes sign in the bracket of its escape.
+
+    Examples
+    --------
+    >>> c = locate_crisis("sqrt-map", "mu", (0.5, 0.125), params={"lam": 2.0})
+    >>> c.kind, round(c.value, 9)   # mu_c = ((lam - 1) / lam)^2
+    ('boundary', 0.25)
+    >>> round(float(c.point[0]), 9)     # the edge mu - sqrt(mu) meets mu / (1 - lam)
+    -0.25
+    """
+    model = as_model(model, kind="map", caller="locate_crisis()")
+    if model.n_states != 1:
+        raise ArgumentError("locate_crisis(): only one-dimensional maps are handled so far, "
+                            f"{model.name!r} has {model.n_states} states")
+    if param not in model.parameters:
+        raise ArgumentError(f"locate_crisis(): {model.name!r} has no parameter {param!r}")
+    tol = V.positive("tol", tol)
+    steps = V.integer("steps", steps, lo=2)
+    transient = V.integer("transient", transient, lo=0)
+    iterations = V.integer("iterations", iterations, lo=2)
+    if x0 is None:
+        x0 = (model.spec.get("defaults") or {}).get("x0")
+    x = V.state_vector(model, x0).astype(float)
+    a, b = (float(v) for v in span)
+    jump = V.positive("jump", jump)
+    ctx = _Context(model, param, params)
+    values = np.linspace(a, b, steps)
+    bounded = []        # (value, samples) of the sweep so far
+    for p in values:
+        samples = _attractor(ctx.section(p), x, transient, iterations, escape)
+        if samples is None:
+            kind = "boundary"
+        elif bounded and _jumped(bounded[-1][1], samples, jump):
+            kind = "interior"
+        else:
+            bounded.append((float(p), samples))
+            x = np.array([samples[-1]])
+            continue
+        if not bounded:
+            raise ManifoldError(f"locate_crisis(): no bounded attractor at {param} = {a}")
+        # an orbit leaving is certain to be past the crisis: every earlier value may be the
+        # bracket's other end; a widening is only compared with the last few
+        found = _locate(ctx, bounded, float(p), periods, tol,
+                        back=len(bounded) if kind == "boundary" else 4)
+        if found is not None:
+            break
+        if kind == "boundary":
+            raise ManifoldError(f"locate_crisis(): the attractor leaves between {param} = "
+                                f"{bounded[-1][0]} and {p}, but no edge meets a saddle's "
+                                "stable set there")
+        # a jump without a contact (a period doubling, a window's end far from any saddle
+        # found): go on following the new attractor
+        bounded.append((float(p), samples))
+        x = np.array([samples[-1]])
+    else:
+        raise ManifoldError(f"locate_crisis(): no crisis found over {param} in [{a}, {b}] (the "
+                            "attractor stays bounded without a sudden widening)")
+    root, cand, history, p_lo = found
+    _, (sad, point, c) = cand.evaluate(ctx, root)
+    return Crisis(model=model, param=param, value=float(root), kind=kind, saddle=sad,
+                  point=np.array([point]), bracket=(p_lo, float(p)), edge=(cand.k, c),
+                  preimage=int(cand.pre >= 0), history=history)
