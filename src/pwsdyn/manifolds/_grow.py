@@ -149,6 +149,7 @@ def grow(evaluate, q0, q1, sig0, *, arclength: float, max_points: int, max_step:
     # (cursor, image) of the last points accepted along the current piece, for the predictor
     hist = [(0.0, br.pts[1])]
     last_pred = [None]
+    h_done = [0.0]          # the cursor's last accepted step
 
     def call(x, guess, s_x):
         if not predict:
@@ -229,12 +230,14 @@ def grow(evaluate, q0, q1, sig0, *, arclength: float, max_points: int, max_step:
         s1 = min(s + h, s_lim)
         y1, sig1 = call(x_at(s1), pts[-1], s1)
         border = None
-        if (predict and sig1 is None and last_pred[0] is not None
-                and float(np.linalg.norm(last_pred[0] - pts[-1])) > max_step):
-            # no preimage found, and the predicted one is farther than the distance criterion
-            # allows: the step would be refused anyway, so it is halved (Newton from a nearer
-            # prediction) before a failure is taken for the end of the branch (the preimage
-            # leaves the section, or none exists) and located by bisection
+        if predict and sig1 is None and s1 - s > 1e-6 and (
+                last_pred[0] is None or s1 - s > h_done[0]
+                or float(np.linalg.norm(last_pred[0] - pts[-1])) > max_step):
+            # no preimage found, and none predicted (the first steps of a branch or piece) or
+            # the predicted one farther than the distance criterion allows (the step would be
+            # refused anyway): the step is halved (Newton from nearer) before a failure is
+            # taken for the end of the branch (the preimage leaves the section, or none
+            # exists) and located by bisection
             h = 0.5 * (s1 - s)
             continue
         if sig1 != s_sig:
@@ -270,6 +273,7 @@ def grow(evaluate, q0, q1, sig0, *, arclength: float, max_points: int, max_step:
             br.append(y1, node=bool(border is not None or at_node))
         else:
             node[-1] = node[-1] or border is not None or at_node
+        h_done[0] = s1 - s
         s = s1
         if predict and (not hist or s1 > hist[-1][0]):
             hist.append((s1, y1))
