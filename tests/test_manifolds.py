@@ -448,9 +448,10 @@ def _segments_cross(P0, P1, Q0, Q1):
 def test_a_basin_boundary_of_the_impact_oscillator_is_the_saddles_stable_manifold():
     # omega = 3.05: a period-2 saddle orbit with three impacts per orbit and multipliers about
     # 4513 and 5.8e-5, between two period-2 attractors. Its strongly contracting stable
-    # direction makes the preimage map expand 17000-fold: plain Newton from the last preimage
-    # fails after an arclength of about 2e-4 (the guarded Newton from the branch's prediction
-    # takes over there).
+    # direction makes the preimage map expand 17000-fold and its third impact is close to
+    # grazing: plain Newton fails already for the first preimage (the fundamental domain is
+    # shortened) and again along the branch (Newton with a line search from the branch's
+    # prediction, and shorter steps, take over there).
     P = {"omega": 3.05}
     orbit = pwsdyn.find_periodic_orbit("impact-oscillator", [-0.26717145, -0.51828814],
                                        params=P, periods=2)
