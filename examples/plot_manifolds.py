@@ -13,7 +13,9 @@ Three saddles: the border-collision normal form (Nusse & Yorke 1992), piecewise-
 manifolds are polylines; the same form with the impacting side's linear term replaced by a
 square root, Nordmark's square-root map of grazing in the plane, whose unstable manifold folds
 with unbounded stretching at the border; and the impact oscillator's period-one orbit past its
-period doubling at :math:`\omega = 2.8`, on its stroboscopic section.
+period doubling at :math:`\omega = 2.8`, on its stroboscopic section; and at
+:math:`\omega = 3.05` the stable manifold of a period-two saddle over the basins of the two
+attractors it separates.
 """
 
 import matplotlib.pyplot as plt
@@ -83,3 +85,25 @@ wu3.plot(ax=ax)
 ax.plot(attractor[:, 0], attractor[:, 1], "o", ms=4, color="k", label="attractor")
 ax.set(title=r"impact oscillator, $\omega = 2.8$")
 fig.tight_layout()
+
+# %%
+# A basin boundary: at omega = 3.05 the impact oscillator has two period-two attractors, and
+# between them a period-two saddle with three impacts per orbit (multipliers about 4513 and
+# 5.8e-5). On a grid around the saddle the boundary between the two basins is its stable
+# manifold.
+P = {"omega": 3.05}
+orbit2 = pwsdyn.find_periodic_orbit("impact-oscillator", [-0.26717145, -0.51828814],
+                                    params=P, periods=2)
+p, w = orbit2.x0, 3e-4
+basins = pwsdyn.basins("impact-oscillator", {"x": p[0] + np.linspace(-w, w, 30),
+                                            "v": p[1] + np.linspace(-w, w, 30)},
+                       params=P, transient=300, samples=16, max_period=4, progress=False)
+ws4 = pwsdyn.manifold("impact-oscillator", orbit2, "stable", arclength=2e-3, tol=1e-7)
+print(ws4)
+fig2, ax = plt.subplots(figsize=(5, 4.2))
+ax.pcolormesh(basins["x"], basins["v"], basins["label"].T, cmap="Pastel1", shading="nearest")
+ws4.plot(ax=ax)
+ax.set(xlim=(p[0] - w, p[0] + w), ylim=(p[1] - w, p[1] + w),
+       title=r"basins and $W^s$, $\omega = 3.05$")
+ax.locator_params(nbins=4)
+fig2.tight_layout()

@@ -431,3 +431,77 @@ def test_the_impact_oscillators_saddle_orbit_has_invariant_manifolds_on_its_sect
         sample = branch[0][1::9]
         images = np.array([F(x, 2) for x in sample])
         assert s.distance(images).max() < 5 * tol
+
+
+def _segments_cross(P0, P1, Q0, Q1):
+    """Whether segment ``P0[i] P1[i]`` crosses segment ``Q0[j] Q1[j]`` (2-D), for all ``i, j``:
+    an ``(m, k)`` boolean array (proper crossings, by the signs of the orientations)."""
+    def orient(a, b, c):
+        return ((b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1])
+                - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0]))
+    A, B = P0[:, None, :], P1[:, None, :]
+    C, D = Q0[None, :, :], Q1[None, :, :]
+    return ((np.sign(orient(A, B, C)) * np.sign(orient(A, B, D)) < 0)
+            & (np.sign(orient(C, D, A)) * np.sign(orient(C, D, B)) < 0))
+
+
+def test_a_basin_boundary_of_the_impact_oscillator_is_the_saddles_stable_manifold():
+    # omega = 3.05: a period-2 saddle orbit with three impacts per orbit and multipliers about
+    # 4513 and 5.8e-5, between two period-2 attractors. Its strongly contracting stable
+    # direction makes the preimage map expand 17000-fold and its third impact is close to
+    # grazing: plain Newton fails already for the first preimage (the fundamental domain is
+    # shortened) and again along the branch (Newton with a line search from the branch's
+    # prediction, and shorter steps, take over there).
+    P = {"omega": 3.05}
+    orbit = pwsdyn.find_periodic_orbit("impact-oscillator", [-0.26717145, -0.51828814],
+                                       params=P, periods=2)
+    mult = np.sort(np.abs(orbit.multipliers))
+    assert orbit.converged and 4e3 < mult[1] < 5e3 and 5e-5 < mult[0] < 7e-5
+    p = np.asarray(orbit.x0)
+    ws = pwsdyn.manifold("impact-oscillator", orbit, "stable", arclength=2e-3, tol=1e-7)
+    assert ws.status == ("arclength", "arclength")
+    # a 30 x 30 grid of half-width 3e-4 around the saddle, each start run 300 + 16 periods
+    w, n = 3e-4, 30
+    xs, vs = p[0] + np.linspace(-w, w, n), p[1] + np.linspace(-w, w, n)
+    ds = pwsdyn.basins("impact-oscillator", {"x": xs, "v": vs}, params=P, transient=300,
+                       samples=16, max_period=4, workers=1, progress=False)
+    L = ds["label"].values                       # over (x, v)
+    assert set(np.unique(L)) == {0, 1}
+    assert list(ds["attractor_period"].values) == [2, 2]
+    # every grid edge (neighbouring starts) the manifold crosses joins two basins, and every
+    # edge joining two basins is crossed by it: the grid's boundary is the stable manifold
+    X, Vv = np.meshgrid(xs, vs, indexing="ij")
+    G = np.stack([X, Vv], axis=-1)
+    edges = [(G[:-1, :].reshape(-1, 2), G[1:, :].reshape(-1, 2),
+              L[:-1, :].ravel() != L[1:, :].ravel()),
+             (G[:, :-1].reshape(-1, 2), G[:, 1:].reshape(-1, 2),
+              L[:, :-1].ravel() != L[:, 1:].ravel())]
+    crossings = 0
+    for E0, E1, differ in edges:
+        crossed = np.zeros(len(E0), dtype=bool)
+        for piece in ws.pieces:
+            crossed |= _segments_cross(E0, E1, piece[:-1], piece[1:]).any(axis=1)
+        assert np.array_equal(crossed, differ)
+        crossings += int(crossed.sum())
+    assert crossings >= n                          # the manifold runs across the whole grid
+    # points 1e-6 on either side of the manifold, along its normal, at ten points inside the
+    # grid, run by simulation (not by basins) to the two attractors. Tolerance: the polyline
+    # is within tol = 1e-7 of the manifold (plus the integration's 1e-10), ten times less
+    # than the offset.
+    T = 2 * np.pi / P["omega"]
+    attractors = ds["attractor_points"].values   # (attractor, cycle point, state)
+
+    def attractor_of(x):
+        traj = pwsdyn.simulate("impact-oscillator", x, (0.0, 320 * T), params=P)
+        last = np.asarray(traj(np.array([319 * T])))[0]
+        dist = [min(np.abs(last - a[k]).max() for k in range(2)) for a in attractors]
+        assert min(dist) < 1e-4
+        return int(np.argmin(dist))
+
+    branch = np.vstack(ws.pieces)
+    inside = branch[np.all(np.abs(branch - p) < 0.9 * w, axis=1)]
+    for i in np.linspace(1, len(inside) - 2, 10).astype(int):
+        t = inside[i + 1] - inside[i - 1]
+        nrm = np.array([-t[1], t[0]]) / np.linalg.norm(t)
+        sides = {attractor_of(inside[i] + s * 1e-6 * nrm) for s in (1.0, -1.0)}
+        assert sides == {0, 1}

@@ -60,6 +60,46 @@ def preimage(sec, y, guess, tol: float = 1e-13, max_iter: int = 40):
     return z, None
 
 
+def preimage_guarded(sec, y, guess, tol: float = 1e-13, max_iter: int = 60,
+                     max_halvings: int = 30):
+    """``preimage`` with a line search: a Newton step is halved until the residual
+    ``max|H(z) - y|`` decreases and ``H`` is defined at the new iterate. For a strongly
+    contracting stable direction (a preimage map that expands by ``1 / |lambda_s|``, thousands
+    for the impact oscillator's saddles) a full Newton step from a guess a little off lands
+    where the map applies other pieces (an impact more or fewer) and the Jacobian of those
+    pieces sends the iterate away; the line search keeps the iterates where the residual
+    shrinks. Used only where :func:`preimage` has failed, so that every preimage it finds is
+    unchanged. ``(guess, None)`` when it fails."""
+    z = np.array(guess, dtype=float)
+    scale = 1.0 + float(np.max(np.abs(y)))
+    Hz, sig, J = sec.evaluate(z, jacobian=True)
+    if sig is None:
+        return z, None
+    res = float(np.max(np.abs(Hz - y)))
+    for _ in range(max_iter):
+        if res <= tol * scale:
+            return z, sig
+        try:
+            dz = np.linalg.solve(J, -(Hz - y))
+        except np.linalg.LinAlgError:
+            return z, None
+        if not np.all(np.isfinite(dz)):
+            return z, None
+        u = 1.0
+        for _ in range(max_halvings):
+            zt = z + u * dz
+            Ht, sigt, Jt = sec.evaluate(zt, jacobian=True)
+            if sigt is not None:
+                rt = float(np.max(np.abs(Ht - y)))
+                if rt < (1.0 - 1e-4 * u) * res:
+                    break
+            u *= 0.5
+        else:
+            return z, None
+        z, Hz, sig, J, res = zt, Ht, sigt, Jt, rt
+    return z, sig if res <= tol * scale else None
+
+
 class Branch:
     """One branch as it grows: points, which are nodes (kinks and piece ends: mapped exactly),
     which segments are jumps (``gap[i]``: from point ``i`` to ``i + 1``)."""
@@ -96,12 +136,29 @@ class Branch:
 
 def grow(evaluate, q0, q1, sig0, *, arclength: float, max_points: int, max_step: float,
          tol: float, alpha_max: float = 0.3, jump_tol: float, bound: float,
-         min_dist: float = 0.0, min_step: float = 1e-14) -> Branch:
+         min_dist: float = 0.0, min_step: float = 1e-14, predict: bool = False) -> Branch:
     """Grow one branch from the fundamental domain ``[q0, q1 = H(q0)]`` (``sig0`` the signature
     of ``H`` at ``q0``) until its arclength exceeds ``arclength`` or it has ``max_points``
     points. ``evaluate(x, guess) -> (H(x), signature)``; ``guess`` is the image of a nearby
-    point (used by Newton preimages)."""
+    point (used by Newton preimages). With ``predict``, ``evaluate(x, guess, predicted)`` also
+    gets a prediction of ``H(x)`` extrapolated from the last two points along the branch in the
+    cursor's parameter (``None`` when there is none): where ``H``
+    expands strongly (the preimages of a strongly contracting saddle) a cursor step ``h`` moves
+    the image by ``h / |lambda_s|`` times a chord, far from the last point."""
     br = Branch(q0, q1)
+    # (cursor, image) of the last points accepted along the current piece, for the predictor
+    hist = [(0.0, br.pts[1])]
+    last_pred = [None]
+    h_done = [0.0]          # the cursor's last accepted step
+
+    def call(x, guess, s_x):
+        if not predict:
+            return evaluate(x, guess)
+        pred = last_pred[0] = None
+        if len(hist) >= 2 and hist[-1][0] > hist[-2][0]:
+            (sa_, ya_), (sb_, yb_) = hist[-2], hist[-1]
+            pred = last_pred[0] = yb_ + (s_x - sb_) / (sb_ - sa_) * (yb_ - ya_)
+        return evaluate(x, guess, pred)
     pts, node, gap = br.pts, br.node, br.gap
     dalpha_max = 8.0 * tol
 
@@ -136,6 +193,8 @@ def grow(evaluate, q0, q1, sig0, *, arclength: float, max_points: int, max_step:
             sm = 0.5 * (sa + sb)
             if not sa < sm < sb:
                 break
+            # no prediction in a bisection: its points are where plain Newton from the
+            # bracket's end decides, so that a border (or the branch's end) is located as before
             ym, sigm = evaluate(x_at(sm), ya)
             if sigm == sig_a:
                 sa, ya = sm, ym
@@ -169,8 +228,18 @@ def grow(evaluate, q0, q1, sig0, *, arclength: float, max_points: int, max_step:
             next_node += 1
         s_lim = float(next_node)
         s1 = min(s + h, s_lim)
-        y1, sig1 = evaluate(x_at(s1), pts[-1])
+        y1, sig1 = call(x_at(s1), pts[-1], s1)
         border = None
+        if predict and sig1 is None and s1 - s > 1e-6 and (
+                last_pred[0] is None or s1 - s > h_done[0]
+                or float(np.linalg.norm(last_pred[0] - pts[-1])) > max_step):
+            # no preimage found, and none predicted (the first steps of a branch or piece) or
+            # the predicted one farther than the distance criterion allows (the step would be
+            # refused anyway): the step is halved (Newton from nearer) before a failure is
+            # taken for the end of the branch (the preimage leaves the section, or none
+            # exists) and located by bisection
+            h = 0.5 * (s1 - s)
+            continue
         if sig1 != s_sig:
             sa, ya, sb, yb, sig_b, jump = bisect(s, s_sig, pts[-1], s1, y1, sig1)
             if sa == s and sig1 is not None and not jump:
@@ -204,7 +273,11 @@ def grow(evaluate, q0, q1, sig0, *, arclength: float, max_points: int, max_step:
             br.append(y1, node=bool(border is not None or at_node))
         else:
             node[-1] = node[-1] or border is not None or at_node
+        h_done[0] = s1 - s
         s = s1
+        if predict and (not hist or s1 > hist[-1][0]):
+            hist.append((s1, y1))
+            del hist[:-2]
         if ok and d < 0.25 * max_step and (d < min_dist or (
                 a < 0.25 * alpha_max and d * a < 0.25 * dalpha_max)):
             h *= 2.0
@@ -217,15 +290,17 @@ def grow(evaluate, q0, q1, sig0, *, arclength: float, max_points: int, max_step:
             if jump:
                 br.append(yb, node=True, gap=True)
             s, s_sig = sb, sig_b
+            hist[:] = [(sb, yb)]
             continue
         if at_node and next_node < len(gap) and gap[next_node]:
             # the end of a piece of the preimage: the next piece's image starts a piece here
-            y2, sig2 = evaluate(pts[next_node + 1], pts[-1])
+            y2, sig2 = call(pts[next_node + 1], pts[-1], float(next_node + 1))
             if sig2 is None:
                 br.status = "undefined"
                 break
             br.append(y2, node=True, gap=True)
             s, s_sig = float(next_node + 1), sig2
+            hist[:] = [(s, y2)]
             continue
         s_sig = sig1
     else:

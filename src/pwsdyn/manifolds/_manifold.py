@@ -12,7 +12,7 @@ from .. import _validate as V
 from ..errors import ArgumentError
 from ..model.spec import as_model
 from ..orbits import PeriodicOrbit
-from ._grow import grow, preimage
+from ._grow import grow, preimage, preimage_guarded
 from ._points import ManifoldError, PeriodicPoint, find_periodic_point
 from ._sections import MapSection, StroboscopicSection, check_section
 
@@ -395,8 +395,19 @@ def manifold(model, point, kind: str = "unstable", *, params=None, section=None,
         newton_tol = 1e-13 if sec_name == "map" else 10.0 * max(sec.opts["rtol"],
                                                                  sec.opts["atol"])
 
-        def evaluate(x, guess):
-            return preimage(H, x, guess, newton_tol)
+        def evaluate(x, guess, predicted=None):
+            z, sig = preimage(H, x, guess, newton_tol)
+            if sig is None and predicted is not None:
+                # a fallback only, so that every preimage found by plain Newton is unchanged:
+                # Newton with a line search, from the branch's prediction, then from the guess
+                # (not in a bisection, which gets no prediction and locates a border or the
+                # branch's end with plain Newton)
+                for g in (predicted, guess):
+                    if g is not None:
+                        z, sig = preimage_guarded(H, x, g, newton_tol)
+                        if sig is not None:
+                            break
+            return z, sig
     branches, nodes, status, lengths, unresolved, flickers = [], [], [], [], 0, 0
     for sign in (1.0, -1.0):
         q0 = p + sign * delta * v
@@ -406,12 +417,21 @@ def manifold(model, point, kind: str = "unstable", *, params=None, section=None,
             # the preimage of q0, and the signature of the inverse's "evaluation" at q0: the
             # pieces the forward map applies at that preimage
             q1, sig0 = evaluate(q0, p + sign * delta / Lam * v)
+            d0 = delta
+            while sig0 is None and d0 > 1e-6 * delta:
+                # the fundamental domain [q0, H(q0)] has length delta / Lam: for a strongly
+                # contracting saddle (Lam ~ 1e-5) it reaches past a border close to the
+                # saddle (a near-grazing impact), where the linear guess is on other pieces;
+                # a start closer to the saddle keeps it on the saddle's own
+                d0 *= 0.1
+                q0 = p + sign * d0 * v
+                q1, sig0 = evaluate(q0, p + sign * d0 / Lam * v)
         if sig0 is None:
             raise ManifoldError(f"manifold(): the map cannot be evaluated next to the saddle "
                                 f"(at {q0.tolist()})")
         br = grow(evaluate, q0, q1, sig0, arclength=arclength, max_points=max_points,
                   max_step=max_step, tol=tol, jump_tol=max(tol, 1e-7),
-                  bound=1e8 * scale, min_dist=min_dist)
+                  bound=1e8 * scale, min_dist=min_dist, predict=kind == "stable")
         # the saddle itself begins the branch: the segment to q0 is the eigendirection
         pieces = br.pieces()
         pieces[0] = np.vstack([p[None, :], pieces[0]])
