@@ -65,6 +65,7 @@ ws2.plot(ax=ax)
 wu2.plot(ax=ax)
 ax.axvline(0, color="0.7", lw=0.8, zorder=0)
 ax.set(xlim=(-1, 0.6), ylim=(-0.4, 0.6), title="square-root map")
+ax.legend(loc="upper right", fontsize=8)
 
 # %%
 # The impact oscillator (zoo ``impact-oscillator``) at omega = 2.8: the period-one impacting
@@ -84,6 +85,7 @@ ws3.plot(ax=ax)
 wu3.plot(ax=ax)
 ax.plot(attractor[:, 0], attractor[:, 1], "o", ms=4, color="k", label="attractor")
 ax.set(title=r"impact oscillator, $\omega = 2.8$")
+ax.legend(loc="best", fontsize=8)
 fig.tight_layout()
 
 # %%
@@ -106,4 +108,5 @@ ws4.plot(ax=ax)
 ax.set(xlim=(p[0] - w, p[0] + w), ylim=(p[1] - w, p[1] + w),
        title=r"basins and $W^s$, $\omega = 3.05$")
 ax.locator_params(nbins=4)
+ax.legend(loc="upper right", fontsize=8)
 fig2.tight_layout()
