@@ -66,6 +66,7 @@ CITATIONS = {
     r"\bKrauskopf (&|and) Osinga\b": "krauskopf1998",
     r"\bHobson\b": "hobson1993",
     r"\bNusse (&|and) Yorke\b": "nusse1992",
+    r"\bGrebogi,\s+Ott\s+(&|and)\s+Yorke\b": "grebogi1983",
     r"\bSvahn & Dankowicz\b|\bSvahn and H\. Dankowicz\b": "svahn2008paperD",
     r"\bDankowicz and F\. Svahn\b|\bDankowicz & Svahn\b": "dankowicz2007paperB",
     r"\bSvahn, J\. Jerrelind\b": "svahn2009paperC",
