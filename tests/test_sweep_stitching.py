@@ -237,3 +237,13 @@ def test_a_wall_moved_onto_the_carried_state_pushes_it():
     assert np.all(ev[ds.sigma.values < -0.05] >= 1.0), ev
     x_end = ds.x_final.sel(direction="down", state="x").values
     assert np.all(x_end <= ds.sigma.values + 1e-8), x_end
+
+
+@pytest.mark.parametrize("model", ["sqrt-map", "impact-oscillator"])
+@pytest.mark.parametrize("section", [np.array([]), np.array(["stroboscopic"]), 3, None])
+def test_a_section_that_is_not_a_string_is_refused(model, section):
+    """Found by the slow fuzzer: an empty array as ``section`` of a map's sweep raised numpy's
+    ValueError (the comparison with 'stroboscopic' was element by element)."""
+    with pytest.raises(pwsdyn.ArgumentError, match="section"):
+        pwsdyn.sweep(model, list(pwsdyn.load_model(model).parameters)[0], [0.1, 0.2],
+                     section=section, progress=False, workers=1)

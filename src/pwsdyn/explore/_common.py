@@ -97,6 +97,10 @@ def check_run_kind(model, section: str, period, options: dict, caller: str) -> N
     """What a map or a flow accepts in a sweep or scan: a map records every iterate (no
     section, no integrator options); a flow needs a known section, a time unit (its forcing
     period or ``period``) and valid integrator options."""
+    if not isinstance(section, str):
+        # (compared with a string first, an array would be compared element by element)
+        raise ArgumentError(f"`section` must be 'stroboscopic' or the name of an event or "
+                            f"switch of model {model.name!r}, got {V.describe(section)}")
     if getattr(model, "is_map", False):
         if section != "stroboscopic":
             raise ArgumentError(f"model {model.name!r} is a map: every iterate is recorded; "
@@ -198,7 +202,7 @@ def failed_status(traj) -> Status:
 
 def check_section(model, section: str) -> None:
     """``section`` is 'stroboscopic' or the name of an event or switch of the flow ``model``."""
-    if section != "stroboscopic":
+    if not isinstance(section, str) or section != "stroboscopic":
         names = {e.name for e in model.events} | {s.name for s in model.switches}
         if not isinstance(section, str) or section not in names:
             raise ArgumentError(f"`section` must be 'stroboscopic' or an event of model "
