@@ -37,7 +37,6 @@ NORDMARK = {"name": "nordmark2", "kind": "map", "states": ["x", "y"],
 
 fig, axes = plt.subplots(1, 3, figsize=(13, 4.2))
 
-# %%
 # The border-collision normal form: a saddle in the left half-plane. Its unstable manifold is
 # straight up to the first image of the border crossing, then bends at every further image and
 # spirals onto the stable focus of the right piece.
@@ -53,7 +52,6 @@ ax.axvline(0, color="0.7", lw=0.8, zorder=0)
 ax.set(xlim=(-3, 3), ylim=(-2, 2.5), title="border-collision normal form")
 ax.legend(loc="upper right", fontsize=8)
 
-# %%
 # The square-root map: the unstable manifold crosses the border x = 0 and its image folds
 # back with a square-root singularity; the points are refined there automatically.
 saddle2 = pwsdyn.find_periodic_point(NORDMARK, [-0.1, 0.05])
@@ -67,7 +65,6 @@ ax.axvline(0, color="0.7", lw=0.8, zorder=0)
 ax.set(xlim=(-1, 0.6), ylim=(-0.4, 0.6), title="square-root map")
 ax.legend(loc="upper right", fontsize=8)
 
-# %%
 # The impact oscillator (zoo ``impact-oscillator``) at omega = 2.8: the period-one impacting
 # orbit is a flip saddle (multipliers about -2.96 and -0.22). Its manifolds on the
 # stroboscopic section, with the attractor the unstable manifold accumulates on (50 forcing
