@@ -11,9 +11,9 @@ unstable manifolds.
 * :class:`pwsdyn.ManifoldError`.
 """
 
-from ._crisis import Crisis, locate_crisis
+from ._crisis import Crisis, locate_crisis, locate_tangency
 from ._manifold import Manifold, manifold
 from ._points import ManifoldError, PeriodicPoint, find_periodic_point
 
 __all__ = ["Crisis", "Manifold", "ManifoldError", "PeriodicPoint", "find_periodic_point",
-           "locate_crisis", "manifold"]
+           "locate_crisis", "locate_tangency", "manifold"]
