@@ -14,6 +14,8 @@ infinity, which the brute-force check confirms.
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -228,11 +230,16 @@ def bcnf_alive(tL, n, dL=0.3, tR=-1.8, dR=0.3, mu=1.0, count=300):
     return ok.mean()
 
 
-def test_a_planar_maps_boundary_crisis_against_its_closed_form_and_brute_force():
+@pytest.fixture(scope="module")
+def planar_crisis():
+    return locate_crisis(bcnf_planar(1.8), "tL", (1.8, 2.0), x0=[0.1, 0.0], steps=11)
+
+
+def test_a_planar_maps_boundary_crisis_against_its_closed_form_and_brute_force(planar_crisis):
     from scipy.optimize import brentq
 
     tLc = brentq(lambda t: bcnf_contact(t)[0], 1.85, 1.95, xtol=1e-15)
-    c = locate_crisis(bcnf_planar(1.8), "tL", (1.8, 2.0), x0=[0.1, 0.0], steps=11)
+    c = planar_crisis
     # piecewise-linear: the fold T is a vertex of the manifold computed as the image of the
     # border point (its bisection to a few ulp) and W^s is straight there, so the contact
     # is exact to rounding; brentq's xtol is 1e-12: 1e-10 (the acceptance is 1e-6)
@@ -271,3 +278,36 @@ def test_locate_tangency_refuses_what_it_cannot_do():
     # no contact over the span: the manifolds stay apart
     with pytest.raises(ManifoldError):
         pwsdyn.locate_tangency(model, "tL", (1.8, 1.85), [-2.0, 0.6])
+
+
+# ======================================================================================
+# the result
+# ======================================================================================
+
+@pytest.mark.parametrize("which", ["tent", "planar"])
+def test_a_crisis_round_trips_through_netcdf(which, planar_crisis, tmp_path):
+    import xarray as xr
+
+    from pwsdyn.errors import OutputExistsError
+
+    c = planar_crisis if which == "planar" else locate_crisis(
+        TENT, "b", (2.0, 3.5), x0=[0.1], params={"a": 1.5, "mu": 1.0})
+    path = c.save(tmp_path / "c.nc")
+    with pytest.raises(OutputExistsError):
+        c.save(path)
+    with xr.open_dataset(path) as ds:
+        got = ds.load()
+    want = c.to_dataset()
+    for name in want.data_vars:
+        assert np.array_equal(got[name].values, want[name].values), name
+    for k, v in want.attrs.items():
+        assert np.all(got.attrs[k] == v), k
+    assert got.attrs["value"] == c.value and got.attrs["crisis_kind"] == "boundary"
+    assert got.attrs["pwsdyn_type"] == "crisis" and "model_text" in got.attrs
+    assert np.array_equal(got["point"].values, c.point)
+    if which == "planar":
+        Wu, Ws = c.manifolds
+        assert got["stable_x"].shape == (Ws.n_points, 2)
+        assert np.array_equal(got["unstable_saddle"].values, c.unstable.x)
+    else:
+        assert json.loads(got.attrs["edge"])[0] == c.edge[0] and "stable_x" not in got

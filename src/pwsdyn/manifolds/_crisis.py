@@ -31,6 +31,7 @@ bounded value among those that change sign in the bracket.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.optimize import brentq
@@ -42,6 +43,13 @@ from ..model.spec import as_model
 from ._points import ManifoldError, PeriodicPoint, find_periodic_point
 from ._sections import MapSection
 from ._tangency import Contact, as_point, root as contact_root
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+    import xarray as xr
+
+    from .._typing import PathLike
 
 
 @dataclass(eq=False)
@@ -102,6 +110,79 @@ class Crisis:
     def __repr__(self):
         return (f"Crisis({self.model.name!r}, {self.kind}, {self.param}={self.value:.12g}, "
                 f"point={self.point.tolist()}, saddle period {self.saddle.period})")
+
+    def to_dataset(self) -> "xr.Dataset":
+        """The crisis as an :class:`xarray.Dataset`: the contact ``point``, the ``saddle``
+        (its cycle and multipliers), the contact function's evaluations (``history_param``,
+        ``history_contact``), for a planar map the other saddle (``unstable_saddle``) and the
+        two manifolds' points at ``value`` (``unstable_x``, ``stable_x`` with their
+        ``*_piece`` index, all pieces one after the other); the value, kind, bracket and
+        parameters in the attributes with the provenance of every pwsdyn result (model
+        text, versions)."""
+        import xarray as xr
+
+        from .._netcdf import cf_global_attrs, json_text, state_coords
+
+        mult = np.atleast_1d(np.asarray(self.saddle.multipliers, dtype=complex))
+        hist = np.array(self.history, dtype=float).reshape(-1, 2)
+        data = {
+            "point": (("state",), np.asarray(self.point, dtype=float),
+                      {"long_name": "where the attractor (or unstable manifold) touches the "
+                                    "saddle's stable set"}),
+            "saddle": (("state",), np.asarray(self.saddle.x, dtype=float),
+                       {"long_name": "the saddle whose stable set is touched"}),
+            "saddle_cycle": (("cycle", "state"), np.asarray(self.saddle.cycle, dtype=float),
+                             {"long_name": "the points of the saddle's cycle"}),
+            "multiplier_real": (("multiplier",), mult.real,
+                                {"long_name": "real part of the saddle's multiplier",
+                                 "units": "1"}),
+            "multiplier_imag": (("multiplier",), mult.imag,
+                                {"long_name": "imaginary part of the saddle's multiplier",
+                                 "units": "1"}),
+            "history_param": (("evaluation",), hist[:, 0],
+                              {"long_name": f"{self.param} at each evaluation of the contact "
+                                            "function"}),
+            "history_contact": (("evaluation",), hist[:, 1],
+                                {"long_name": "the contact function (positive before the "
+                                              "crisis)"}),
+        }
+        if self.unstable is not None:
+            data["unstable_saddle"] = (("state",), np.asarray(self.unstable.x, dtype=float),
+                                       {"long_name": "the saddle whose unstable manifold "
+                                                     "touches"})
+        for m, name in zip(self.manifolds, ("unstable", "stable")):
+            pieces = m.pieces
+            data[f"{name}_x"] = ((f"{name}_point", "state"), np.concatenate(pieces),
+                                 {"long_name": f"point of the {name} manifold at the crisis"})
+            data[f"{name}_piece"] = ((f"{name}_point",), np.concatenate(
+                [np.full(len(q), k, dtype=np.int64) for k, q in enumerate(pieces)]),
+                {"long_name": "piece index (a polyline each)"})
+        ds = xr.Dataset(data, coords=state_coords(self.model))
+        ds.attrs.update(cf_global_attrs(
+            self.model, "crisis", f"pwsdyn {self.kind} crisis of model {self.model.name}",
+            "located from the geometry: the root of a contact function between the attractor "
+            "and a saddle's stable set (pwsdyn.locate_crisis, pwsdyn.locate_tangency)"))
+        ds.attrs.update({
+            "crisis_kind": self.kind, "param": self.param, "value": float(self.value),
+            "bracket": json_text([float(v) for v in self.bracket]),
+            "parameters": json_text({k: float(v) for k, v in self.saddle.params.items()}),
+            "saddle_period": int(self.saddle.period),
+            "saddle_pieces": json_text(list(self.saddle.pieces)),
+        })
+        if self.unstable is not None:
+            ds.attrs["unstable_period"] = int(self.unstable.period)
+        if self.edge is not None:
+            ds.attrs["edge"] = json_text([int(self.edge[0]), float(self.edge[1])])
+        if self.preimage is not None:
+            ds.attrs["preimage"] = int(self.preimage)
+        return ds
+
+    def save(self, path: PathLike, overwrite: bool = False) -> Path:
+        """Write :meth:`to_dataset` to a NetCDF file; an existing file is refused
+        (:class:`~pwsdyn.OutputExistsError`) unless ``overwrite=True``."""
+        from .._netcdf import save_dataset
+
+        return save_dataset(self.to_dataset(), path, overwrite=overwrite)
 
 
 def _attractor(sec: MapSection, x, transient: int, iterations: int, escape: float):
