@@ -311,3 +311,26 @@ def test_a_crisis_round_trips_through_netcdf(which, planar_crisis, tmp_path):
         assert np.array_equal(got["unstable_saddle"].values, c.unstable.x)
     else:
         assert json.loads(got.attrs["edge"])[0] == c.edge[0] and "stable_x" not in got
+
+
+def test_the_crisis_figure_has_every_part_in_its_legend(planar_crisis):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    from pwsdyn.plot import plot_crisis
+
+    A = np.random.default_rng(1).normal(size=(50, 2)) * 0.1
+    fig = plot_crisis(planar_crisis, attractor=A)
+    ax = fig.axes[0]
+    labels = {t.get_text() for t in ax.get_legend().get_texts()}
+    assert {"attractor", "contact", "saddle (period 1)",
+            "stable manifold of the boundary saddle"} <= labels
+    drawn = {ln.get_label() for ln in ax.get_lines() if not ln.get_label().startswith("_")}
+    assert drawn <= labels
+    # into the user's axes: that figure is returned
+    mine = Figure()
+    assert plot_crisis(planar_crisis, ax=mine.subplots()) is mine
+    with pytest.raises(ArgumentError):
+        plot_crisis(object())
