@@ -186,7 +186,8 @@ class Contact:
                     len(ok_u) or len(ok_s)):
                 break
             radius *= 0.5
-            if radius < 1.01 * d0:
+            # d0 may be zero (the curves already cross at a vertex): the halving must end
+            if radius < 1.01 * d0 or radius < 1e-12 * (1.0 + float(np.max(np.abs(c)))):
                 raise ManifoldError("the manifolds meet on both sides of each other near "
                                     "their nearest approach")
         self.sigma = (np.sign(ok_u[0]) if len(ok_u) else 1.0,
