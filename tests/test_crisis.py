@@ -14,6 +14,8 @@ infinity, which the brute-force check confirms.
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -161,12 +163,174 @@ def test_the_cubic_maps_boundary_crisis_at_r_3_on_the_period_two_saddle():
     assert c.saddle.period == 2 and abs(abs(c.saddle.x[0]) - 2.0) < 1e-10
 
 
-def test_no_crisis_in_the_span_and_a_two_dimensional_map_are_reported():
+def test_no_crisis_in_the_span_and_a_three_dimensional_map_are_reported():
     with pytest.raises(ManifoldError, match="stays bounded"):
         locate_crisis(TENT, "b", (2.0, 2.5), x0=[0.1], steps=3, transient=100,
                       iterations=100)
-    plane = {"name": "plane", "kind": "map", "states": ["x", "y"], "parameters": {"mu": 1.0},
-             "pieces": [{"name": "P", "map": {"x": "mu - x*x + y", "y": "0.3*x"}}]}
-    with pytest.raises(ArgumentError, match="one-dimensional"):
-        locate_crisis(plane, "mu", (1.0, 2.0), x0=[0.0, 0.0])
+    space = {"name": "space", "kind": "map", "states": ["x", "y", "z"],
+             "parameters": {"mu": 1.0},
+             "pieces": [{"name": "P", "map": {"x": "mu - x*x + y", "y": "0.3*x",
+                                              "z": "0.5*z"}}]}
+    with pytest.raises(ArgumentError, match="two-dimensional"):
+        locate_crisis(space, "mu", (1.0, 2.0), x0=[0.0, 0.0, 0.0])
     assert pwsdyn.locate_crisis is locate_crisis and pwsdyn.Crisis is Crisis
+
+
+# ======================================================================================
+# planar maps: the border-collision normal form's boundary crisis, a homoclinic tangency
+# ======================================================================================
+#
+# x -> A_L x + mu e1 (x1 <= 0), A_R x + mu e1 (x1 > 0), A = [[tau, 1], [-delta, 0]] (Nusse &
+# Yorke 1992), with tau_L > 1 + delta_L and tau_R < -(1 + delta_R): a chaotic attractor around
+# the flip saddle R* in R; the saddle L* = mu (1, -delta_L) / (1 - tau_L + delta_L) in L, with
+# multipliers l1 > 1 > l2 > 0 (roots of l^2 - tau_L l + delta_L), bounds its basin. Derived
+# here: the stable line of L*, through L* along w = (1, -delta_L / l2), is W^s(L*) within L;
+# its part below the x1-axis has the preimage F_R^{-1} in R (F_R maps R below the axis,
+# F_L maps L above it). The unstable line of L*, along u = (1, -delta_L / l1), reaches the
+# border at B = L* - x_L* u; both pieces send B to T = (B_2 + mu, 0), a fold of W^u(L*) on the
+# x1-axis, the attractor's rightmost tip. T lies on F_R^{-1}(stable line) exactly when
+# Q = A_R T + mu e1 lies on the stable line: the contact g = (w x (Q - L*)) / |w| = 0, a
+# homoclinic tangency of L*, is the crisis (beyond it the tip crosses into the escaping side).
+# Closed form up to one scalar root, found here by brentq at xtol 1e-15.
+
+def bcnf_planar(tL, dL=0.3, tR=-1.8, dR=0.3, mu=1.0):
+    return {"name": "bcnf", "kind": "map", "states": ["x", "y"],
+            "parameters": {"tL": tL, "dL": dL, "tR": tR, "dR": dR, "mu": mu},
+            "pieces": [{"name": "L", "condition": "x <= 0",
+                        "map": {"x": "tL*x + y + mu", "y": "-dL*x"}},
+                       {"name": "R", "map": {"x": "tR*x + y + mu", "y": "-dR*x"}}]}
+
+
+def bcnf_contact(tL, dL=0.3, tR=-1.8, dR=0.3, mu=1.0):
+    """The signed distance of Q = F(T) from the stable line of L* (see above), and L*."""
+    AR = np.array([[tR, 1.0], [-dR, 0.0]])
+    s = np.sqrt(tL * tL - 4 * dL)
+    l1, l2 = (tL + s) / 2, (tL - s) / 2
+    xL = mu / (1 - tL + dL)
+    L = np.array([xL, -dL * xL])
+    u, w = np.array([1.0, -dL / l1]), np.array([1.0, -dL / l2])
+    B = L - xL * u
+    T = np.array([B[1] + mu, 0.0])
+    d = AR @ T + [mu, 0.0] - L
+    return (w[0] * d[1] - w[1] * d[0]) / np.linalg.norm(w), L, T
+
+
+def bcnf_alive(tL, n, dL=0.3, tR=-1.8, dR=0.3, mu=1.0, count=300):
+    """Brute force: iterate ``count`` initial conditions around R* for ``n`` iterations; the
+    fraction that stayed bounded."""
+    AL = np.array([[tL, 1.0], [-dL, 0.0]])
+    AR = np.array([[tR, 1.0], [-dR, 0.0]])
+    x = np.random.default_rng(0).uniform(-0.3, 0.3, (count, 2)) + [0.3, -0.1]
+    ok = np.ones(count, bool)
+    for _ in range(n):
+        y = np.where((x[:, 0] <= 0)[:, None], x @ AL.T, x @ AR.T)
+        y[:, 0] += mu
+        ok &= np.abs(y[:, 0]) < 1e6
+        x = np.where(ok[:, None], y, 0.0)
+    return ok.mean()
+
+
+@pytest.fixture(scope="module")
+def planar_crisis():
+    return locate_crisis(bcnf_planar(1.8), "tL", (1.8, 2.0), x0=[0.1, 0.0], steps=11)
+
+
+def test_a_planar_maps_boundary_crisis_against_its_closed_form_and_brute_force(planar_crisis):
+    from scipy.optimize import brentq
+
+    tLc = brentq(lambda t: bcnf_contact(t)[0], 1.85, 1.95, xtol=1e-15)
+    c = planar_crisis
+    # piecewise-linear: the fold T is a vertex of the manifold computed as the image of the
+    # border point (its bisection to a few ulp) and W^s is straight there, so the contact
+    # is exact to rounding; brentq's xtol is 1e-12: 1e-10 (the acceptance is 1e-6)
+    assert c.kind == "boundary" and abs(c.value - tLc) < 1e-10
+    assert c.bracket[0] < tLc < c.bracket[1]
+    _, L, T = bcnf_contact(c.value)
+    assert c.saddle.pieces == ("L",) and np.allclose(c.saddle.x, L, atol=1e-12)
+    assert c.unstable is c.saddle                   # a homoclinic tangency
+    assert np.linalg.norm(c.point - T) < 1e-9       # the fold touches W^s(L*)
+    Wu, Ws = c.manifolds
+    assert Wu.kind == "unstable" and Ws.kind == "stable" and Ws.distance(T)[0] < 1e-9
+    # brute force: bounded for 20000 iterations just below, all gone just above (escape
+    # times grow as the crisis is approached, so the margin above is wider)
+    assert bcnf_alive(tLc - 5e-3, 20000) == 1.0
+    assert bcnf_alive(tLc + 2e-2, 20000) == 0.0
+
+
+def test_a_homoclinic_tangency_in_another_parameter_against_its_closed_form():
+    from scipy.optimize import brentq
+
+    tRc = brentq(lambda t: bcnf_contact(1.89, tR=t)[0], -1.75, -1.85, xtol=1e-15)
+    model = bcnf_planar(1.89, tR=-1.75)
+    L = pwsdyn.find_periodic_point(model, [-1.7, 0.5])
+    c = pwsdyn.locate_tangency(model, "tR", (-1.75, -1.85), L, tol=1e-13)
+    # exact contact (see above): brentq's xtol 1e-13 and rounding
+    assert c.kind == "tangency" and abs(c.value - tRc) < 1e-11
+    assert c.saddle is c.unstable and len(c.history) >= 3
+
+
+def test_locate_tangency_refuses_what_it_cannot_do():
+    with pytest.raises(ArgumentError):
+        pwsdyn.locate_tangency(TENT, "b", (2.0, 3.0), [0.1])
+    model = bcnf_planar(1.8)
+    with pytest.raises(ArgumentError):
+        pwsdyn.locate_tangency(model, "nope", (1.8, 1.85), [-2.0, 0.6])
+    # no contact over the span: the manifolds stay apart
+    with pytest.raises(ManifoldError):
+        pwsdyn.locate_tangency(model, "tL", (1.8, 1.85), [-2.0, 0.6])
+
+
+# ======================================================================================
+# the result
+# ======================================================================================
+
+@pytest.mark.parametrize("which", ["tent", "planar"])
+def test_a_crisis_round_trips_through_netcdf(which, planar_crisis, tmp_path):
+    import xarray as xr
+
+    from pwsdyn.errors import OutputExistsError
+
+    c = planar_crisis if which == "planar" else locate_crisis(
+        TENT, "b", (2.0, 3.5), x0=[0.1], params={"a": 1.5, "mu": 1.0})
+    path = c.save(tmp_path / "c.nc")
+    with pytest.raises(OutputExistsError):
+        c.save(path)
+    with xr.open_dataset(path) as ds:
+        got = ds.load()
+    want = c.to_dataset()
+    for name in want.data_vars:
+        assert np.array_equal(got[name].values, want[name].values), name
+    for k, v in want.attrs.items():
+        assert np.all(got.attrs[k] == v), k
+    assert got.attrs["value"] == c.value and got.attrs["crisis_kind"] == "boundary"
+    assert got.attrs["pwsdyn_type"] == "crisis" and "model_text" in got.attrs
+    assert np.array_equal(got["point"].values, c.point)
+    if which == "planar":
+        Wu, Ws = c.manifolds
+        assert got["stable_x"].shape == (Ws.n_points, 2)
+        assert np.array_equal(got["unstable_saddle"].values, c.unstable.x)
+    else:
+        assert json.loads(got.attrs["edge"])[0] == c.edge[0] and "stable_x" not in got
+
+
+def test_the_crisis_figure_has_every_part_in_its_legend(planar_crisis):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    from pwsdyn.plot import plot_crisis
+
+    A = np.random.default_rng(1).normal(size=(50, 2)) * 0.1
+    fig = plot_crisis(planar_crisis, attractor=A)
+    ax = fig.axes[0]
+    labels = {t.get_text() for t in ax.get_legend().get_texts()}
+    assert {"attractor", "contact", "saddle (period 1)",
+            "stable manifold of the boundary saddle"} <= labels
+    drawn = {ln.get_label() for ln in ax.get_lines() if not ln.get_label().startswith("_")}
+    assert drawn <= labels
+    # into the user's axes: that figure is returned
+    mine = Figure()
+    assert plot_crisis(planar_crisis, ax=mine.subplots()) is mine
+    with pytest.raises(ArgumentError):
+        plot_crisis(object())

@@ -38,7 +38,7 @@ _LAZY = {
     "discontinuity_map": "grazing", "design_control": "grazing",
     "Manifold": "manifolds", "ManifoldError": "manifolds", "PeriodicPoint": "manifolds",
     "find_periodic_point": "manifolds", "manifold": "manifolds",
-    "Crisis": "manifolds", "locate_crisis": "manifolds",
+    "Crisis": "manifolds", "locate_crisis": "manifolds", "locate_tangency": "manifolds",
 }
 
 __all__ = ["ArgumentError", "ExpressionError", "ModelError", "OutputExistsError", "PwsdynError",
@@ -51,7 +51,8 @@ if TYPE_CHECKING:  # what static checkers and IDEs see; at run time see __getatt
     from .grazing import design_control, discontinuity_map
     from .integrate import EventRecord, Trajectory, simulate
     from .manifolds import (Crisis, Manifold, ManifoldError, PeriodicPoint,
-                            find_periodic_point, locate_crisis, manifold)
+                            find_periodic_point, locate_crisis, locate_tangency,
+                            manifold)
     from .model import Model, compile_model, load_model, with_discrete_control, zoo_names
     from .orbits import OrbitError, PeriodicOrbit, RecurrenceWarning, find_periodic_orbit
     from .stability import (SectionNotReachedError, floquet_multipliers, monodromy,

@@ -62,13 +62,13 @@ controls are shown as escapes (``\\x1b``, ``\\u202e``), so a model cannot drive 
 
 The package: ``_output`` (terminal output, output files), ``_common`` (the shared options
 and the preamble), ``_main`` (the group and ``models``) and one module per family of commands
-(``_simulate``, ``_explore``, ``_scan``, ``_orbits``, ``_manifold``), each registering its
-commands on ``main``.
+(``_simulate``, ``_explore``, ``_scan``, ``_orbits``, ``_manifold``, ``_crisis``), each
+registering its commands on ``main``.
 """
 
 from __future__ import annotations
 
-from . import _explore, _manifold, _orbits, _scan, _simulate  # noqa: F401  (commands)
+from . import _crisis, _explore, _manifold, _orbits, _scan, _simulate  # noqa: F401  (commands)
 from ._common import FALLBACK_T_END
 from ._main import main
 from ._output import NETCDF_SUFFIXES, _safe  # noqa: F401  (_safe: the one sanitiser)

@@ -186,7 +186,8 @@ class Prepared:
 
 #: How a ``--param NAME`` without a value is read: not at all (an error), as the swept
 #: parameter of ``sweep`` (which also takes ``--sweep NAME``) or the continued one.
-_NAMED = {None: None, "swept": "--sweep/--param", "continued": "--param"}
+_NAMED = {None: None, "swept": "--sweep/--param", "continued": "--param",
+          "varied": "--param"}
 
 
 def prepare(model, params, sets, x0, *, outputs=(), force: bool = False,
@@ -195,8 +196,8 @@ def prepare(model, params, sets, x0, *, outputs=(), force: bool = False,
 
     ``params``, ``sets`` and ``x0`` are the values of ``-p/--param``, ``-s/--set`` and
     ``--x0``; ``outputs`` holds ``(option, path, kind)`` for :func:`_check_outputs`;
-    ``named`` (``"swept"`` or ``"continued"``) lets one ``--param NAME`` name a parameter
-    (``swept`` is ``sweep --sweep NAME``); ``options`` are the integrator options of the
+    ``named`` (``"swept"``, ``"continued"`` or ``"varied"``) lets one ``--param NAME`` name a
+    parameter (``swept`` is ``sweep --sweep NAME``); ``options`` are the integrator options of the
     command (None: not given). Bad arguments are click errors (exit 2); a model that cannot
     be loaded, or an output file that cannot be written, is one ``Error:`` line (exit 1).
     """
@@ -212,7 +213,7 @@ def prepare(model, params, sets, x0, *, outputs=(), force: bool = False,
             if named == "swept":
                 raise click.UsageError("Missing option '--sweep' (the swept parameter: "
                                        "--sweep NAME, or --param NAME)")
-            raise click.UsageError("name the continued parameter once: --param NAME")
+            raise click.UsageError(f"name the {named} parameter once: --param NAME")
         if len(names) > 1:
             raise click.BadParameter(f"one {named} parameter, got {names}", param_hint=hint)
         name = names[0]
@@ -286,6 +287,7 @@ _NAMED_HELP = {
     "swept": " A NAME without =VALUE names the swept parameter instead (the same as "
              "--sweep NAME).",
     "continued": " A NAME without =VALUE names the continued parameter (required, once).",
+    "varied": " A NAME without =VALUE names the varied parameter (required, once).",
 }
 
 

@@ -1,5 +1,8 @@
-"""Boundary and interior crises of one-dimensional piecewise-smooth maps, located from the
-geometry.
+"""Boundary and interior crises of piecewise-smooth maps, and tangencies of their manifolds,
+located from the geometry.
+
+One-dimensional maps
+--------------------
 
 An attractor of a 1-D map is bounded by iterates of its border points (where the piece
 changes) and of its smooth pieces' critical points: its edges are ``F^k(c)``. Its basin is
@@ -12,20 +15,41 @@ they reach the fixed point between them). Either way the contact function
 there and is root-found by ``scipy.optimize.brentq``. Escape (or a jump in the extent) is
 only used to bracket the value on a coarse sweep; the value itself never comes from escape
 times, whose scaling near a crisis makes them a poor measure of it.
+
+Two-dimensional maps
+--------------------
+The attractor is the closure of a saddle's unstable manifold within it and its basin is bounded
+by the stable manifold of a saddle: a boundary crisis is the first contact of the two curves,
+a heteroclinic tangency (a homoclinic one when the boundary saddle's own unstable manifold
+bounds the attractor; Grebogi, Ott & Yorke 1983). After the bracketing sweep the saddles of
+the given periods around the attractor are found, and for every pair (``P``, ``S``), ``S`` off
+the attractor, the signed contact function of ``W^u(P)`` and ``W^s(S)``
+(``pwsdyn.manifolds._tangency``) is tried; the crisis is the root nearest the sweep's last
+bounded value among those that change sign in the bracket.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.optimize import brentq
+from scipy.spatial import cKDTree
 
 from .. import _validate as V
 from ..errors import ArgumentError
 from ..model.spec import as_model
 from ._points import ManifoldError, PeriodicPoint, find_periodic_point
 from ._sections import MapSection
+from ._tangency import Contact, as_point, root as contact_root
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+    import xarray as xr
+
+    from .._typing import PathLike
 
 
 @dataclass(eq=False)
@@ -40,24 +64,34 @@ class Crisis:
     value : float
         The parameter at which the attractor's edge touches the saddle's stable set.
     kind : str
-        ``"boundary"`` (the attractor is destroyed beyond ``value``: its orbit leaves) or
-        ``"interior"`` (it suddenly widens: its extent jumps).
+        ``"boundary"`` (the attractor is destroyed beyond ``value``: its orbit leaves),
+        ``"interior"`` (it suddenly widens: its extent jumps), or ``"tangency"`` (from
+        :func:`pwsdyn.locate_tangency`: a homoclinic or heteroclinic tangency, no attractor
+        followed).
     saddle : PeriodicPoint
-        The repelling periodic point whose stable set is touched, at ``value``, with its
-        multipliers.
+        The saddle (the repelling periodic point of a 1-D map) whose stable set is touched, at
+        ``value``, with its multipliers.
     point : numpy.ndarray, shape (n,)
         Where they touch: the point of the saddle's stable set (the saddle itself or one of its
-        preimages) met by the attractor's edge, at ``value``.
+        preimages) met by the attractor's edge, at ``value``; for a planar map the vertex of
+        one manifold that reaches the other.
     bracket : tuple of float
         The sweep's value before the crisis was seen and the one at which it was (the orbit
-        left, or the extent jumped).
-    edge : tuple
-        ``(k, c)``: the edge is the ``k``-th image of the border or critical point ``c`` (at
-        ``value``).
-    preimage : int
-        ``0`` when the edge touches the saddle itself, ``1`` when it touches a preimage of it.
+        left, or the extent jumped); the ``span`` of a tangency.
+    edge : tuple or None
+        1-D maps: ``(k, c)``, the edge is the ``k``-th image of the border or critical point
+        ``c`` (at ``value``).
+    preimage : int or None
+        1-D maps: ``0`` when the edge touches the saddle itself, ``1`` when it touches a
+        preimage of it.
     history : list of tuple
         ``(parameter, contact)`` of every evaluation of the contact function.
+    unstable : PeriodicPoint or None
+        Planar maps: the saddle whose unstable manifold touches ``saddle``'s stable manifold
+        (``saddle`` itself for a homoclinic tangency).
+    manifolds : tuple
+        Planar maps: the :class:`~pwsdyn.Manifold` objects ``(W^u(unstable), W^s(saddle))``
+        at ``value``.
     """
 
     model: object
@@ -67,13 +101,88 @@ class Crisis:
     saddle: PeriodicPoint
     point: np.ndarray
     bracket: tuple
-    edge: tuple
-    preimage: int
+    edge: tuple | None = None
+    preimage: int | None = None
     history: list = field(default_factory=list)
+    unstable: PeriodicPoint | None = None
+    manifolds: tuple = ()
 
     def __repr__(self):
         return (f"Crisis({self.model.name!r}, {self.kind}, {self.param}={self.value:.12g}, "
                 f"point={self.point.tolist()}, saddle period {self.saddle.period})")
+
+    def to_dataset(self) -> "xr.Dataset":
+        """The crisis as an :class:`xarray.Dataset`: the contact ``point``, the ``saddle``
+        (its cycle and multipliers), the contact function's evaluations (``history_param``,
+        ``history_contact``), for a planar map the other saddle (``unstable_saddle``) and the
+        two manifolds' points at ``value`` (``unstable_x``, ``stable_x`` with their
+        ``*_piece`` index, all pieces one after the other); the value, kind, bracket and
+        parameters in the attributes with the provenance of every pwsdyn result (model
+        text, versions)."""
+        import xarray as xr
+
+        from .._netcdf import cf_global_attrs, json_text, state_coords
+
+        mult = np.atleast_1d(np.asarray(self.saddle.multipliers, dtype=complex))
+        hist = np.array(self.history, dtype=float).reshape(-1, 2)
+        data = {
+            "point": (("state",), np.asarray(self.point, dtype=float),
+                      {"long_name": "where the attractor (or unstable manifold) touches the "
+                                    "saddle's stable set"}),
+            "saddle": (("state",), np.asarray(self.saddle.x, dtype=float),
+                       {"long_name": "the saddle whose stable set is touched"}),
+            "saddle_cycle": (("cycle", "state"), np.asarray(self.saddle.cycle, dtype=float),
+                             {"long_name": "the points of the saddle's cycle"}),
+            "multiplier_real": (("multiplier",), mult.real,
+                                {"long_name": "real part of the saddle's multiplier",
+                                 "units": "1"}),
+            "multiplier_imag": (("multiplier",), mult.imag,
+                                {"long_name": "imaginary part of the saddle's multiplier",
+                                 "units": "1"}),
+            "history_param": (("evaluation",), hist[:, 0],
+                              {"long_name": f"{self.param} at each evaluation of the contact "
+                                            "function"}),
+            "history_contact": (("evaluation",), hist[:, 1],
+                                {"long_name": "the contact function (positive before the "
+                                              "crisis)"}),
+        }
+        if self.unstable is not None:
+            data["unstable_saddle"] = (("state",), np.asarray(self.unstable.x, dtype=float),
+                                       {"long_name": "the saddle whose unstable manifold "
+                                                     "touches"})
+        for m, name in zip(self.manifolds, ("unstable", "stable")):
+            pieces = m.pieces
+            data[f"{name}_x"] = ((f"{name}_point", "state"), np.concatenate(pieces),
+                                 {"long_name": f"point of the {name} manifold at the crisis"})
+            data[f"{name}_piece"] = ((f"{name}_point",), np.concatenate(
+                [np.full(len(q), k, dtype=np.int64) for k, q in enumerate(pieces)]),
+                {"long_name": "piece index (a polyline each)"})
+        ds = xr.Dataset(data, coords=state_coords(self.model))
+        ds.attrs.update(cf_global_attrs(
+            self.model, "crisis", f"pwsdyn {self.kind} crisis of model {self.model.name}",
+            "located from the geometry: the root of a contact function between the attractor "
+            "and a saddle's stable set (pwsdyn.locate_crisis, pwsdyn.locate_tangency)"))
+        ds.attrs.update({
+            "crisis_kind": self.kind, "param": self.param, "value": float(self.value),
+            "bracket": json_text([float(v) for v in self.bracket]),
+            "parameters": json_text({k: float(v) for k, v in self.saddle.params.items()}),
+            "saddle_period": int(self.saddle.period),
+            "saddle_pieces": json_text(list(self.saddle.pieces)),
+        })
+        if self.unstable is not None:
+            ds.attrs["unstable_period"] = int(self.unstable.period)
+        if self.edge is not None:
+            ds.attrs["edge"] = json_text([int(self.edge[0]), float(self.edge[1])])
+        if self.preimage is not None:
+            ds.attrs["preimage"] = int(self.preimage)
+        return ds
+
+    def save(self, path: PathLike, overwrite: bool = False) -> Path:
+        """Write :meth:`to_dataset` to a NetCDF file; an existing file is refused
+        (:class:`~pwsdyn.OutputExistsError`) unless ``overwrite=True``."""
+        from .._netcdf import save_dataset
+
+        return save_dataset(self.to_dataset(), path, overwrite=overwrite)
 
 
 def _attractor(sec: MapSection, x, transient: int, iterations: int, escape: float):
@@ -306,9 +415,10 @@ def _locate(ctx, bounded, p_hi, periods, tol, back: int = 4):
 
 def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float = 1e-12,
                   steps: int = 41, transient: int = 2000, iterations: int = 2000,
-                  periods=(1, 2), escape: float = 1e8, jump: float = 1.5) -> "Crisis":
-    """A boundary or interior crisis of a one-dimensional map's attractor, located from the
-    geometry.
+                  periods=(1, 2), escape: float = 1e8, jump: float = 1.5,
+                  arclength: float | None = None, manifold_tol: float = 1e-9) -> "Crisis":
+    """A boundary or interior crisis of a one-dimensional map's attractor, or a boundary crisis
+    of a planar map's attractor, located from the geometry.
 
     The attractor reached from ``x0`` is followed through ``span`` on ``steps`` values (each
     started from the last state of the previous one, as :func:`pwsdyn.sweep` does for maps);
@@ -323,10 +433,17 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
     does (an orbit slow to find the way out leaves only well past the crisis), earlier values
     of the sweep are tried as the bracket's lower end.
 
+    A planar map's attractor is followed in the same way (only its destruction, a boundary
+    crisis, is bracketed). There, its saddles of the given ``periods`` are found (Newton from
+    points of the attractor and of a grid around it), and for each pair ``(P, S)`` of them,
+    ``S`` not on the attractor, the contact of ``W^u(P)`` with ``W^s(S)`` (both grown to
+    ``arclength`` with :func:`pwsdyn.manifold`) is located as by
+    :func:`pwsdyn.locate_tangency`; the crisis is the root nearest the bracket's lower end.
+
     Parameters
     ----------
     model : MapModel, str, path or dict
-        A one-dimensional map model (``kind = "map"``).
+        A one- or two-dimensional map model (``kind = "map"``).
     param : str
         The parameter varied.
     span : (float, float)
@@ -350,6 +467,13 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
         widening (also by more than a tenth of the attractor's magnitude, so that a period
         doubling is not one); a widening with no contact in its bracket (a period doubling, a
         window's end at a saddle of another period) is passed over.
+    arclength : float, optional
+        Planar maps: the length of each branch of the manifolds (default four times the
+        attractor's diameter).
+    manifold_tol : float
+        Planar maps: the manifolds' ``tol`` (the deviation of their chords from the curves),
+        which bounds the error of a smooth contact; a polygonal one (a piecewise-linear map's)
+        is exact.
 
     Returns
     -------
@@ -370,9 +494,9 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
     -0.25
     """
     model = as_model(model, kind="map", caller="locate_crisis()")
-    if model.n_states != 1:
-        raise ArgumentError("locate_crisis(): only one-dimensional maps are handled so far, "
-                            f"{model.name!r} has {model.n_states} states")
+    if model.n_states > 2:
+        raise ArgumentError("locate_crisis(): one- and two-dimensional maps are handled so "
+                            f"far, {model.name!r} has {model.n_states} states")
     if param not in model.parameters:
         raise ArgumentError(f"locate_crisis(): {model.name!r} has no parameter {param!r}")
     tol = V.positive("tol", tol)
@@ -384,7 +508,12 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
     x = V.state_vector(model, x0).astype(float)
     a, b = (float(v) for v in span)
     jump = V.positive("jump", jump)
+    if arclength is not None:
+        arclength = V.positive("arclength", arclength)
     ctx = _Context(model, param, params)
+    if model.n_states == 2:
+        return _locate_planar(ctx, a, b, x, tol, steps, transient, iterations, periods,
+                              escape, arclength, manifold_tol)
     values = np.linspace(a, b, steps)
     bounded = []        # (value, samples) of the sweep so far
     for p in values:
@@ -421,3 +550,222 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
     return Crisis(model=model, param=param, value=float(root), kind=kind, saddle=sad,
                   point=np.array([point]), bracket=(p_lo, float(p)), edge=(cand.k, c),
                   preimage=int(cand.pre >= 0), history=history)
+
+
+# ======================================================================================
+# planar maps
+# ======================================================================================
+
+def _orbit(sec: MapSection, x, transient: int, iterations: int, escape: float):
+    """Iterate; the recorded points ``(iterations, n)``, or ``None`` when the orbit leaves."""
+    x = np.array(x, dtype=float)
+    out = np.empty((iterations, len(x)))
+    for i in range(transient + iterations):
+        x, sig, _ = sec.evaluate(x)
+        if sig is None or float(np.max(np.abs(x))) > escape:
+            return None
+        if i >= transient:
+            out[i - transient] = x
+    return out
+
+
+def _saddles(sec, samples, periods) -> list:
+    """The saddles of the given periods found by Newton from points of the attractor and of a
+    grid over its bounding box widened by its size on every side, each cycle once."""
+    lo, hi = samples.min(axis=0), samples.max(axis=0)
+    w = np.maximum(hi - lo, 1e-9 * (1 + np.abs(hi)))
+    g = [np.linspace(l - wi, h + wi, 7) for l, h, wi in zip(lo, hi, w)]
+    seeds = np.vstack([samples[:: max(1, len(samples) // 20)],
+                       np.array(np.meshgrid(*g)).reshape(2, -1).T])
+    found: list = []
+    for period in periods:
+        for s in seeds:
+            try:
+                pt = find_periodic_point(sec.model, s, period, params=sec.params)
+            except ManifoldError:
+                continue
+            if not _is_saddle(pt):
+                continue
+            scale = 1e-8 * (1 + float(np.max(np.abs(pt.x))))
+            if any(period % q.period == 0 and np.min(np.linalg.norm(
+                    q.cycle - pt.x, axis=1)) < scale for q in found):
+                continue
+            found.append(pt)
+    return found
+
+
+def _is_saddle(pt) -> bool:
+    m = np.asarray(pt.multipliers)
+    if not np.all(np.isfinite(m)) or np.any(np.abs(m.imag) > 1e-12):
+        return False
+    a = np.abs(m)
+    return bool(a[0] > 1 + 1e-9 and a[-1] < 1 - 1e-9)
+
+
+def _locate_planar(ctx, a, b, x, tol, steps, transient, iterations, periods, escape,
+                   arclength, manifold_tol, back: int = 4):
+    """A planar map's boundary crisis: the sweep, then :func:`_first_contact`."""
+    values = np.linspace(a, b, steps)
+    bounded = []
+    for p in values:
+        samples = _orbit(ctx.section(p), x, transient, iterations, escape)
+        if samples is None:
+            break
+        bounded.append((float(p), samples))
+        x = samples[-1]
+    else:
+        raise ManifoldError(f"locate_crisis(): no crisis found over {ctx.param} in [{a}, {b}] "
+                            "(the attractor stays bounded)")
+    if not bounded:
+        raise ManifoldError(f"locate_crisis(): no bounded attractor at {ctx.param} = {a}")
+    p_hi = float(p)
+    # an orbit slow to find the way out leaves only past the crisis, so the last bounded value
+    # may be past it too (its manifolds already cross and the contact found there is a later
+    # one): earlier values are tried until the first root found repeats
+    best, previous = None, None
+    for p_lo, samples in bounded[::-1][:back + 1]:
+        found = _first_contact(ctx, p_lo, p_hi, samples, tol, periods, arclength,
+                               manifold_tol)
+        if found is None:
+            if best is not None:
+                break
+            continue
+        if best is None or abs(found[0] - a) < abs(best[0] - a):
+            best = found + (p_lo,)
+        if previous is not None and abs(found[0] - previous) <= 1e3 * tol:
+            break
+        previous = found[0]
+    if best is None:
+        raise ManifoldError(f"locate_crisis(): the attractor leaves between {ctx.param} = "
+                            f"{bounded[-1][0]} and {p_hi}, but no saddle's unstable manifold "
+                            "meets a boundary saddle's stable manifold there")
+    r, contact, history, p_lo = best
+    return _result(ctx.model, ctx.param, contact, r, "boundary", (p_lo, p_hi), history)
+
+
+def _first_contact(ctx, p_lo, p_hi, samples, tol, periods, arclength, manifold_tol):
+    """The contact root between ``p_lo`` and ``p_hi`` nearest ``p_lo`` over the pairs
+    ``(P, S)`` of saddles, ``S`` off the attractor (on its basin's boundary) and ``P`` on it
+    or ``S`` itself; ``(root, contact, history)`` or ``None``."""
+    sec = ctx.section(p_lo)
+    diameter = float(np.linalg.norm(samples.max(axis=0) - samples.min(axis=0)))
+    length = arclength if arclength is not None else 4.0 * max(diameter, 1e-9)
+    saddles = _saddles(sec, samples, periods)
+    # the recorded orbit's spacing: a saddle on the attractor is about as close to it as its
+    # points are to each other, one on the basin's boundary is farther by far
+    tree = cKDTree(samples)
+    spacing = float(np.median(tree.query(samples, k=2)[0][:, 1]))
+    on = [float(np.min(tree.query(q.cycle)[0])) < 10.0 * spacing for q in saddles]
+    best = None
+    for S, s_on in zip(saddles, on):
+        if s_on:
+            continue
+        for P, p_on in zip(saddles, on):
+            if not (p_on or P is S):
+                continue     # W^u(P) is not in the attractor's closure
+            contact = Contact(sec.model, ctx.param, ctx.params, P, S, arclength=length,
+                              tol=manifold_tol, max_points=20_000, exclude=length / 10.0)
+            history: list = []
+            try:
+                g0 = contact.start(p_lo, P, S)
+            except ManifoldError:
+                continue
+            history.append((p_lo, g0))
+            r = contact_root(contact, p_lo, p_hi, tol, history)
+            # the first contact met from the bracket's lower end
+            if r is not None and (best is None or abs(r - p_lo) < abs(best[0] - p_lo)):
+                best = (r, contact, history)
+    return best
+
+
+def _result(model, param, contact, root, kind, bracket, history):
+    contact(root)
+    p, g, point, Wu, Ws, P, S = contact.last
+    return Crisis(model=model, param=param, value=float(root), kind=kind, saddle=S,
+                  point=np.asarray(point, dtype=float), bracket=tuple(bracket),
+                  history=history, unstable=P, manifolds=(Wu, Ws))
+
+
+def locate_tangency(model, param: str, span, unstable, stable=None, *, params=None,
+                    period: int = 1, tol: float = 1e-10, arclength: float = 10.0,
+                    manifold_tol: float = 1e-9, max_points: int = 20_000,
+                    exclude: float | None = None):
+    """The first homoclinic or heteroclinic tangency, in one parameter, of the unstable
+    manifold of a saddle of a planar map with the stable manifold of a saddle.
+
+    At ``span[0]`` the nearest approach of ``W^u(unstable)`` and ``W^s(stable)`` (grown to
+    ``arclength`` with :func:`pwsdyn.manifold`) is found; the signed distance between them
+    there (see ``pwsdyn.manifolds._tangency``), positive at ``span[0]``, is continued in the
+    parameter and its root between ``span[0]`` and ``span[1]`` found by
+    ``scipy.optimize.brentq`` to ``tol``.
+
+    Parameters
+    ----------
+    model : MapModel, str, path or dict
+        A two-dimensional map model (``kind = "map"``).
+    param : str
+        The parameter varied.
+    span : (float, float)
+        The manifolds must not meet near their nearest approach at ``span[0]`` and must
+        cross at ``span[1]``.
+    unstable : PeriodicPoint or sequence
+        The saddle whose unstable manifold is followed (a state is refined by
+        :func:`pwsdyn.find_periodic_point` with ``period``).
+    stable : PeriodicPoint or sequence, optional
+        The saddle whose stable manifold is followed; by default the same one (a homoclinic
+        tangency).
+    params : dict, optional
+        The other parameters' values.
+    period : int
+        The period of a saddle given as a state.
+    tol : float
+        Absolute tolerance on the located value.
+    arclength : float
+        Length of each branch of both manifolds.
+    manifold_tol : float
+        The manifolds' ``tol``: the deviation of their chords, which bounds the error of a
+        smooth (non-polygonal) contact.
+    max_points : int
+        Points per branch at most.
+    exclude : float, optional
+        For a homoclinic tangency, points within this distance of the saddle (where the
+        manifolds cross) are not searched for the nearest approach (default ``arclength /
+        10``).
+
+    Returns
+    -------
+    Crisis
+        With ``kind = "tangency"``: ``value``, ``saddle`` (the stable manifold's saddle),
+        ``unstable`` (the other), ``point`` (the vertex that touches the other curve) and the
+        two manifolds at ``value``.
+
+    Raises
+    ------
+    ManifoldError
+        A saddle is lost, or the contact does not change sign over ``span``.
+    """
+    model = as_model(model, kind="map", caller="locate_tangency()")
+    if model.n_states != 2:
+        raise ArgumentError("locate_tangency(): the manifolds must be curves that cut the "
+                            f"plane: a two-dimensional map, {model.name!r} has "
+                            f"{model.n_states} states")
+    if param not in model.parameters:
+        raise ArgumentError(f"locate_tangency(): {model.name!r} has no parameter {param!r}")
+    tol = V.positive("tol", tol)
+    arclength = V.positive("arclength", arclength)
+    a, b = (float(v) for v in span)
+    prm = {**dict(params or {}), param: a}
+    P = as_point(model, unstable, prm, period)
+    S = P if stable is None else as_point(model, stable, prm, period)
+    exclude = arclength / 10.0 if exclude is None else V.positive("exclude", exclude)
+    contact = Contact(model, param, params, P, S, arclength=arclength, tol=manifold_tol,
+                       max_points=max_points, exclude=exclude)
+    history: list = []
+    g0 = contact.start(a, P, S)
+    history.append((a, g0))
+    root = contact_root(contact, a, b, tol, history)
+    if root is None:
+        raise ManifoldError(f"locate_tangency(): the manifolds' contact does not change sign "
+                            f"between {param} = {a} and {b}")
+    return _result(model, param, contact, root, "tangency", (a, b), history)
+

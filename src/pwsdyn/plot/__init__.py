@@ -11,7 +11,8 @@ path (directory, format, existing file) is checked before the figure is drawn.
 One module per family of figures: trajectories (:func:`plot_trajectory`), periodic orbits
 (:func:`plot_orbit`), continued branches (:func:`plot_branch`), sweeps, basins and response
 metrics (:func:`plot_bifurcation`, :func:`plot_lyapunov`, :func:`plot_basins`,
-:func:`plot_metrics`), period maps of two-parameter scans (:func:`plot_scan`); what they
+:func:`plot_metrics`), period maps of two-parameter scans (:func:`plot_scan`), crises located from the geometry
+(:func:`plot_crisis`); what they
 share (names typeset, legends, files) in one more. Every name is importable from
 ``pwsdyn.plot``.
 
@@ -32,6 +33,8 @@ from ._common import _number as _number
 from ._common import _tex as _tex
 from ._common import _values_text as _values_text
 from ._common import figure_formats as figure_formats
+from ._manifolds import CRISIS_COLORS as CRISIS_COLORS
+from ._manifolds import plot_crisis as plot_crisis
 from ._orbits import plot_orbit as plot_orbit
 from ._scans import PERIOD_COLORS as PERIOD_COLORS
 from ._scans import SCAN_SPECIAL_COLORS as SCAN_SPECIAL_COLORS
@@ -54,9 +57,9 @@ from ._trajectories import TRAJECTORY_COLOR as TRAJECTORY_COLOR
 from ._trajectories import plot_trajectory as plot_trajectory
 
 __all__ = ["BASIN_COLORS", "BASIN_SPECIAL_COLORS", "BRANCH_STYLES", "CONSTRAINED_STYLES",
-           "DEFAULT_METRICS", "EVENT_STYLES", "GREEK_SPELLINGS", "PERIOD_COLORS",
-           "SCAN_SPECIAL_COLORS", "SPECIAL_MARKERS", "SURFACE_COLOR", "SWEEP_COLORS",
-           "SWEEP_MARKERS", "TRAJECTORY_COLOR",
-           "VARIANT_COLORS", "figure_formats", "plot_basins", "plot_bifurcation", "plot_branch",
+           "CRISIS_COLORS", "DEFAULT_METRICS", "EVENT_STYLES", "GREEK_SPELLINGS",
+           "PERIOD_COLORS", "SCAN_SPECIAL_COLORS", "SPECIAL_MARKERS", "SURFACE_COLOR",
+           "SWEEP_COLORS", "SWEEP_MARKERS", "TRAJECTORY_COLOR", "VARIANT_COLORS",
+           "figure_formats", "plot_basins", "plot_bifurcation", "plot_branch", "plot_crisis",
            "plot_lyapunov", "plot_metrics", "plot_orbit", "plot_scan", "plot_trajectory",
            "scan_classes"]
