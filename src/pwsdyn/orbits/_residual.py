@@ -25,6 +25,7 @@ from ._base import shooting_options
 from ._sampling import sample_times
 from ._segments import FieldKey, SegmentSystem
 from .signature import Signature
+from .surfaces import model_context
 
 _SYSTEMS: dict = {}
 
@@ -429,6 +430,18 @@ class _OrbitProblemBase:
             raise ArgumentError(f"`p` must hold {self.q} finite values {list(self.parameters)}")
         return p
 
+    def _context_at(self, p):
+        """The model's point evaluations at ``p`` (:func:`~pwsdyn.orbits.surfaces.model_context`),
+        kept for the last ``p``: the admissibility check and the monitors of a point ask for
+        them at one ``p``."""
+        params = self.param_dict(p)
+        key = (tuple(params.items()), self.sliding)
+        got = self.__dict__.get("_context_cache")
+        if got is None or got[0] != key:
+            got = self.__dict__["_context_cache"] = (
+                key, model_context(self.model, params, self.sliding))
+        return got[1]
+
     def param_dict(self, p=None) -> dict:
         """All parameter values of the model at the problem's ``p``."""
         out = dict(self.params)
@@ -500,8 +513,11 @@ class _OrbitProblemBase:
         if key not in cache:
             if len(cache) > 4 * max(self.m, 1):
                 cache.clear()
+            # the dense output stored as the run goes: every step of it is read (the
+            # samples), and rebuilding it from the nodes afterwards costs more than the run
             cache[key] = [self._flow(i, s.t, s.z, s.T,
-                                     self._seg_opts(p, dense=True, variational=False))[2], None]
+                                     self._seg_opts(p, dense=True, variational=False),
+                                     store_dense=True)[2], None]
         return cache[key]
 
     def _dense_samples(self, i, s, p):
@@ -519,10 +535,12 @@ class _OrbitProblemBase:
             entry[1] = (ts, Y)
         return (tr,) + entry[1]
 
-    def _flow(self, i, t, z, T, opts, dense=False):
+    def _flow(self, i, t, z, T, opts, store_dense=False):
         """``(y, Phi, traj)`` of segment field ``i`` from ``(t, z)`` for duration ``T``; the
         :class:`~pwsdyn.Trajectory` only for a run with dense output (the samples of the
-        admissibility check and the monitors), None otherwise."""
+        admissibility check and the monitors), None otherwise. ``store_dense``: the run
+        stores each step's dense output as it goes (the same coefficients as those rebuilt
+        from its nodes on demand)."""
         fidx = self._fidx[i]
         n = self.sys.naug
         if T == 0.0 or abs(T) <= 4 * np.spacing(max(1.0, abs(t))):
@@ -533,7 +551,7 @@ class _OrbitProblemBase:
             t0, t1, mode = -t, -t - T, self.sys.field_index(self.fields[i], reverse=True)
         # opts: the problem's options (checked when it was built) with the segment's settings
         run = run_compiled(self.sys.cm, z, t0, t1, self._pv, opts, mode0=mode, admit=False,
-                           checked=True)
+                           checked=True, store_dense=store_dense)
         if run.status.failed or not np.all(np.isfinite(run.x)) or (
                 run.jacobian is not None and not np.all(np.isfinite(run.jacobian))):
             raise SegmentFailed(i, f"segment {i} ({self.state_names[i]}) could not be "
