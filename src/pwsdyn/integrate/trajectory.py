@@ -254,7 +254,10 @@ class EventLog(Sequence):
             return np.array([e.name for e in self._records], dtype=object)
         ev = np.array([e.name for e in self.model.events] or [""], dtype=object)
         sw = np.array([s.name for s in self.model.switches] or [""], dtype=object)
-        on_switch = np.isin(self.kind_code, [EVENT_KINDS.index(k) for k in SWITCH_EVENT_KINDS])
+        # (compared by broadcasting: numpy.isin costs more than the rest for a short log,
+        # and shooting reads the names of every run's log)
+        codes = np.array([EVENT_KINDS.index(k) for k in SWITCH_EVENT_KINDS])
+        on_switch = (np.asarray(self.kind_code)[:, None] == codes).any(axis=1)
         return np.where(on_switch, sw[np.where(on_switch, self.ref, 0)],
                         ev[np.where(on_switch, 0, self.ref)])
 

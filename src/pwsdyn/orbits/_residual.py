@@ -472,6 +472,16 @@ class _OrbitProblemBase:
             got = cache[key] = (value, grad)
         return got
 
+    def _shooting_opts(self, p):
+        """:meth:`_seg_opts` of the variational runs of :meth:`evaluate`, kept for the last
+        ``p`` (a continuation step evaluates at one ``p`` per iterate); not for callers that
+        change the dict."""
+        key = (p.tobytes(), tuple(self.opts.items()))
+        got = self.__dict__.get("_opts_cache")
+        if got is None or got[0] != key:
+            got = self.__dict__["_opts_cache"] = (key, self._seg_opts(p))
+        return got[1]
+
     def _seg_opts(self, p, dense=False, variational=True):
         o = dict(self.opts, variational=variational, dense=dense, throw=False, chatter=False,
                  exact=False, mode=None)
@@ -650,7 +660,7 @@ class _OrbitProblemBase:
         na = sysm.naug
         N = self.size
         Nw = N + q
-        opts = self._seg_opts(p)
+        opts = self._shooting_opts(p)
         pv = self._pv
         F = np.zeros(N)
         J = np.zeros((N, Nw))
