@@ -621,9 +621,19 @@ class Trajectory:
         y0 = self._y[idx]
         y1 = self._y[idx + 1]
         kind = self._ikind[idx]
+        smooth = (kind == 0) & (length > 0)
+        if len(ts) and smooth.all():
+            # every time inside a step of positive length (the samples of a segment): the
+            # polynomial alone, as below
+            Q = self._dense[idx]
+            th = theta[:, None]
+            acc = np.zeros((Q.shape[0], ny))
+            for k in range(Q.shape[2] - 1, -1, -1):
+                acc = (acc + Q[:, :, k]) * th
+            out = (y0 + acc)[:, :nout]
+            return out[0] if np.ndim(t) == 0 else out
         # linear between nodes: chattering gaps and intervals stored without dense output
         out = (1.0 - theta)[:, None] * y0 + theta[:, None] * y1
-        smooth = (kind == 0) & (length > 0)
         if np.any(smooth):
             Q = self._dense[idx[smooth]]
             th = theta[smooth][:, None]

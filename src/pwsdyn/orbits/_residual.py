@@ -435,11 +435,14 @@ class _OrbitProblemBase:
         kept for the last ``p``: the admissibility check and the monitors of a point ask for
         them at one ``p``."""
         params = self.param_dict(p)
-        key = (tuple(params.items()), self.sliding)
+        key = tuple(params.items())
         got = self.__dict__.get("_context_cache")
-        if got is None or got[0] != key:
-            got = self.__dict__["_context_cache"] = (
-                key, model_context(self.model, params, self.sliding))
+        if got is None or got[2] != self.sliding:
+            got = (key, model_context(self.model, params, self.sliding), self.sliding)
+        elif got[0] != key:
+            # the compiled model and its tables as they were, other parameter values
+            got = (key, got[1].with_params(params), self.sliding)
+        self.__dict__["_context_cache"] = got
         return got[1]
 
     def param_dict(self, p=None) -> dict:
