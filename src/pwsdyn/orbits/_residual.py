@@ -565,8 +565,8 @@ class _OrbitProblemBase:
         # opts: the problem's options (checked when it was built) with the segment's settings
         run = run_compiled(self.sys.cm, z, t0, t1, self._pv, opts, mode0=mode, admit=False,
                            checked=True, store_dense=store_dense)
-        if run.status.failed or not np.all(np.isfinite(run.x)) or (
-                run.jacobian is not None and not np.all(np.isfinite(run.jacobian))):
+        if run.status.failed or not np.isfinite(run.x).all() or (
+                run.jacobian is not None and not np.isfinite(run.jacobian).all()):
             raise SegmentFailed(i, f"segment {i} ({self.state_names[i]}) could not be "
                                 f"integrated over {T:.6g} from t = {t:.10g}: {run.message}")
         tr = run.trajectory(self.sys.cm.model, opts, t0, t1) if opts["dense"] else None
@@ -724,10 +724,11 @@ class _OrbitProblemBase:
             if self.forced:
                 Dper[0] -= 1.0
         if self.forced:
-            F[-1] = period - self.period_value(p)
+            per, per_grad = self._period_at(p)
+            F[-1] = period - per
             if jacobian:
                 J[-1] = Dper
-                J[-1, N:] -= self._period_grad(p)
+                J[-1, N:] -= per_grad
         return ProblemEvaluation(np.asarray(u, dtype=float).copy(), p, F,
                                  J[:, :N] if jacobian else None,
                                  J[:, N:] if jacobian else None, period, segs, Dper)
