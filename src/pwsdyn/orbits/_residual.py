@@ -425,6 +425,10 @@ class _OrbitProblemBase:
     def _p(self, p):
         if p is None:
             return self.p0.copy()
+        if type(p) is np.ndarray and p.dtype == np.float64 and p.shape == (self.q,) and all(
+                map(math.isfinite, p.tolist())):
+            # already checked (a point's ~16 calls pass the problem's own array): as below
+            return p
         p = np.asarray(p, dtype=float).reshape(-1)
         if p.shape != (self.q,) or not np.isfinite(p).all():
             raise ArgumentError(f"`p` must hold {self.q} finite values {list(self.parameters)}")
@@ -475,14 +479,17 @@ class _OrbitProblemBase:
             got = cache[key] = (value, grad)
         return got
 
-    def _shooting_opts(self, p):
-        """:meth:`_seg_opts` of the variational runs of :meth:`evaluate`, kept for the last
-        ``p`` (a continuation step evaluates at one ``p`` per iterate); not for callers that
-        change the dict."""
+    def _shooting_opts(self, p, dense=False):
+        """:meth:`_seg_opts` of the variational runs of :meth:`evaluate` (``dense``: of the
+        dense runs without variational equations of the checks along a solution), kept for
+        the last ``p`` (a continuation step evaluates at one ``p`` per iterate); not for
+        callers that change the dict."""
         key = (p.tobytes(), tuple(self.opts.items()))
-        got = self.__dict__.get("_opts_cache")
+        slot = "_dense_opts_cache" if dense else "_opts_cache"
+        got = self.__dict__.get(slot)
         if got is None or got[0] != key:
-            got = self.__dict__["_opts_cache"] = (key, self._seg_opts(p))
+            got = self.__dict__[slot] = (key, self._seg_opts(p, dense=dense,
+                                                             variational=not dense))
         return got[1]
 
     def _seg_opts(self, p, dense=False, variational=True):
@@ -529,7 +536,8 @@ class _OrbitProblemBase:
             # the dense output stored as the run goes: every step of it is read (the
             # samples), and rebuilding it from the nodes afterwards costs more than the run
             cache[key] = [self._flow(i, s.t, s.z, s.T,
-                                     self._seg_opts(p, dense=True, variational=False),
+                                     self._shooting_opts(np.asarray(p, dtype=float),
+                                                         dense=True),
                                      store_dense=True)[2], None]
         return cache[key]
 
