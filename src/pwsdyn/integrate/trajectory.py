@@ -612,7 +612,8 @@ class Trajectory:
         # 'left': t[i] < t <= t[i+1]; 'right': t[i] <= t < t[i+1]. Either way the interval
         # found has positive length, so zero-length jump intervals are never interpolated.
         idx = np.searchsorted(self.t, ts, side=side) - 1
-        idx = np.clip(idx, 0, nint - 1)
+        # (numpy.clip of integers looks up their limits at every call)
+        idx = np.minimum(np.maximum(idx, 0), nint - 1)
         dense = self._dense
         if isinstance(dense, np.ndarray) and dense.shape[:2] == (nint, ny) and ts.ndim == 1:
             # stored dense output (not rebuilt on demand): every time in one compiled loop,

@@ -484,12 +484,13 @@ class _OrbitProblemBase:
         dense runs without variational equations of the checks along a solution), kept for
         the last ``p`` (a continuation step evaluates at one ``p`` per iterate); not for
         callers that change the dict."""
-        key = (p.tobytes(), tuple(self.opts.items()))
+        # (by the options dict's identity: set when the problem is made, never changed)
+        key = p.tobytes()
         slot = "_dense_opts_cache" if dense else "_opts_cache"
         got = self.__dict__.get(slot)
-        if got is None or got[0] != key:
+        if got is None or got[0] != key or got[2] is not self.opts:
             got = self.__dict__[slot] = (key, self._seg_opts(p, dense=dense,
-                                                             variational=not dense))
+                                                             variational=not dense), self.opts)
         return got[1]
 
     def _seg_opts(self, p, dense=False, variational=True):
