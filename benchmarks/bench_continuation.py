@@ -43,7 +43,11 @@ time (``total_over_kernel``).
 Run::
 
     python benchmarks/bench_continuation.py [--repeats 3] [--points 200] [--save]
-        [--label after]
+        [--label after] [--base /path/to/old/src [--rounds 3]]
+
+``--base`` also times a previous version's ``src`` and this checkout's in worker processes
+that take turns (the load of a shared machine moves in between), best CPU time of each, and
+compares their branches bit for bit (points, multipliers, test functions, special points).
 
 ``--save`` writes ``results/continuation.json``, keeping the rows of other labels (so that a
 run of the code before a change and one after sit side by side, each with its own scipy
@@ -55,7 +59,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import hashlib
 import platform
+import subprocess
 import sys
 import time
 from collections import defaultdict
@@ -202,6 +208,53 @@ def breakdown(run):
     return br, dict(b.time), dict(b.calls)
 
 
+def branch_digest(br) -> str:
+    """The branch's points, multipliers and special points, bit for bit."""
+    h = hashlib.sha256()
+    for p in br.points:
+        h.update(np.asarray(p.u, dtype=float).tobytes())
+        h.update(np.float64(p.lam).tobytes())
+        h.update(np.asarray(p.data["multipliers"], dtype=complex).tobytes())
+        h.update(repr(sorted(p.tests.items())).encode())
+    h.update(repr([(s.kind, s.value) for s in br.special_points]).encode())
+    return h.hexdigest()
+
+
+def worker(args) -> dict:
+    """``--repeats`` timed branches of the source tree on ``PYTHONPATH`` (``--base`` mode)."""
+    model = pwsdyn.load_model("impact-oscillator")
+    orb = io_orbit("stable")
+
+    def run_pwsdyn():
+        return pwsdyn.continue_orbit(model, orb, "omega", span=(2.0, 10.0), ds=0.02,
+                                     ds_max=0.02, max_points=args.points)
+    run_pwsdyn()
+    br, wp, cp = timed(run_pwsdyn, args.repeats)
+    return dict(wall_s=wp, cpu_s=cp, points=len(br), digest=branch_digest(br),
+                pwsdyn=str(Path(pwsdyn.__file__).parent))
+
+
+def compare_trees(base: Path, args) -> dict:
+    """The code before (``base``, a ``src`` directory) and this checkout's, in worker
+    processes taking turns (``--rounds`` each), best CPU time of each."""
+    trees = {"before": base.resolve(), "after": HERE.parent / "src"}
+    runs = {k: [] for k in trees}
+    for _ in range(args.rounds):
+        for k, src in trees.items():
+            env = dict(os.environ, PYTHONPATH=str(src))
+            cmd = [sys.executable, __file__, "--worker", "--repeats", str(args.repeats),
+                   "--points", str(args.points)]
+            out = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
+            if out.returncode:
+                sys.stderr.write(out.stderr)
+                raise SystemExit(f"worker for {src} failed")
+            runs[k].append(json.loads(out.stdout.strip().splitlines()[-1]))
+    return {k: dict(cpu_s=min(w["cpu_s"] for w in v), wall_s=min(w["wall_s"] for w in v),
+                    points=v[-1]["points"], digest=v[-1]["digest"], src=str(trees[k]),
+                    imported=v[-1]["pwsdyn"])
+            for k, v in runs.items()}
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--repeats", type=int, default=3)
@@ -209,7 +262,13 @@ def main(argv=None):
     ap.add_argument("--save", action="store_true", help="write results/continuation.json")
     ap.add_argument("--label", default="current",
                     help="name of this run's row in the saved file (e.g. before, after)")
+    ap.add_argument("--base", type=Path, help="a previous version's src, timed alongside")
+    ap.add_argument("--rounds", type=int, default=3, help="worker rounds per tree (--base)")
+    ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.worker:
+        print(json.dumps(worker(args)))
+        return 0
     model = pwsdyn.load_model("impact-oscillator")
     orb = io_orbit("stable")
 
@@ -218,6 +277,7 @@ def main(argv=None):
                                      ds_max=0.02, max_points=args.points)
 
     run_pwsdyn()                                      # warm-up: compilation, caches
+    trees = compare_trees(args.base, args) if args.base is not None else None
     br, wp, cp = timed(run_pwsdyn, args.repeats)
     omegas = br.values
     x_start = closed_form_at_zero(omegas[0])[0] + 1e-3
@@ -262,6 +322,18 @@ def main(argv=None):
     print(f"{'scipy':<8} {1e3 * ws / n:>9.2f} {1e3 * cs / n:>13.2f} {err_sc:>10.1e} "
           f"{mult_sc:>9.1e}")
     print(f"ratio scipy / pwsdyn: {ws / wp:.1f} (wall), {cs / cp:.1f} (CPU)")
+    if trees is not None:
+        b, a = trees["before"], trees["after"]
+        row["trees"] = trees
+        row["identical"] = b["digest"] == a["digest"]
+        print(f"before / after, worker processes taking turns ({args.rounds} rounds of "
+              f"{args.repeats}), best CPU ms / point and scipy / pwsdyn (CPU, this run's "
+              f"scipy):")
+        for k, w in trees.items():
+            print(f"  {k:<7} {1e3 * w['cpu_s'] / w['points']:>7.3f}  "
+                  f"{cs / len(sc) / (w['cpu_s'] / w['points']):>6.1f}x   ({w['imported']})")
+        print(f"  after / before {a['cpu_s'] / b['cpu_s']:.3f}; branches identical bit for "
+              f"bit: {'yes' if row['identical'] else 'NO'}")
     print(f"a point's cost (CPU ms, with timers: {sum(per.values()):.3f} per point; calls per "
           f"point in brackets):")
     for k in ("kernel", "linalg", "monitors", "python"):
@@ -283,6 +355,9 @@ def main(argv=None):
         with open(path, "w") as fh:
             json.dump(dict(meta=meta, rows=rows + [row]), fh, indent=1, default=str)
     ok = err_pw < 1e-8 and mult_pw < 1e-6 and err_sc < 1e-6 and mult_sc < 1e-4
+    if trees is not None and not row["identical"]:
+        print("before and after computed different branches", file=sys.stderr)
+        ok = False
     if not ok:
         print("accuracy check FAILED", file=sys.stderr)
         return 2

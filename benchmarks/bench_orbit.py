@@ -31,7 +31,10 @@ asserted; the script exits with status 2 if a method misses the closed form by m
 
 Run::
 
-    python benchmarks/bench_orbit.py [--repeats 5] [--save]
+    python benchmarks/bench_orbit.py [--repeats 5] [--save] [--label after]
+
+``--save`` writes ``results/orbit.json``, keeping the rows of other labels (a run of the code
+before a change, ``PYTHONPATH`` at its ``src``, and one after sit side by side).
 """
 
 from __future__ import annotations
@@ -205,6 +208,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--save", action="store_true", help="write results/orbit.json")
+    ap.add_argument("--label", default="current",
+                    help="name of this run's rows in the saved file (e.g. before, after)")
     args = ap.parse_args(argv)
     cases = {"impact-oscillator, stable": forced_case("stable"),
              "impact-oscillator, unstable": forced_case("unstable"),
@@ -218,7 +223,7 @@ def main(argv=None):
         pw, wp, cp = timed(rp, args.repeats)
         sc, ws, cs = timed(rs, max(1, args.repeats // 2))
         acc = check(pw, sc)
-        row = dict(case=name, pwsdyn_wall_s=wp, pwsdyn_cpu_s=cp, scipy_wall_s=ws,
+        row = dict(label=args.label, case=name, pwsdyn_wall_s=wp, pwsdyn_cpu_s=cp, scipy_wall_s=ws,
                    scipy_cpu_s=cs, ratio_wall=ws / wp, ratio_cpu=cs / cp, **acc)
         rows.append(row)
         if "orbit_err_pwsdyn" in acc:
@@ -239,8 +244,15 @@ def main(argv=None):
                 cpus=os.cpu_count(), load=os.getloadavg(), repeats=args.repeats)
     if args.save:
         (HERE / "results").mkdir(exist_ok=True)
-        with open(HERE / "results" / "orbit.json", "w") as fh:
-            json.dump(dict(meta=meta, rows=rows), fh, indent=1, default=str)
+        # the rows of other labels are kept: a run of the code before a change and one after
+        # sit side by side, each with its own scipy baseline (ratios compared)
+        path = HERE / "results" / "orbit.json"
+        old = json.loads(path.read_text()) if path.exists() else {}
+        kept = [r for r in old.get("rows", []) if r.get("label", "") not in ("", args.label)]
+        for r in rows:
+            r["meta"] = meta
+        with open(path, "w") as fh:
+            json.dump(dict(meta=meta, rows=kept + rows), fh, indent=1, default=str)
     if not ok:
         print("accuracy check FAILED", file=sys.stderr)
         return 2

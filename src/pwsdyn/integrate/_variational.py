@@ -45,6 +45,12 @@ def assemble_segments(n: int, nodes_y: np.ndarray, dense: np.ndarray, ev_info: n
     """
     m = len(ev_info)
     nn = n * n
+    if not m:
+        # one segment (an orbit problem's segment runs): Phi is global already -- the
+        # products with P[0] = I below leave finite nodes and dense output as they are
+        # (up to the sign of a zero); the Jacobian is the same product as below
+        phi = y_fin[n:n + nn].reshape(n, n).copy()
+        return [phi], phi @ np.eye(n)
     phis = [ev_xb[r, n:n + nn].reshape(n, n).copy() for r in range(m)]
     phis.append(y_fin[n:n + nn].reshape(n, n).copy())
     salts = [ev_xa[r, n:n + nn].reshape(n, n).copy() for r in range(m)]

@@ -27,6 +27,7 @@ event or switch index, a count) is made here only (:meth:`AfterEvents.code`).
 
 from __future__ import annotations
 
+import copy
 import threading
 from dataclasses import dataclass
 from typing import Mapping
@@ -637,6 +638,17 @@ class ModelContext:
         self._pv = np.ascontiguousarray(self.p if self.p.size else np.zeros(1), dtype=float)
         self.etab, self.eact, self.stab = kernel_tables(self.cm, sliding)
         self.nm = len(self.model.modes)
+
+    def with_params(self, params: Mapping[str, float] | None) -> "ModelContext":
+        """The same context at other parameter values (by name; the model's defaults for the
+        others): the compiled model and its tables are shared, only the parameter vector is
+        new (an analysis that moves along a parameter asks for one context per value)."""
+        new = copy.copy(self)
+        new.p = self.model.parameter_vector(params)
+        new.params = dict(zip(self.model.parameters, (float(v) for v in new.p)))
+        if not self.is_map:
+            new._pv = np.ascontiguousarray(new.p if new.p.size else np.zeros(1), dtype=float)
+        return new
 
     @classmethod
     def get(cls, payload_or_model) -> "ModelContext":

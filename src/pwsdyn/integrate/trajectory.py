@@ -254,7 +254,10 @@ class EventLog(Sequence):
             return np.array([e.name for e in self._records], dtype=object)
         ev = np.array([e.name for e in self.model.events] or [""], dtype=object)
         sw = np.array([s.name for s in self.model.switches] or [""], dtype=object)
-        on_switch = np.isin(self.kind_code, [EVENT_KINDS.index(k) for k in SWITCH_EVENT_KINDS])
+        # (compared by broadcasting: numpy.isin costs more than the rest for a short log,
+        # and shooting reads the names of every run's log)
+        codes = np.array([EVENT_KINDS.index(k) for k in SWITCH_EVENT_KINDS])
+        on_switch = (np.asarray(self.kind_code)[:, None] == codes).any(axis=1)
         return np.where(on_switch, sw[np.where(on_switch, self.ref, 0)],
                         ev[np.where(on_switch, 0, self.ref)])
 
@@ -609,7 +612,23 @@ class Trajectory:
         # 'left': t[i] < t <= t[i+1]; 'right': t[i] <= t < t[i+1]. Either way the interval
         # found has positive length, so zero-length jump intervals are never interpolated.
         idx = np.searchsorted(self.t, ts, side=side) - 1
-        idx = np.clip(idx, 0, nint - 1)
+        # (numpy.clip of integers looks up their limits at every call)
+        idx = np.minimum(np.maximum(idx, 0), nint - 1)
+        dense = self._dense
+        if isinstance(dense, np.ndarray) and dense.shape[:2] == (nint, ny) and ts.ndim == 1:
+            # stored dense output (not rebuilt on demand): every time in one compiled loop,
+            # the same operations as the array code below (a segment's ~200 samples cost
+            # ~40 array operations there)
+            from ._rows import dense_rows
+
+            out = dense_rows(np.ascontiguousarray(self.t, dtype=float),
+                             np.ascontiguousarray(self._y, dtype=float),
+                             np.ascontiguousarray(self._ikind, dtype=np.int64),
+                             np.ascontiguousarray(dense, dtype=float),
+                             np.ascontiguousarray(ts),
+                             np.ascontiguousarray(idx, dtype=np.int64), side == "right")
+            out = out[:, :nout]
+            return out[0] if np.ndim(t) == 0 else out
         t0 = self.t[idx]
         t1 = self.t[idx + 1]
         length = t1 - t0
@@ -618,9 +637,19 @@ class Trajectory:
         y0 = self._y[idx]
         y1 = self._y[idx + 1]
         kind = self._ikind[idx]
+        smooth = (kind == 0) & (length > 0)
+        if len(ts) and smooth.all():
+            # every time inside a step of positive length (the samples of a segment): the
+            # polynomial alone, as below
+            Q = self._dense[idx]
+            th = theta[:, None]
+            acc = np.zeros((Q.shape[0], ny))
+            for k in range(Q.shape[2] - 1, -1, -1):
+                acc = (acc + Q[:, :, k]) * th
+            out = (y0 + acc)[:, :nout]
+            return out[0] if np.ndim(t) == 0 else out
         # linear between nodes: chattering gaps and intervals stored without dense output
         out = (1.0 - theta)[:, None] * y0 + theta[:, None] * y1
-        smooth = (kind == 0) & (length > 0)
         if np.any(smooth):
             Q = self._dense[idx[smooth]]
             th = theta[smooth][:, None]

@@ -56,7 +56,7 @@ def admissibility(prob, u, p=None, evaluation=None
     """
     p = prob._p(p)
     ev = evaluation if evaluation is not None else prob.evaluate(u, p, jacobian=False)
-    ctx = model_context(prob.model, prob.param_dict(p), prob.sliding)
+    ctx = prob._context_at(p)
     out = []
     # a segment that vanishes at a graze (a sliding segment shrinking to nothing) has a
     # duration of round-off size, of either sign, at the located point

@@ -25,6 +25,7 @@ from ._base import shooting_options
 from ._sampling import sample_times
 from ._segments import FieldKey, SegmentSystem
 from .signature import Signature
+from .surfaces import model_context
 
 _SYSTEMS: dict = {}
 
@@ -424,10 +425,29 @@ class _OrbitProblemBase:
     def _p(self, p):
         if p is None:
             return self.p0.copy()
+        if type(p) is np.ndarray and p.dtype == np.float64 and p.shape == (self.q,) and all(
+                map(math.isfinite, p.tolist())):
+            # already checked (a point's ~16 calls pass the problem's own array): as below
+            return p
         p = np.asarray(p, dtype=float).reshape(-1)
         if p.shape != (self.q,) or not np.isfinite(p).all():
             raise ArgumentError(f"`p` must hold {self.q} finite values {list(self.parameters)}")
         return p
+
+    def _context_at(self, p):
+        """The model's point evaluations at ``p`` (:func:`~pwsdyn.orbits.surfaces.model_context`),
+        kept for the last ``p``: the admissibility check and the monitors of a point ask for
+        them at one ``p``."""
+        params = self.param_dict(p)
+        key = tuple(params.items())
+        got = self.__dict__.get("_context_cache")
+        if got is None or got[2] != self.sliding:
+            got = (key, model_context(self.model, params, self.sliding), self.sliding)
+        elif got[0] != key:
+            # the compiled model and its tables as they were, other parameter values
+            got = (key, got[1].with_params(params), self.sliding)
+        self.__dict__["_context_cache"] = got
+        return got[1]
 
     def param_dict(self, p=None) -> dict:
         """All parameter values of the model at the problem's ``p``."""
@@ -458,6 +478,20 @@ class _OrbitProblemBase:
                     if self.forced else None)
             got = cache[key] = (value, grad)
         return got
+
+    def _shooting_opts(self, p, dense=False):
+        """:meth:`_seg_opts` of the variational runs of :meth:`evaluate` (``dense``: of the
+        dense runs without variational equations of the checks along a solution), kept for
+        the last ``p`` (a continuation step evaluates at one ``p`` per iterate); not for
+        callers that change the dict."""
+        # (by the options dict's identity: set when the problem is made, never changed)
+        key = p.tobytes()
+        slot = "_dense_opts_cache" if dense else "_opts_cache"
+        got = self.__dict__.get(slot)
+        if got is None or got[0] != key or got[2] is not self.opts:
+            got = self.__dict__[slot] = (key, self._seg_opts(p, dense=dense,
+                                                             variational=not dense), self.opts)
+        return got[1]
 
     def _seg_opts(self, p, dense=False, variational=True):
         o = dict(self.opts, variational=variational, dense=dense, throw=False, chatter=False,
@@ -500,8 +534,12 @@ class _OrbitProblemBase:
         if key not in cache:
             if len(cache) > 4 * max(self.m, 1):
                 cache.clear()
+            # the dense output stored as the run goes: every step of it is read (the
+            # samples), and rebuilding it from the nodes afterwards costs more than the run
             cache[key] = [self._flow(i, s.t, s.z, s.T,
-                                     self._seg_opts(p, dense=True, variational=False))[2], None]
+                                     self._shooting_opts(np.asarray(p, dtype=float),
+                                                         dense=True),
+                                     store_dense=True)[2], None]
         return cache[key]
 
     def _dense_samples(self, i, s, p):
@@ -519,10 +557,12 @@ class _OrbitProblemBase:
             entry[1] = (ts, Y)
         return (tr,) + entry[1]
 
-    def _flow(self, i, t, z, T, opts, dense=False):
+    def _flow(self, i, t, z, T, opts, store_dense=False):
         """``(y, Phi, traj)`` of segment field ``i`` from ``(t, z)`` for duration ``T``; the
         :class:`~pwsdyn.Trajectory` only for a run with dense output (the samples of the
-        admissibility check and the monitors), None otherwise."""
+        admissibility check and the monitors), None otherwise. ``store_dense``: the run
+        stores each step's dense output as it goes (the same coefficients as those rebuilt
+        from its nodes on demand)."""
         fidx = self._fidx[i]
         n = self.sys.naug
         if T == 0.0 or abs(T) <= 4 * np.spacing(max(1.0, abs(t))):
@@ -533,9 +573,9 @@ class _OrbitProblemBase:
             t0, t1, mode = -t, -t - T, self.sys.field_index(self.fields[i], reverse=True)
         # opts: the problem's options (checked when it was built) with the segment's settings
         run = run_compiled(self.sys.cm, z, t0, t1, self._pv, opts, mode0=mode, admit=False,
-                           checked=True)
-        if run.status.failed or not np.all(np.isfinite(run.x)) or (
-                run.jacobian is not None and not np.all(np.isfinite(run.jacobian))):
+                           checked=True, store_dense=store_dense)
+        if run.status.failed or not np.isfinite(run.x).all() or (
+                run.jacobian is not None and not np.isfinite(run.jacobian).all()):
             raise SegmentFailed(i, f"segment {i} ({self.state_names[i]}) could not be "
                                 f"integrated over {T:.6g} from t = {t:.10g}: {run.message}")
         tr = run.trajectory(self.sys.cm.model, opts, t0, t1) if opts["dense"] else None
@@ -632,7 +672,7 @@ class _OrbitProblemBase:
         na = sysm.naug
         N = self.size
         Nw = N + q
-        opts = self._seg_opts(p)
+        opts = self._shooting_opts(p)
         pv = self._pv
         F = np.zeros(N)
         J = np.zeros((N, Nw))
@@ -693,10 +733,11 @@ class _OrbitProblemBase:
             if self.forced:
                 Dper[0] -= 1.0
         if self.forced:
-            F[-1] = period - self.period_value(p)
+            per, per_grad = self._period_at(p)
+            F[-1] = period - per
             if jacobian:
                 J[-1] = Dper
-                J[-1, N:] -= self._period_grad(p)
+                J[-1, N:] -= per_grad
         return ProblemEvaluation(np.asarray(u, dtype=float).copy(), p, F,
                                  J[:, :N] if jacobian else None,
                                  J[:, N:] if jacobian else None, period, segs, Dper)

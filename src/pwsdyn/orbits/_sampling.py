@@ -15,15 +15,30 @@ def sample_times(tr) -> np.ndarray:
     if len(t) < 2:
         return t
     th = np.arange(SAMPLES) / SAMPLES
-    inner = (t[:-1, None] + np.diff(t)[:, None] * th[None, :]).reshape(-1)
-    return np.unique(np.append(inner, t[-1]))
+    inner = np.append((t[:-1, None] + np.diff(t)[:, None] * th[None, :]).reshape(-1), t[-1])
+    # sorted and distinct already unless a step is of no length (a jump's two nodes) or of
+    # round-off size: numpy.unique (a sort) only then, with the same result
+    if bool((inner[1:] > inner[:-1]).all()):
+        return inner
+    return np.unique(inner)
+
+
+def _local_minima(g) -> list:
+    """Indices ``i`` (``0 < i < len(g) - 1``) with ``g[i] <= g[i - 1]`` and ``g[i] <= g[i +
+    1]``, in order (compared as arrays: a Python loop over the samples cost more than the
+    rest of a check)."""
+    g = np.asarray(g)
+    if len(g) < 3:
+        return []
+    mid = g[1:-1]
+    return (np.flatnonzero((mid <= g[:-2]) & (mid <= g[2:])) + 1).tolist()
 
 
 def interior_minimum(val, ts, g):
     """``(t, value)`` of the smallest local minimum of the samples ``g`` at ``ts`` strictly
     inside the range (not at its ends), refined by minimizing ``val`` between the
     neighbouring samples; ``None`` when the samples have no interior local minimum."""
-    cands = [i for i in range(1, len(g) - 1) if g[i] <= g[i - 1] and g[i] <= g[i + 1]]
+    cands = _local_minima(g)
     if not cands:
         return None
     best = None
@@ -75,7 +90,7 @@ def lowest_point(fn, tr, ts, vals, sign, n, limit=None):
     g = sign * vals
     k = int(np.argmin(g))
     best = (float(ts[k]), float(vals[k]))
-    cands = [k] + [i for i in range(1, len(g) - 1) if g[i] <= g[i - 1] and g[i] <= g[i + 1]]
+    cands = [k] + _local_minima(g)
     for i in sorted(set(cands))[:50]:
         a = ts[max(i - 1, 0)]
         b = ts[min(i + 1, len(ts) - 1)]

@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 import sympy as sp
 
+from .._compiling import type_once
 from ..errors import ArgumentError, ModelError
 from ..model.cache import load_module
 from ..model.codegen import (W_AFFINE, W_F, W_FX, W_G, W_GT, W_GX, W_H,
@@ -105,9 +106,12 @@ class SegmentSystem:
         def warm_up(fn):
             fn(W_F, 0, 0.0, np.zeros(nz), np.zeros(max(1, len(self.rest))), np.zeros(nz * nz))
 
-        self.evaluate, path = load_module("segments", _VERSION, self.digest, self._source,
-                                          model_name=model.name, attribute="evaluate",
-                                          warm_up=warm_up)
+        evaluate, path = load_module("segments", _VERSION, self.digest, self._source,
+                                     model_name=model.name, attribute="evaluate",
+                                     warm_up=warm_up)
+        # passed to the kernel on every segment run: its numba type resolved once, as the
+        # model's own evaluate is (pwsdyn._compiling.type_once)
+        self.evaluate = type_once(evaluate)
         self.compile_seconds = time.perf_counter() - t0
         nf = 2 * len(self.fields)
         names = [f"segment_field_{i}" for i in range(nf)]

@@ -150,7 +150,7 @@ def dib_monitors(prob, u, p=None, evaluation=None) -> dict:
     """
     p = prob._p(p)
     ev = evaluation if evaluation is not None else prob.evaluate(u, p, jacobian=False)
-    ctx = model_context(prob.model, prob.param_dict(p), prob.sliding)
+    ctx = prob._context_at(p)
     m, n = prob.model, prob.n
     out = {}
     for i, s in enumerate(ev.segs):
