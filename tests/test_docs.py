@@ -70,6 +70,9 @@ CITATIONS = {
     r"\bSvahn & Dankowicz\b|\bSvahn and H\. Dankowicz\b": "svahn2008paperD",
     r"\bDankowicz and F\. Svahn\b|\bDankowicz & Svahn\b": "dankowicz2007paperB",
     r"\bSvahn, J\. Jerrelind\b": "svahn2009paperC",
+    r"\bBurridge (&|and) (L\. )?Knopoff\b": "burridge1967",
+    r"\bCarlson (&|and) (J\. S\. )?Langer\b": "carlson1989",
+    r"\bNussbaum (&|and) (A\. )?Ruina\b": "nussbaum1987",
 }
 #: The thesis's appended papers.
 PAPERS = {"A": "wilcox2009paperA", "B": "dankowicz2007paperB", "C": "svahn2009paperC",
