@@ -455,3 +455,59 @@ def test_burridge_knopoff_refuses_what_it_cannot_build():
     m = pwsdyn.burridge_knopoff(2, Fs=[1.0, 1.5])
     assert (m.parameters["Fs2"], m.parameters["Fd2"]) == (1.5, 0.75)
     assert set(m.units) == set(m.descriptions) == {"t", *m.states, *m.parameters}
+
+
+# ======================================================================================
+# a periodic orbit with a segment on the intersection
+# ======================================================================================
+
+#: the two-block belt with a stiffer coupling spring: an orbit on which block 1 sticks, block
+#: 2 joins it (both stuck, on the intersection), block 1 releases, then block 2
+BELT_ORBIT = {"kc": 2.0}
+#: a state near it (rounded from the run's 300th time unit) and its period
+BELT_ORBIT_GUESS = ([0.9596, -0.4364, 0.9704, -0.4544], 8.735)
+
+
+@needs_multi
+def test_orbit_with_a_codimension_two_segment_and_its_multipliers():
+    """Issue 27 acceptance: a periodic orbit whose signature slides on the intersection of
+    both contacts' surfaces, found by shooting from a guess, and its multipliers against
+    central differences of its return map to the hyperplane through ``x0`` normal to the
+    field (pwsdyn runs at 1e-13). Sliding removes one dimension per surface slid on, so the
+    return map's Jacobian has rank 1: one nontrivial multiplier, the others 0.
+
+    Tolerance 1e-6 on the multiplier: central differences with h = 1e-6 err by about
+    h^2 |P'''| (1e-12) plus the runs' error over h (1e-13 / 1e-6 = 1e-7)."""
+    x_guess, period = BELT_ORBIT_GUESS
+    orbit = pwsdyn.find_periodic_orbit("two-block-belt", x_guess, period=period,
+                                       params=BELT_ORBIT)
+    assert "slide_multi" in str(orbit.signature)
+    x0, T, t0 = np.asarray(orbit.x0, float), orbit.period, orbit.t0
+    model = pwsdyn.load_model("two-block-belt")
+    p = {**model.parameters, **BELT_ORBIT}
+
+    def field(x):       # the slip field of both blocks, for the section's normal
+        def friction(w, fs, fd):
+            return math.copysign(fd + (fs - fd) / (1 + p["delta"] * abs(w)), w)
+        w1, w2 = x[1] - p["V"], x[3] - p["V"]
+        return np.array([x[1], (-p["k1"] * x[0] - p["kc"] * (x[0] - x[2])
+                                - friction(w1, p["Fs1"], p["Fd1"])) / p["m1"],
+                         x[3], (-p["k2"] * x[2] - p["kc"] * (x[2] - x[0])
+                                - friction(w2, p["Fs2"], p["Fd2"])) / p["m2"]])
+    assert abs(x0[1] - p["V"]) > 0.1 and abs(x0[3] - p["V"]) > 0.1   # both slip at x0
+    normal = field(x0)
+
+    def ret(x):
+        run = pwsdyn.simulate("two-block-belt", x, (t0, t0 + 1.2 * T), params=BELT_ORBIT,
+                              rtol=1e-13, atol=1e-13)
+        t = brentq(lambda s: normal @ (run(s) - x0), t0 + 0.9 * T, t0 + 1.1 * T, xtol=1e-14)
+        return run(t)
+
+    assert np.abs(ret(x0) - x0).max() < 1e-10
+    h = 1e-6
+    J = np.column_stack([(ret(x0 + h * e) - ret(x0 - h * e)) / (2 * h) for e in np.eye(4)])
+    fd = sorted(np.linalg.eigvals(J), key=abs)
+    mult = sorted(np.asarray(orbit.multipliers), key=abs)
+    assert abs(mult[-1].real) > 1.5 and abs(mult[-1].imag) < 1e-12   # unstable, flip
+    assert fd[-1] == pytest.approx(mult[-1], rel=1e-6)
+    assert max(abs(v) for v in fd[:-1]) < 1e-6 and max(abs(v) for v in mult[:-1]) < 1e-6
