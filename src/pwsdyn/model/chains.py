@@ -1,8 +1,8 @@
 r"""Burridge-Knopoff chains: ``n`` blocks in a row on a moving plate, each with its own friction
 contact.
 
-The model of :func:`burridge_knopoff` (Burridge & Knopoff 1967; with velocity-weakening friction,
-Carlson & Langer 1989), in the frame of the blocks' rest positions: block :math:`i` at
+The model of :func:`pwsdyn.burridge_knopoff` (Burridge & Knopoff 1967; with velocity-weakening
+friction, Carlson & Langer 1989), in the frame of the blocks' rest positions: block :math:`i` at
 :math:`x_i` with velocity :math:`v_i` is tied to its neighbours by springs :math:`k_c`, to the
 fixed frame by a spring :math:`k_p` (the leaf springs to the driver plate of the earthquake
 model, seen from the plate), and rubs on a belt moving at :math:`V`:
@@ -38,7 +38,7 @@ from ..errors import ArgumentError
 from .discontinuities import MAX_SPLIT_MODES
 from .spec import Model, load_model
 
-#: Most blocks :func:`burridge_knopoff` builds: the ``2**n`` split modes must not exceed
+#: Most blocks :func:`pwsdyn.burridge_knopoff` builds: the ``2**n`` split modes must not exceed
 #: ``MAX_SPLIT_MODES`` (n <= 4), and their generated code must fit the code generator's
 #: ``MAX_SOURCE_CHARS`` (136 408 characters for n = 4, over the 100 000 allowed).
 MAX_BLOCKS = 3
