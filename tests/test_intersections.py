@@ -19,6 +19,7 @@ import pwsdyn
 from pwsdyn.errors import Status
 from pwsdyn.integrate.trajectory import DiscreteState
 from pwsdyn.io import load_trajectory
+from pwsdyn.stability import event_saltations
 
 #: The integrator's tolerances for comparisons at 1e-8 (local errors ~1e-12 accumulate over
 #: a few dozen events to ~1e-10).
@@ -293,3 +294,34 @@ def test_jacobian_through_codim2_entry_and_exit_matches_finite_differences():
                      ("slide_end", "slide:vrel1")]
     J_fd = _fd_jacobian(two_blocks(), x0, (0.0, 3.0), 1e-5)
     np.testing.assert_allclose(tr.jacobian, J_fd, rtol=0, atol=5e-6)
+
+
+def test_saltation_matrices_at_entry_and_exit():
+    """The matrices the kernel applied. Relays, entry into x = y = 0 at t = 2 from sliding on
+    y = 0: S = I + (f_after - f_before) h_x / (h_x f_before) with f_before = (-1/2, 0, 3/2),
+    f_after = (0, 0, 9/8), h_x = (1, 0, 0): its first column is (0, 0, 3/4), the rest the
+    identity's. Two blocks, release of the second belt: the field is continuous there (at
+    lambda_2 = 0 the bilinear field is the first belt's sliding field), so the kernel applies
+    S = I; that this is right is what the Jacobian through the exit against central
+    differences (the test above) verifies."""
+    tr = pwsdyn.simulate(RELAYS, [1.0, 0.5, 0.0], (0.0, 3.0), variational=True, **TIGHT)
+    S = event_saltations(tr)[1]
+    expected = np.eye(3)
+    expected[:, 0] = [0.0, 0.0, 0.75]
+    np.testing.assert_allclose(S, expected, rtol=0, atol=1e-12)
+    tr = pwsdyn.simulate(two_blocks(), [0.0] * 4, (0.0, 3.0), variational=True, **TIGHT)
+    assert tr.events[2].kind == "slide_end"
+    np.testing.assert_allclose(event_saltations(tr)[2], np.eye(4), rtol=0, atol=1e-12)
+
+
+def test_three_relays_slide_on_the_triple_intersection():
+    """x' = -sign(x), y' = -2 sign(y), z' = -4 sign(z) from (1, 1/2, 1/2): z = 0 at 1/8,
+    y = 0 at 1/4, x = 0 at 1; then at rest on the codimension-3 intersection."""
+    m = {"name": "three-relays", "states": ["x", "y", "z"],
+         "modes": {"m": {"x": "-sign(x)", "y": "-2*sign(y)", "z": "-4*sign(z)"}}}
+    tr = pwsdyn.simulate(m, [1.0, 0.5, 0.5], (0.0, 2.0), **TIGHT)
+    assert [str(e.mode_after) for e in tr.events] == [
+        "slide:z", "slide_multi:y&z", "slide_multi:x&y&z"]
+    np.testing.assert_allclose([e.t for e in tr.events], [0.125, 0.25, 1.0], rtol=0,
+                               atol=1e-12)
+    np.testing.assert_allclose(tr.x_final, 0.0, rtol=0, atol=1e-12)
