@@ -49,6 +49,7 @@ CITATIONS = {
     r"\bAdolfsson\b": "adolfsson2001",
     r"\bFilippov\b": "filippov1988",
     r"\bUtkin\b": "utkin1992",
+    r"\bDieci\b|\bLopez\b": "dieci2011",
     r"\bKuznetsov, Rinaldi & Gragnani\b": "kuznetsov2003",
     r"\bKuznetsov,? (\*Elements|section)": "kuznetsov2004",
     r"\bKeller's\b": "keller1977",

@@ -552,7 +552,8 @@ class Trajectory:
         return np.array([e.t for e in self.events_of(kind, name)])
 
     def sliding_intervals(self) -> list:
-        """The Filippov sliding segments: ``[(t_start, t_end, switch name), ...]``.
+        """The Filippov sliding segments: ``[(t_start, t_end, switch name), ...]``; sliding on
+        an intersection is named by its surfaces joined by ``&`` (``"v1&v2"``).
 
         Read from the discrete state of the nodes, so a run that starts on a sliding surface
         (no ``slide_start`` event) or ends while sliding is included; consecutive segments on
@@ -568,7 +569,7 @@ class Trajectory:
             st = parsed.get(text)
             if st is None:
                 st = parsed[text] = DiscreteState.parse(text)
-            if st.kind == "slide":
+            if st.kind == "slide" or st.kind == "slide_multi":
                 if cur is not None and cur[2] == st.name:
                     cur[1] = float(t[i])
                 else:
