@@ -11,7 +11,8 @@ Fs/2, delta = 3), from rest, 1000 time units, ``rtol = atol = 1e-10``. For each 
 
 The loader splits a mode written with ``sign()`` into 2**n variants (at most
 ``MAX_SPLIT_MODES`` = 16) whose generated code must fit ``MAX_SOURCE_CHARS`` (100 000
-characters; 136 408 for n = 4), so n <= 3 here (``pwsdyn.model.chains.MAX_BLOCKS``). Timings are reported, never asserted.
+characters; 136 408 for n = 4), so n <= 3 here (``pwsdyn.model.chains.MAX_BLOCKS``).
+Timings are reported, never asserted.
 
 Run::
 
