@@ -695,7 +695,20 @@ def _settle_multi(ev, p, t, y, n, nm, mask, ref, stab, buf, hdx, w1, work):
                 _project_multi(ev, p, mask, t, y, n, hdx, buf)
                 return SLIDE_MULTI, mask, ref
             ks = _multi_surface(mask, worst)
-            if work[o_lam + worst] > 1.0:
+            # the side it leaves to: where every corner field moves the state one way across
+            # it (a crossing), that way; otherwise (some corner fields point into it) the side
+            # its weight points to
+            amin = np.inf
+            amax = -np.inf
+            for c in range(1 << k):
+                amin = min(amin, work[o_a + worst * (1 << k) + c])
+                amax = max(amax, work[o_a + worst * (1 << k) + c])
+            below = work[o_lam + worst] > 1.0
+            if amin >= 0.0:
+                below = False
+            elif amax <= 0.0:
+                below = True
+            if below:
                 ref = _partner(stab, ks, ref)
             mask &= ~(1 << ks)
             ref = _multi_reference(stab, mask, ref)
