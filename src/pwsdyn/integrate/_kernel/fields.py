@@ -380,7 +380,7 @@ def _rate_band(ev, p, k, mode, nm, t, x, n, hdx):
 def multi_work_size(n):
     """Length of the work vector of :func:`_solve_lambda` for ``n`` states (the kernel's
     ``gx`` and ``buf`` are at least this long; :func:`_multi_offsets`)."""
-    return _multi_offsets(n)[8] + (1 << MULTI_MAX) + 4
+    return _multi_offsets(n)[8] + (1 << MULTI_MAX) + n + 5
 
 
 @_hot
@@ -497,12 +497,38 @@ def _multi_set_corners(stab, mask, ref, n, work):
     :func:`_lambda_core`; the kernel sets them once per sliding state in its ``buf``, whose
     watch functions have no switch table). False if a corner is missing."""
     o_m = _multi_offsets(n)[8]
+    # the (t, x) of the weights held in work (:func:`_multi_lambda_cached`): none yet
+    work[o_m + (1 << MULTI_MAX)] = np.nan
     for c in range(1 << _multi_count(mask)):
         m = _multi_corner(stab, mask, ref, c)
         if m < 0:
             return False
         work[o_m + c] = m
     return True
+
+
+@_hot
+def _multi_lambda_cached(ev, p, mask, i, t, x, n, w1, work):
+    """``lambda_i`` at ``(t, x)`` from the weights held in ``work`` where they were solved at
+    the same ``(t, x)`` (the watch functions of all surfaces and both sides of an
+    intersection sample the same points: one solve serves them all), else solved (NaN
+    where the rule has no solution)."""
+    o_lam = _multi_offsets(n)[4]
+    o_c = _multi_offsets(n)[8] + (1 << MULTI_MAX)
+    hit = work[o_c] == t
+    if hit:
+        for q in range(n):
+            if work[o_c + 1 + q] != x[q]:
+                hit = False
+                break
+    if not hit:
+        if _lambda_core(ev, p, mask, t, x, n, w1, work) < 0:
+            work[o_c] = np.nan
+            return np.nan
+        work[o_c] = t
+        for q in range(n):
+            work[o_c + 1 + q] = x[q]
+    return work[o_lam + i]
 
 
 @_hot
@@ -621,17 +647,6 @@ def _multi_field(ev, p, mask, ref, nm, t, x, n, out, stab, slide_c, w1, work):
                 g = slide_c * hval / nrm2
                 for q in range(n):
                     out[q] -= g * work[o_hx + i * n + q]
-
-
-@_hot
-def _multi_lambda(ev, p, mask, ref, nm, t, x, n, stab, i, w1, work):
-    """``lambda_i`` of the multilinear sliding field at ``(t, x)`` (NaN where it has no
-    solution): the watch function of the exit from surface ``i`` of the intersection."""
-    k = _solve_lambda(ev, p, mask, ref, nm, t, x, n, stab, w1, work)
-    if k < 0:
-        return np.nan
-    o_hx, o_ht, o_fc, o_a, o_lam, o_g, o_jac, o_dl, o_m = _multi_offsets(n)
-    return work[o_lam + i]
 
 
 @_hot
