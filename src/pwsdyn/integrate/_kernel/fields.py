@@ -380,7 +380,7 @@ def _rate_band(ev, p, k, mode, nm, t, x, n, hdx):
 def multi_work_size(n):
     """Length of the work vector of :func:`_solve_lambda` for ``n`` states (the kernel's
     ``gx`` and ``buf`` are at least this long; :func:`_multi_offsets`)."""
-    return _multi_offsets(n)[8] + (1 << MULTI_MAX) + n + 5
+    return _multi_offsets(n)[8] + (1 << MULTI_MAX) + 4
 
 
 @_hot
@@ -497,38 +497,12 @@ def _multi_set_corners(stab, mask, ref, n, work):
     :func:`_lambda_core`; the kernel sets them once per sliding state in its ``buf``, whose
     watch functions have no switch table). False if a corner is missing."""
     o_m = _multi_offsets(n)[8]
-    # the (t, x) of the weights held in work (:func:`_multi_lambda_cached`): none yet
-    work[o_m + (1 << MULTI_MAX)] = np.nan
     for c in range(1 << _multi_count(mask)):
         m = _multi_corner(stab, mask, ref, c)
         if m < 0:
             return False
         work[o_m + c] = m
     return True
-
-
-@_hot
-def _multi_lambda_cached(ev, p, mask, i, t, x, n, w1, work):
-    """``lambda_i`` at ``(t, x)`` from the weights held in ``work`` where they were solved at
-    the same ``(t, x)`` (the watch functions of all surfaces and both sides of an
-    intersection sample the same points: one solve serves them all), else solved (NaN
-    where the rule has no solution)."""
-    o_lam = _multi_offsets(n)[4]
-    o_c = _multi_offsets(n)[8] + (1 << MULTI_MAX)
-    hit = work[o_c] == t
-    if hit:
-        for q in range(n):
-            if work[o_c + 1 + q] != x[q]:
-                hit = False
-                break
-    if not hit:
-        if _lambda_core(ev, p, mask, t, x, n, w1, work) < 0:
-            work[o_c] = np.nan
-            return np.nan
-        work[o_c] = t
-        for q in range(n):
-            work[o_c + 1 + q] = x[q]
-    return work[o_lam + i]
 
 
 @_hot
