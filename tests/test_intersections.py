@@ -325,3 +325,26 @@ def test_three_relays_slide_on_the_triple_intersection():
     np.testing.assert_allclose([e.t for e in tr.events], [0.125, 0.25, 1.0], rtol=0,
                                atol=1e-12)
     np.testing.assert_allclose(tr.x_final, 0.0, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("y_field, x0, kinds, y_end", [
+    # y attracting too: both slide from the instant of arrival
+    ("-2*sign(y)", [1.0, 2.0], ["slide_multi:x&y"], 0.0),
+    # y crossed downwards (y' = -3/2 above, -1/2 below): slides on x, crosses y
+    ("-1 - 0.5*sign(y)", [1.0, 1.5], ["slide:x"], -1.0),
+    # the same with the faster field below (y' = -3/2 above, -5/2 below)
+    ("-2 + 0.5*sign(y)", [1.0, 1.5], ["slide:x"], -5.0),
+])
+def test_a_regular_arrival_exactly_at_the_intersection(y_field, x0, kinds, y_end):
+    """x' = -sign(x) and the motion reaches x = 0 and y = 0 at the same instant t = 1
+    (non-generic): it slides on both where both attract, and on x = 0 only where the flow
+    crosses y = 0 (every corner field moves y the same way), then y(3) = y_end in closed
+    form."""
+    m = {"name": "corner", "states": ["x", "y"], "modes": {"m": {"x": "-sign(x)", "y": y_field}}}
+    tr = pwsdyn.simulate(m, x0, (0.0, 3.0), **TIGHT)
+    assert [str(e.mode_after) for e in tr.events] == kinds
+    assert tr.events[0].t == pytest.approx(1.0, abs=1e-12)
+    np.testing.assert_allclose(tr.x_final, [0.0, y_end], rtol=0, atol=1e-12)
+    # a start at the intersection resolves the same way
+    tr0 = pwsdyn.simulate(m, [0.0, 0.0], (1.0, 3.0), **TIGHT)
+    np.testing.assert_allclose(tr0.x_final, [0.0, y_end], rtol=0, atol=1e-12)

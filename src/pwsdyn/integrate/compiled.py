@@ -997,8 +997,9 @@ def check_state_name(model, mode, name: str = "mode") -> None:
         return
     must = (f"None or a discrete state of model {model.name!r}: a mode "
             f"{list(model.mode_names)}, 'stick:<event>' with an event "
-            f"{[e.name for e in model.events]} or 'slide:<switch>' with a switch "
-            f"{[s.name for s in model.switches]}")
+            f"{[e.name for e in model.events]}, 'slide:<switch>' with a switch "
+            f"{[s.name for s in model.switches]} or 'slide_multi:<surface>&<surface>...' "
+            f"with two or more surfaces {[s.name for s in model.surfaces]}")
     try:
         st = DiscreteState.parse(mode)
     except ValueError:

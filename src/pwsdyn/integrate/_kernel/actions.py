@@ -14,7 +14,7 @@ from .._codes import (ACT_EVENT, ACT_INTERSECTION, ACT_SWITCH, K_CHATTER, K_CROS
                       SLIDE_MULTI, STICK, ST_INTERSECTION, ST_SUCCESS, SW_FILIPPOV)
 from ._base import EVENT_TABLE_TYPE, SWITCH_TABLE_TYPE, _FD_STEP, _dot, _hot, _hot_inline
 from .fields import (_field, _find_switch, _impact_direction, _multi_count, _multi_offsets,
-                     _multi_field, _multi_reference, _multi_surface, _partner, _project_multi, _project_surface,
+                     _multi_field, _multi_reference, _on_surfaces, _multi_surface, _partner, _project_multi, _project_surface,
                      _resolve, _settle_multi, _solve_lambda, multi_work_size)
 from .watch import _free_normal_acc, _grazing, _project_stick, _stays_in_contact, _surface_rate
 
@@ -602,6 +602,23 @@ def _act_switch(ev, p, s, old_kind, old_idx, old_mode, nm, t, y, n, stab, buf, h
         didx = s
         mode = a_m
         log_kind = K_SLIDE_START
+        # arriving on further Filippov surfaces at the same instant (an arrival at their
+        # intersection, non-generic): the multilinear weights decide which of them it slides
+        # on (buf, at least multi_work_size long, is the work vector)
+        xmax = 1.0
+        for i in range(n):
+            xmax = max(xmax, abs(y[i]))
+        mask = _on_surfaces(ev, p, t, y, n, xmax, k, a_m, stab, buf, hdx)
+        if mask != 0:
+            mask |= 1 << k
+            ref = _multi_reference(stab, mask, a_m)
+            if ref >= 0:
+                dk, di, dm = _settle_multi(ev, p, t, y, n, nm, mask, ref, stab, buf, hdx, hdx,
+                                           buf)
+                if dk >= 0:
+                    if dk == REGULAR:
+                        log_kind = K_CROSSING
+                    return dk, di, dm, log_kind, False
         _project_surface(ev, p, k, t, y, n, hdx, buf)
     else:
         log_kind = K_CROSSING

@@ -624,17 +624,6 @@ def _multi_field(ev, p, mask, ref, nm, t, x, n, out, stab, slide_c, w1, work):
 
 
 @_hot
-def _multi_lambda(ev, p, mask, ref, nm, t, x, n, stab, i, w1, work):
-    """``lambda_i`` of the multilinear sliding field at ``(t, x)`` (NaN where it has no
-    solution): the watch function of the exit from surface ``i`` of the intersection."""
-    k = _solve_lambda(ev, p, mask, ref, nm, t, x, n, stab, w1, work)
-    if k < 0:
-        return np.nan
-    o_hx, o_ht, o_fc, o_a, o_lam, o_g, o_jac, o_dl, o_m = _multi_offsets(n)
-    return work[o_lam + i]
-
-
-@_hot
 def _project_multi(ev, p, mask, t, y, n, hdx, buf):
     """Bring a state back onto all surfaces of ``mask``: sweeps of the one-surface Newton
     projection (:func:`_project_surface`), exact after one sweep for orthogonal linear
@@ -695,7 +684,20 @@ def _settle_multi(ev, p, t, y, n, nm, mask, ref, stab, buf, hdx, w1, work):
                 _project_multi(ev, p, mask, t, y, n, hdx, buf)
                 return SLIDE_MULTI, mask, ref
             ks = _multi_surface(mask, worst)
-            if work[o_lam + worst] > 1.0:
+            # the side it leaves to: where every corner field moves the state one way across
+            # it (a crossing), that way; otherwise (some corner fields point into it) the side
+            # its weight points to
+            amin = np.inf
+            amax = -np.inf
+            for c in range(1 << k):
+                amin = min(amin, work[o_a + worst * (1 << k) + c])
+                amax = max(amax, work[o_a + worst * (1 << k) + c])
+            below = work[o_lam + worst] > 1.0
+            if amin >= 0.0:
+                below = False
+            elif amax <= 0.0:
+                below = True
+            if below:
                 ref = _partner(stab, ks, ref)
             mask &= ~(1 << ks)
             ref = _multi_reference(stab, mask, ref)
