@@ -195,6 +195,44 @@ def scipy_smoothed(p, t_end, rtol, atol, eps, method, t_eval):
 
 
 # ------------------------------------------------------------------------------------------
+def two_contacts(params, period, cycles, rtol, atol, repeats):
+    """Sliding on an intersection: two such blocks on two belts in one model (the second with
+    other parameters), so that both often stick at once (``slide_multi``, the bilinear
+    sliding field of Dieci & Lopez), against the one block over the same time: cost per
+    step and per time unit as ratios of CPU time, and the share of the time both stick."""
+    p = params
+    two = {"name": "two-blocks", "states": ["x1", "v1", "x2", "v2"],
+           "parameters": {"m": p["m"], "k1": p["k"], "Fs1": p["Fs"], "V1": p["V"],
+                          "d1": p["delta"], "k2": 1.5 * p["k"], "Fs2": 0.8 * p["Fs"],
+                          "V2": 1.5 * p["V"], "d2": 2.0 / 3.0 * p["delta"]},
+           "definitions": {"vrel1": "v1 - V1", "vrel2": "v2 - V2"},
+           "modes": {"block": {
+               "x1": "v1", "v1": "(-k1*x1 - Fs1*sign(vrel1)/(1 + d1*abs(vrel1)))/m",
+               "x2": "v2", "v2": "(-k2*x2 - Fs2*sign(vrel2)/(1 + d2*abs(vrel2)))/m"}}}
+    t_end = cycles * period
+    model2 = pwsdyn.load_model(two)
+    pwsdyn.simulate(model2, [0.0] * 4, (0.0, period), rtol=rtol, atol=atol, method="RK45")
+    one = Timer(lambda: pwsdyn_run(MODEL, params, t_end, rtol, atol, False))
+    both = Timer(lambda: pwsdyn.simulate(model2, [0.0] * 4, (0.0, t_end), rtol=rtol,
+                                         atol=atol, dense=False, method="RK45",
+                                         max_steps=100_000_000, max_events=10_000_000))
+    interleaved([(one, repeats), (both, repeats)])
+    s1, s2 = one.result.stats, both.result.stats
+    multi = sum(b - a for a, b, name in both.result.sliding_intervals() if "&" in name)
+    # CPU time: on a shared machine the wall clock of these millisecond runs is mostly
+    # waiting
+    per_step = (both.cpu / s2["steps"]) / (one.cpu / s1["steps"])
+    per_time = both.cpu / one.cpu
+    print(f"two contacts ({cycles} cycles of the first): {s2['steps']} steps, "
+          f"{s2['events']} events vs {s1['steps']} steps, {s1['events']} events for one block; "
+          f"both stuck {100 * multi / t_end:.0f}% of the time; CPU cost ratio two/one per "
+          f"step {per_step:.2f}, per time unit {per_time:.2f}")
+    return dict(cycles=cycles, steps_one=s1["steps"], steps_two=s2["steps"],
+                events_one=s1["events"], events_two=s2["events"],
+                share_both_stuck=multi / t_end, ratio_per_step=per_step,
+                ratio_per_time=per_time)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--periods", type=int, default=200, help="stick-slip cycles (200)")
@@ -277,6 +315,7 @@ def main(argv=None):
           f"{d_start:.2e}, max |d t_slip| {d_end:.2e}")
     print(f"smoothed (eps={args.eps:g}) vs pwsdyn: max |dx| over {args.smooth_periods} cycles "
           f"{err_smooth:.2e}")
+    codim2 = two_contacts(params, period, min(args.periods, 50), rtol, atol, args.repeats)
     ok = d_start <= 1e4 * rtol and d_end <= 1e4 * rtol
     if args.save:
         res = dict(benchmark="filippov", date=datetime.now(timezone.utc).isoformat(),
@@ -287,7 +326,8 @@ def main(argv=None):
                    model=MODEL, params=params, period=period, rtol=rtol, atol=atol,
                    eps=args.eps, rows=out_rows, pwsdyn_stats=st, scipy_nfev=nfev_s,
                    agreement=dict(stick_start=d_start, stick_end=d_end, phases=n_cmp),
-                   smoothed_error=err_smooth, import_s=IMPORT_S, first_simulate_s=first_s)
+                   smoothed_error=err_smooth, import_s=IMPORT_S, first_simulate_s=first_s,
+                   codim2=codim2)
         (HERE / "results").mkdir(exist_ok=True)
         (HERE / "results" / "filippov.json").write_text(json.dumps(res, indent=2))
         print("wrote", HERE / "results" / "filippov.json")

@@ -49,6 +49,7 @@ CITATIONS = {
     r"\bAdolfsson\b": "adolfsson2001",
     r"\bFilippov\b": "filippov1988",
     r"\bUtkin\b": "utkin1992",
+    r"\bDieci\b|\bLopez\b": "dieci2011",
     r"\bKuznetsov, Rinaldi & Gragnani\b": "kuznetsov2003",
     r"\bKuznetsov,? (\*Elements|section)": "kuznetsov2004",
     r"\bKeller's\b": "keller1977",
@@ -70,6 +71,9 @@ CITATIONS = {
     r"\bSvahn & Dankowicz\b|\bSvahn and H\. Dankowicz\b": "svahn2008paperD",
     r"\bDankowicz and F\. Svahn\b|\bDankowicz & Svahn\b": "dankowicz2007paperB",
     r"\bSvahn, J\. Jerrelind\b": "svahn2009paperC",
+    r"\bBurridge (&|and) (L\. )?Knopoff\b": "burridge1967",
+    r"\bCarlson (&|and) (J\. S\. )?Langer\b": "carlson1989",
+    r"\bNussbaum (&|and) (A\. )?Ruina\b": "nussbaum1987",
 }
 #: The thesis's appended papers.
 PAPERS = {"A": "wilcox2009paperA", "B": "dankowicz2007paperB", "C": "svahn2009paperC",

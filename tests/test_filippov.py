@@ -399,20 +399,24 @@ def test_sliding_on_one_surface_while_crossing_another():
     assert traj.sliding_intervals() == [(pytest.approx(0.2), 3.0, "y")]
 
 
-def test_reaching_the_intersection_of_two_surfaces_while_sliding_is_reported():
-    """x' = -sign(x), y' = -2 sign(y) from (1, 0.5): slides on y = 0 from t = 0.25 and
-    reaches the intersection x = y = 0 at t = 1, where the sliding fields on both sides of
-    x = 0 point into it (sliding on the intersection is not supported)."""
+def test_reaching_a_non_attracting_intersection_while_sliding_is_reported():
+    """x' = -sign(x), y' = sign(y) (1/2 - 3/2 sign(x)) + 3/4 from (1, 1/8): slides on y = 0
+    from t = 1/2 (y' = -1/4 above, 7/4 below) and reaches x = y = 0 at t = 1, where the
+    sliding field points into x = 0; beyond it y = 0 repels (y' = 11/4 above, -5/4 below). The
+    bilinear weights solve u_x = 0 and u_y/2 + 3/4 = 0: u_y = -3/2 outside [-1, 1]
+    (lambda_y = 5/4), the intersection is not attracting, and the run ends there. (An
+    attracting intersection is slid on: tests/test_intersections.py.)"""
     m = {"name": "corner", "states": ["x", "y"],
-         "modes": {"m": {"x": "-sign(x)", "y": "-2*sign(y)"}}}
-    traj = pwsdyn.simulate(m, [1.0, 0.5], (0.0, 3.0), throw=False)
+         "modes": {"m": {"x": "-sign(x)", "y": "sign(y)*(0.5 - 1.5*sign(x)) + 0.75"}}}
+    traj = pwsdyn.simulate(m, [1.0, 0.125], (0.0, 3.0), throw=False)
     assert traj.status == Status.SURFACE_INTERSECTION
     assert traj.t_final == pytest.approx(1.0, abs=1e-12)
     assert np.max(np.abs(traj.x_final)) <= 1e-12
-    assert "intersection of two switching surfaces" in traj.message
-    # t = 1 to rounding (the exact flow of the constant fields: 1 - 4e-16)
+    assert "intersection of switching surfaces" in traj.message
+    assert "not attracting" in traj.message
+    # t = 1 to rounding
     with pytest.raises(SolveError, match=r"intersection.*Stopped at t=(1\b|0\.999999999999)"):
-        pwsdyn.simulate(m, [1.0, 0.5], (0.0, 3.0))
+        pwsdyn.simulate(m, [1.0, 0.125], (0.0, 3.0))
 
 
 def test_kinks_of_max_min_are_located_and_crossed():

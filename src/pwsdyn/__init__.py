@@ -26,7 +26,7 @@ from .errors import (ArgumentError as ArgumentError, ExpressionError as Expressi
 _LAZY = {
     "EventRecord": "integrate", "Trajectory": "integrate", "simulate": "integrate",
     "Model": "model", "compile_model": "model", "load_model": "model", "zoo_names": "model",
-    "with_discrete_control": "model",
+    "with_discrete_control": "model", "burridge_knopoff": "model",
     "OrbitError": "orbits", "PeriodicOrbit": "orbits", "RecurrenceWarning": "orbits",
     "find_periodic_orbit": "orbits",
     "SectionNotReachedError": "stability", "floquet_multipliers": "stability",
@@ -53,7 +53,8 @@ if TYPE_CHECKING:  # what static checkers and IDEs see; at run time see __getatt
     from .manifolds import (Crisis, Manifold, ManifoldError, PeriodicPoint,
                             find_periodic_point, locate_crisis, locate_tangency,
                             manifold)
-    from .model import Model, compile_model, load_model, with_discrete_control, zoo_names
+    from .model import (Model, burridge_knopoff, compile_model, load_model,
+                        with_discrete_control, zoo_names)
     from .orbits import OrbitError, PeriodicOrbit, RecurrenceWarning, find_periodic_orbit
     from .stability import (SectionNotReachedError, floquet_multipliers, monodromy,
                             poincare_map, saltation_matrix)

@@ -24,9 +24,15 @@ import numpy as np
 # --------------------------------------------------------------------------------------
 
 #: Discrete states (``dkind``): a regular mode, sticking on an impact surface, Filippov
-#: sliding on a switching surface (the kernel's module docstring).
-STATE_KINDS = ("mode", "stick", "slide")
-REGULAR, STICK, SLIDE = range(3)
+#: sliding on a switching surface, sliding on the intersection of several switching surfaces
+#: (``didx`` the bit mask of their surface indices, ``mode`` the corner above all of them;
+#: the kernel's module docstring).
+STATE_KINDS = ("mode", "stick", "slide", "slide_multi")
+REGULAR, STICK, SLIDE, SLIDE_MULTI = range(4)
+
+#: Most switching surfaces slid on at once (``SLIDE_MULTI``): 2**k corner modes, and a mode
+#: splits into at most ``model.discontinuities.MAX_SPLIT_MODES`` = 16 = 2**4 variants.
+MULTI_MAX = 4
 
 #: Kinds of the event log, indexed by the kernel's ``K_*`` codes (``trajectory.EVENT_KINDS``
 #: and ``orbits.signature.KINDS`` must list the same names in the same order; a test checks).
@@ -40,13 +46,16 @@ MODEL_EVENT_KINDS = ("impact", "transition")
 EV_IMPACT, EV_TRANSITION = range(2)
 
 #: Watch function types: a surface ``h``, a normal velocity ``hdot`` (sliding exit), a normal
-#: acceleration ``hddot`` (release from sticking).
-WATCH_TYPES = ("surface", "hdot", "hddot")
-WF_SURFACE, WF_HDOT, WF_HDDOT = range(3)
+#: acceleration ``hddot`` (release from sticking), a weight ``lambda_i`` or ``1 - lambda_i``
+#: of the multilinear sliding field on an intersection (exit from one of its surfaces).
+WATCH_TYPES = ("surface", "hdot", "hddot", "lambda")
+WF_SURFACE, WF_HDOT, WF_HDDOT, WF_LAMBDA = range(4)
 
 #: What a watch function does when it fires: one action handler each in the kernel.
-ACTIONS = ("event", "switch", "release", "exit_above", "exit_below", "intersection")
-ACT_EVENT, ACT_SWITCH, ACT_RELEASE, ACT_EXIT_ABOVE, ACT_EXIT_BELOW, ACT_INTERSECTION = range(6)
+ACTIONS = ("event", "switch", "release", "exit_above", "exit_below", "intersection",
+           "exit_multi")
+(ACT_EVENT, ACT_SWITCH, ACT_RELEASE, ACT_EXIT_ABOVE, ACT_EXIT_BELOW, ACT_INTERSECTION,
+ ACT_EXIT_MULTI) = range(7)
 
 #: Status codes of a run (``errors.Status`` has the same values; a test checks).
 STATUSES = ("success", "terminal", "max_steps", "max_events", "step_too_small", "nonfinite",

@@ -203,9 +203,12 @@ _STATUS_MESSAGES = {
     Status.STEP_TOO_SMALL: "The step size fell below the resolution of the time variable. The "
                            "vector field may be singular or the solution may blow up here.",
     Status.NONFINITE: "The state or vector field became NaN or infinite.",
-    Status.SURFACE_INTERSECTION: "The trajectory reached the intersection of two switching "
-                                 "surfaces while sliding; sliding on intersections is not "
-                                 "supported.",
+    Status.SURFACE_INTERSECTION: "The trajectory reached the intersection of switching "
+                                 "surfaces while sliding, where the motion can neither cross "
+                                 "nor leave them and the intersection is not attracting: the "
+                                 "multilinear sliding rule has no solution in [0, 1]^k (or "
+                                 "more than 4 surfaces meet); the final state is the sliding "
+                                 "state that reached it.",
     Status.ZENO: "Events accumulate in finite time (Zeno) and no chattering map applies.",
     Status.DIVERGED: "A state component grew beyond `bound`: the run diverged. Raise `bound` "
                      "if the attractor is that large.",

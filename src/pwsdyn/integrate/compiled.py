@@ -42,7 +42,8 @@ from ..model import compile_model, load_model
 from ..model.codegen import (W_F, W_G, W_GT, W_GUARD, W_GX, W_H, W_HD, W_HDT, W_HDX, W_HT,
                              W_HX)
 from ..model.spec import as_model
-from ._codes import (EVENT_LOG_KINDS, REGULAR, SAVE_DENSE, SAVE_EVENTS, SAVE_NODES, SLIDE, STATS,
+from ._codes import (EVENT_LOG_KINDS, REGULAR, SAVE_DENSE, SAVE_EVENTS, SAVE_NODES, SLIDE,
+                     SLIDE_MULTI, STATS,
                      STICK, VAR_NONE, VAR_SEGMENTS, KernelResult, kernel_options)
 from ._load import kernel
 from ._start import ADMIT_BEHIND, Start, abs_max, start_state
@@ -145,7 +146,15 @@ def _state_name(model, kind: int, idx: int, mode: int) -> DiscreteState:
         return DiscreteState("mode", model.modes[mode].name)
     if kind == 1:
         return DiscreteState("stick", model.events[idx].name)
+    if kind == SLIDE_MULTI:
+        return DiscreteState("slide_multi", _multi_name(model, idx))
     return DiscreteState("slide", model.switches[idx].name)
+
+
+def _multi_name(model, mask: int) -> str:
+    """The name of sliding on the intersection of the surfaces of the bit mask ``mask``: their
+    names joined by ``&`` in increasing index (``slide_multi:v1&v2``)."""
+    return "&".join(model.surfaces[k].name for k in range(len(model.surfaces)) if mask >> k & 1)
 
 
 #: One-entry arrays of the discrete states' names, by model digest and kernel code.
@@ -954,16 +963,40 @@ class ModelContext:
             else:
                 mode = int(mode_hint)
             return KernelState(STICK, j, mode)
+        if st.kind == "slide_multi":
+            return self._multi_state(st.surfaces)
         s = self.switch_index(st.name)
         # the kernel keeps the `above` mode while sliding (only the switch index matters
         # for the sliding field)
         return KernelState(SLIDE, s, int(self.stab[s]["above"]))
+
+    def _multi_state(self, names) -> KernelState:
+        """The kernel code of sliding on the intersection of the surfaces ``names``: the bit
+        mask of their indices and the first mode above all of them (the reference corner the
+        kernel keeps; as for ``slide:<switch>``, only the surfaces matter for the field where
+        one mode's variants meet there)."""
+        idx = {s.name: k for k, s in enumerate(self.model.surfaces)}
+        unknown = [nm for nm in names if nm not in idx]
+        if unknown or len(names) < 2:
+            raise ValueError(f"slide_multi names two or more surfaces of "
+                             f"{list(idx)} joined by '&', got {'&'.join(names)!r}")
+        mask = 0
+        for nm in names:
+            mask |= 1 << idx[nm]
+        ks = {idx[nm] for nm in names}
+        for m in range(self.nm):
+            above = {int(r["surface"]) for r in self.stab if int(r["above"]) == m}
+            if ks <= above:
+                return KernelState(SLIDE_MULTI, mask, m)
+        raise ValueError(f"no mode lies above all of the surfaces {'&'.join(names)!r}")
 
     def state_name(self, st: KernelState) -> DiscreteState:
         if st.kind == REGULAR:
             return DiscreteState("mode", self.model.modes[st.mode].name)
         if st.kind == STICK:
             return DiscreteState("stick", self.model.events[st.index].name)
+        if st.kind == SLIDE_MULTI:
+            return DiscreteState("slide_multi", _multi_name(self.model, st.index))
         return DiscreteState("slide", self.model.switches[st.index].name)
 
 
@@ -976,8 +1009,9 @@ def check_state_name(model, mode, name: str = "mode") -> None:
         return
     must = (f"None or a discrete state of model {model.name!r}: a mode "
             f"{list(model.mode_names)}, 'stick:<event>' with an event "
-            f"{[e.name for e in model.events]} or 'slide:<switch>' with a switch "
-            f"{[s.name for s in model.switches]}")
+            f"{[e.name for e in model.events]}, 'slide:<switch>' with a switch "
+            f"{[s.name for s in model.switches]} or 'slide_multi:<surface>&<surface>...' "
+            f"with two or more surfaces {[s.name for s in model.surfaces]}")
     try:
         st = DiscreteState.parse(mode)
     except ValueError:
@@ -987,6 +1021,9 @@ def check_state_name(model, mode, name: str = "mode") -> None:
     if st.kind == "stick" and st.name in [e.name for e in model.events]:
         return
     if st.kind == "slide" and st.name in [s.name for s in model.switches]:
+        return
+    if (st.kind == "slide_multi" and len(st.surfaces) >= 2
+            and set(st.surfaces) <= {s.name for s in model.surfaces}):
         return
     raise V.fail(name, must, mode)
 

@@ -27,11 +27,13 @@ STATE_KINDS = _STATE_KINDS
 
 
 class DiscreteState(str):
-    """A discrete state of a flow: a mode, sticking on an impact event or sliding on a switch.
+    """A discrete state of a flow: a mode, sticking on an impact event, sliding on a switch or
+    on the intersection of several switching surfaces.
 
     ``DiscreteState(kind, name)`` with ``kind`` one of
-    :data:`~pwsdyn.integrate.trajectory.STATE_KINDS` (``"mode"``, ``"stick"``, ``"slide"``) and
-    ``name`` the mode, impact event or switch. It is the text the event log, the trajectory's
+    :data:`~pwsdyn.integrate.trajectory.STATE_KINDS` (``"mode"``, ``"stick"``, ``"slide"``,
+    ``"slide_multi"``) and ``name`` the mode, impact event or switch; for ``slide_multi`` the
+    names of the surfaces slid on, joined by ``&`` (``slide_multi:v1&v2``; :attr:`surfaces`). It is the text the event log, the trajectory's
     ``state`` and every file have always used (the mode's name, ``stick:<event>``,
     ``slide:<switch>``) and a ``str``: it compares equal to that text, hashes like it and is
     written as it, so code that compares states with strings keeps working. :meth:`parse` is the
@@ -67,14 +69,14 @@ class DiscreteState(str):
         kind, sep, name = str(text).partition(":")
         if not sep:
             return cls("mode", kind)
-        if kind not in ("stick", "slide"):
+        if kind not in ("stick", "slide", "slide_multi"):
             raise ValueError(f"unknown discrete state {str(text)!r}: expected a mode name, "
                              "'stick:<event>' or 'slide:<switch>'")
         return cls(kind, name)
 
     @property
     def kind(self) -> str:
-        """``"mode"``, ``"stick"`` or ``"slide"``."""
+        """``"mode"``, ``"stick"``, ``"slide"`` or ``"slide_multi"``."""
         kind, sep, _ = self.partition(":")
         return kind if sep else "mode"
 
@@ -85,8 +87,14 @@ class DiscreteState(str):
         return name if sep else str(self)
 
     @property
+    def surfaces(self) -> tuple:
+        """The surfaces slid on at once, for ``slide_multi`` (their names; empty otherwise)."""
+        return tuple(self.name.split("&")) if self.kind == "slide_multi" else ()
+
+    @property
     def code(self) -> int:
-        """The kernel's code of :attr:`kind`: 0 a mode, 1 sticking, 2 sliding."""
+        """The kernel's code of :attr:`kind`: 0 a mode, 1 sticking, 2 sliding, 3 sliding on an
+        intersection."""
         return STATE_KINDS.index(self.kind)
 
     @property
@@ -547,7 +555,8 @@ class Trajectory:
         return np.array([e.t for e in self.events_of(kind, name)])
 
     def sliding_intervals(self) -> list:
-        """The Filippov sliding segments: ``[(t_start, t_end, switch name), ...]``.
+        """The Filippov sliding segments: ``[(t_start, t_end, switch name), ...]``; sliding on
+        an intersection is named by its surfaces joined by ``&`` (``"v1&v2"``).
 
         Read from the discrete state of the nodes, so a run that starts on a sliding surface
         (no ``slide_start`` event) or ends while sliding is included; consecutive segments on
@@ -563,7 +572,7 @@ class Trajectory:
             st = parsed.get(text)
             if st is None:
                 st = parsed[text] = DiscreteState.parse(text)
-            if st.kind == "slide":
+            if st.kind == "slide" or st.kind == "slide_multi":
                 if cur is not None and cur[2] == st.name:
                     cur[1] = float(t[i])
                 else:

@@ -5,3 +5,4 @@ from .spec import (Event as Event, Mode as Mode, Model as Model, Surface as Surf
                    Switch as Switch, load_model as load_model, zoo_names as zoo_names)
 from .control import with_discrete_control as with_discrete_control
 from .iteration import iterate as iterate
+from .chains import burridge_knopoff as burridge_knopoff

@@ -39,6 +39,7 @@ EVENT_STYLES = {
 CONSTRAINED_STYLES = {
     "stick": dict(color="#009E73", label="sticking"),
     "slide": dict(color="#CC79A7", label="sliding"),
+    "slide_multi": dict(color="#882255", label="sliding on an intersection"),
 }
 SURFACE_COLOR = "0.35"
 #: Largest number of samples chosen automatically (see ``num`` of :func:`plot_trajectory`).

@@ -20,7 +20,18 @@ Discrete state
   ``f12 = (1 - alpha) f_above + alpha f_below`` (thesis eq. 2.7-2.8) or Utkin's equivalent
   control ``f(t, x, u_eq)`` (slides; switch table column 4), optionally with the stabilising
   term ``-C h h_x^T`` of the slides; each accepted sliding step is projected back onto
-  ``h = 0``.
+  ``h = 0``;
+* ``SLIDE_MULTI``: sliding on the intersection of ``k = 2 .. MULTI_MAX (4)`` Filippov
+  surfaces; ``didx`` is the bit mask of their surface indices, ``mode`` the reference corner
+  (the product variant above all of them; the other ``2^k - 1`` corners are reached from it
+  across one surface at a time). The field is the multilinear extension of L. Dieci and
+  L. Lopez (Numer. Math. 117 (2011) 779-811), ``f = sum_c prod_i w_i(c) f_c`` with
+  ``w_i = lambda_i`` below surface ``i`` and ``1 - lambda_i`` above, ``lambda`` the root of
+  ``h_i,t + h_i,x f = 0`` by Newton's method (``fields`` says why this rule: for
+  fields affine in the signs it is the field at ``u_i = 1 - 2 lambda_i``, Utkin's
+  equivalent control with a vector ``u``, the contacts' stick forces solved jointly); each
+  accepted step is projected back onto every surface. For ``k = 1`` the rule is the convex
+  combination, which stays ``SLIDE`` with its own code.
 
 Switching surfaces
 ------------------
@@ -32,14 +43,21 @@ switches of kind ``SW_CONTINUOUS`` (kinks of ``Abs``/``Max``/``Min``) always cro
 ends (``slide_end``) where ``hdot`` of the mode above turns positive (``alpha = 0``) or that of
 the mode below turns negative (``alpha = 1``), located by Newton on that ``hdot``. Reaching
 another switching surface while sliding crosses it if the sliding motion continues on its far
-side; if the sliding fields on both sides point into it (sliding on the intersection) the run
-ends with ``ST_INTERSECTION``.
+side; if the sliding fields on both sides point into it the motion slides on the intersection
+(``slide_start``, ``SLIDE_MULTI``) where the multilinear weights lie in ``[0, 1]^k`` (an
+attracting intersection), and the run ends with ``ST_INTERSECTION`` where they do not (or
+more than ``MULTI_MAX`` surfaces would meet). Sliding on an intersection ends on surface
+``i`` (``slide_end``) where ``lambda_i`` reaches 0 (the motion leaves to the side above) or
+1 (below); the other surfaces keep sliding as far as their own weights allow (on the rest of
+the intersection, on one surface, or none: a released contact may make another slip at
+once). A start on several Filippov surfaces is resolved the same way.
 
 Watch functions
 ---------------
 In each discrete state the kernel watches a small list of scalar functions of ``(t, x)`` for
-zero crossings: surfaces ``h`` (events, switches), normal velocities ``hdot`` (sliding exit)
-and normal accelerations ``hddot`` (release from sticking). On every accepted step each is
+zero crossings: surfaces ``h`` (events, switches), normal velocities ``hdot`` (sliding exit),
+normal accelerations ``hddot`` (release from sticking) and the weights ``lambda_i``,
+``1 - lambda_i`` of sliding on an intersection (exit from one of its surfaces). On every accepted step each is
 sampled on the dense output -- surfaces at the ends and at the interior extrema of the cubic
 Hermite fit from ``h`` and ``hdot`` at the ends, the other functions at the ends and the
 midpoint (the normal acceleration of a sticking motion also at the extrema of its Hermite
@@ -127,9 +145,12 @@ with ``Phi' = J Phi`` and updated at every event by the full saltation matrix (s
 time-dependent surfaces and resets: :func:`_event_saltation` (impacts, transitions),
 :func:`_switch_saltation` (Filippov crossing, sliding entry), :func:`_chatter_saltation`
 (complete chattering, the slides' ``G = C + (f_out - C f_in) h_x / (h_x f_in)`` with the time
-derivatives of the map); release and sliding exit leave the field continuous (``S = I``).
+derivatives of the map); entry into sliding on an intersection is the sliding entry formula
+with ``f_in`` the sliding field before and ``f_out`` the multilinear one after, ``h`` the surface
+reached; release, sliding exit and the exit from an intersection leave the field continuous
+(at ``lambda_i = 0`` or 1 the multilinear field is that of the remaining surfaces: ``S = I``).
 ``J`` is symbolic in a regular mode and a central difference (step ~ eps^(1/3)) of the
-sticking or sliding field. Steps are accepted only when ``Phi`` meets the tolerances too.
+sticking or sliding field (also on an intersection). Steps are accepted only when ``Phi`` meets the tolerances too.
 With ``opts.variational == VAR_SEGMENTS`` ``Phi`` restarts at the identity after every event and
 each event record carries the segment's ``Phi`` and ``S`` (the per-segment transfer matrices;
 see :mod:`pwsdyn.integrate._variational`).

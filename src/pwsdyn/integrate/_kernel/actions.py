@@ -10,10 +10,12 @@ from numba import njit
 
 from ...model.codegen import W_F, W_G, W_GX, W_GT, W_HD, W_HDT, W_HDX, W_HT, W_HX
 from .._codes import (ACT_EVENT, ACT_INTERSECTION, ACT_SWITCH, K_CHATTER, K_CROSSING, K_IMPACT,
-                      K_RELEASE, K_SLIDE_END, K_SLIDE_START, REGULAR, SLIDE, STICK,
-                      ST_INTERSECTION, ST_SUCCESS, SW_FILIPPOV)
+                      K_RELEASE, K_SLIDE_END, K_SLIDE_START, MULTI_MAX, REGULAR, SLIDE,
+                      SLIDE_MULTI, STICK, ST_INTERSECTION, ST_SUCCESS, SW_FILIPPOV)
 from ._base import EVENT_TABLE_TYPE, SWITCH_TABLE_TYPE, _FD_STEP, _dot, _hot, _hot_inline
-from .fields import _field, _find_switch, _impact_direction, _partner, _project_surface, _resolve
+from .fields import (_field, _find_switch, _impact_direction, _multi_count, _multi_offsets,
+                     _multi_field, _multi_reference, _on_surfaces, _multi_surface, _partner, _project_multi, _project_surface,
+                     _resolve, _settle_multi, _solve_lambda, multi_work_size)
 from .watch import _free_normal_acc, _grazing, _project_stick, _stays_in_contact, _surface_rate
 
 @njit(cache=True)
@@ -181,10 +183,10 @@ def _chatter_saltation(ev, p, j, k, mode, nm, t, x_in, n, S, etab, stab, slide_c
     whole map divided its error, growing with |t|, by v).
     """
     W = np.zeros(n)
-    gx = np.zeros(n * n)
+    gx = np.zeros(max(n * n, multi_work_size(n)))
     hdx = np.zeros(n)
     f = np.zeros(n)
-    buf = np.zeros(max(n, 2))
+    buf = np.zeros(max(n, 2, multi_work_size(n)))
     hx = np.zeros(n)
     hx1 = np.zeros(n)
     hd1 = np.zeros(n)
@@ -600,6 +602,23 @@ def _act_switch(ev, p, s, old_kind, old_idx, old_mode, nm, t, y, n, stab, buf, h
         didx = s
         mode = a_m
         log_kind = K_SLIDE_START
+        # arriving on further Filippov surfaces at the same instant (an arrival at their
+        # intersection, non-generic): the multilinear weights decide which of them it slides
+        # on (buf, at least multi_work_size long, is the work vector)
+        xmax = 1.0
+        for i in range(n):
+            xmax = max(xmax, abs(y[i]))
+        mask = _on_surfaces(ev, p, t, y, n, xmax, k, a_m, stab, buf, hdx)
+        if mask != 0:
+            mask |= 1 << k
+            ref = _multi_reference(stab, mask, a_m)
+            if ref >= 0:
+                dk, di, dm = _settle_multi(ev, p, t, y, n, nm, mask, ref, stab, buf, hdx, hdx,
+                                           buf)
+                if dk >= 0:
+                    if dk == REGULAR:
+                        log_kind = K_CROSSING
+                    return dk, di, dm, log_kind, False
         _project_surface(ev, p, k, t, y, n, hdx, buf)
     else:
         log_kind = K_CROSSING
@@ -660,8 +679,99 @@ def _act_intersection(ev, p, k2, new_sign, log_ref, old_kind, old_idx, old_mode,
             log_kind = K_SLIDE_END
             log_ref = old_idx
     if log_kind < 0:
-        return ST_INTERSECTION, dkind, didx, mode, log_kind, log_ref
+        # the sliding motion can neither cross k2 nor leave k1 there: it slides on the
+        # intersection if the multilinear weights lie in [0, 1]^2 (an attracting intersection)
+        return _enter_multi(ev, p, (1 << k1) | (1 << k2), stab[old_idx].above, k2, nm, t, y, n,
+                            stab, buf, wk, dkind, didx, mode, log_ref)
     return ST_SUCCESS, dkind, didx, mode, log_kind, log_ref
+
+
+@_hot
+def _enter_multi(ev, p, mask, m, k2, nm, t, y, n, stab, buf, wk, dkind, didx, mode, log_ref):
+    """Sliding that reaches surface ``k2`` starts sliding on the intersection of the surfaces
+    of ``mask`` (``k2`` among them; ``m`` a mode of one of the corners) where the multilinear
+    weights solve the tangency conditions inside ``[0, 1]^k`` (the fields of all corners
+    pressing the state into the intersection): ``slide_start`` on the switch of ``k2`` at the
+    reference corner. Otherwise the intersection is not attracting, or the rule has no
+    solution, and the run ends with ``ST_INTERSECTION`` in the old state. Returns
+    ``(status, dkind, didx, mode, log_kind, log_ref)``."""
+    w1, w2, gx, hdx, jac, xt, ft = wk
+    if _multi_count(mask) > MULTI_MAX or k2 >= 63:
+        return ST_INTERSECTION, dkind, didx, mode, -1, log_ref
+    ref = _multi_reference(stab, mask, m)
+    if ref < 0:
+        return ST_INTERSECTION, dkind, didx, mode, -1, log_ref
+    k = _solve_lambda(ev, p, mask, ref, nm, t, y, n, stab, w1, gx)
+    if k < 0:
+        return ST_INTERSECTION, dkind, didx, mode, -1, log_ref
+    o_lam = _multi_offsets(n)[4]
+    tol = 64.0 * 2.220446049250313e-16
+    for i in range(k):
+        lam = gx[o_lam + i]
+        if not (-tol <= lam <= 1.0 + tol):
+            return ST_INTERSECTION, dkind, didx, mode, -1, log_ref
+    _project_multi(ev, p, mask, t, y, n, hdx, buf)
+    s2 = _find_switch(stab, k2, ref, _partner(stab, k2, ref))
+    return ST_SUCCESS, SLIDE_MULTI, mask, ref, K_SLIDE_START, s2
+
+
+@_hot
+def _act_multi_intersection(ev, p, k3, new_sign, log_ref, old_idx, old_mode, nm, t, y, n,
+                            stab, slide_c, buf, fbuf, wk):
+    """Sliding on the intersection of the surfaces of ``old_idx`` reached surface ``k3``:
+    it crosses ``k3`` where the multilinear field of the corners beyond it is defined (weights
+    in ``[0, 1]^k``) and carries the state away from ``k3``; otherwise it slides on the
+    intersection with ``k3`` too (:func:`_enter_multi`), or the run ends with
+    ``ST_INTERSECTION``. Returns ``(status, dkind, didx, mode, log_kind, log_ref)``."""
+    w1, w2, gx, hdx, jac, xt, ft = wk
+    mask = old_idx
+    ref2 = _partner(stab, k3, old_mode)
+    if ref2 >= 0:
+        k = _solve_lambda(ev, p, mask, ref2, nm, t, y, n, stab, w1, gx)
+        if k > 0:
+            o_lam = _multi_offsets(n)[4]
+            inside = True
+            for i in range(k):
+                if not (0.0 <= gx[o_lam + i] <= 1.0):
+                    inside = False
+            if inside:
+                _multi_field(ev, p, mask, ref2, nm, t, y, n, fbuf, stab, slide_c, w1, gx)
+                ev(W_HX, k3, t, y, p, hdx)
+                ev(W_HT, k3, t, y, p, buf)
+                rate = buf[0] + _dot(hdx, fbuf, n)
+                if rate * new_sign > 0.0:
+                    s3 = _find_switch(stab, k3, ref2, old_mode)
+                    if s3 < 0:
+                        s3 = _find_switch(stab, k3, old_mode, ref2)
+                    return ST_SUCCESS, SLIDE_MULTI, mask, ref2, K_CROSSING, s3
+    return _enter_multi(ev, p, mask | (1 << k3), old_mode, k3, nm, t, y, n, stab, buf, wk,
+                        SLIDE_MULTI, old_idx, old_mode, log_ref)
+
+
+@_hot
+def _act_multi_exit(ev, p, code, old_idx, old_mode, nm, t, y, n, stab, buf, wk):
+    """Sliding on the intersection of the surfaces of ``old_idx`` (reference corner
+    ``old_mode``) ends on surface ``i = code // 2``: its weight ``lambda_i`` reached 0
+    (``code`` even: the motion leaves it to the side above) or 1 (odd: below). The other
+    surfaces keep sliding as far as their own weights allow (:func:`_settle_multi`: on the
+    intersection of the rest, on the one left, or none -- the released contact may make
+    another one slip at once). Logged as ``slide_end`` on the switch of that surface at the
+    corner the motion leaves into. Returns ``(dkind, didx, mode, log_kind, log_ref)``."""
+    w1, w2, gx, hdx, jac, xt, ft = wk
+    i = code // 2
+    ks = _multi_surface(old_idx, i)
+    ref = old_mode
+    if code % 2 == 1:
+        ref = _partner(stab, ks, ref)
+    s_log = _find_switch(stab, ks, old_mode, _partner(stab, ks, old_mode))
+    mask = old_idx & ~(1 << ks)
+    ref = _multi_reference(stab, mask, ref)
+    dkind, didx, mode = _settle_multi(ev, p, t, y, n, nm, mask, ref, stab, buf, hdx, w1, gx)
+    if dkind < 0:
+        dkind = REGULAR
+        didx = -1
+        mode = ref
+    return dkind, didx, mode, K_SLIDE_END, s_log
 
 
 @njit(cache=True)

@@ -1,6 +1,29 @@
 """The vector field of every discrete state: a mode, sticking on a surface (constrained motion),
-Filippov sliding (convex combination or Utkin's equivalent control); the discrete state
+Filippov sliding (convex combination or Utkin's equivalent control), sliding on the
+intersection of several switching surfaces (the multilinear extension); the discrete state
 resolved against the switching surfaces; the right-hand side with the variational equations.
+
+Sliding on an intersection
+--------------------------
+On the intersection of ``k >= 2`` Filippov surfaces Filippov's convex set holds the ``2^k``
+fields of the corner modes (the product variants that differ only in the sides of the ``k``
+surfaces) and a tangent convex combination is not unique. The kernel takes the multilinear
+(for ``k = 2`` bilinear) extension of L. Dieci and L. Lopez, "Sliding motion on discontinuity
+surfaces of high co-dimension. A construction for selecting a Filippov vector field",
+Numer. Math. 117 (2011) 779-811:
+
+    f = sum_c prod_i w_i(c) f_c,   w_i(c) = lambda_i (c below surface i), 1 - lambda_i (above),
+
+with ``lambda`` in ``[0, 1]^k`` the root of the ``k`` tangency conditions
+``h_i,t + h_i,x f = 0`` (:func:`_solve_lambda`). Why this rule: a field that is affine in each
+switching term (dry friction written with ``sign``, relays) is multilinear in the signs, and
+the corner fields are its values at ``u_i = +-1``; the multilinear extension at
+``lambda`` IS that field at ``u_i = 1 - 2 lambda_i``. So it is Utkin's equivalent control
+with a vector ``u``, and in mechanics the stuck contacts' forces solved jointly from their
+stick conditions (each within its static bound while ``lambda_i`` is in ``[0, 1]``); for
+contacts that do not interact the conditions decouple and each contact slides exactly as it
+does alone. For ``k = 1`` it is the convex combination (thesis eq. 2.8), which the kernel keeps
+in its own code path (``SLIDE``).
 """
 
 from __future__ import annotations
@@ -10,7 +33,7 @@ from numba import njit
 
 from ...model.codegen import (W_F, W_FU, W_FX, W_GX, W_H, W_HD, W_HDT, W_HDU, W_HDUD, W_HDX, W_HT,
                               W_HX)
-from .._codes import REGULAR, SLIDE, SLIDE_UTKIN, STICK, SW_FILIPPOV
+from .._codes import MULTI_MAX, REGULAR, SLIDE, SLIDE_MULTI, SLIDE_UTKIN, STICK, SW_FILIPPOV
 from ._base import EVENT_TABLE_TYPE, SWITCH_TABLE_TYPE, _EPS, _FD_STEP, _dot, _hot, _hot_inline
 
 # --------------------------------------------------------------------------------------
@@ -55,6 +78,12 @@ def _field(ev, p, dkind, didx, mode, nm, t, x, n, out, etab, stab, slide_c, w1, 
         lam = acc / hw if hw != 0.0 else 0.0
         for i in range(n):
             out[i] -= lam * w1[i]
+        return
+    if dkind == SLIDE_MULTI:
+        # sliding on the intersection of the surfaces of the bit mask didx, mode the corner
+        # above all of them: the multilinear extension (module docstring); gx is its work
+        # vector (the kernel sizes it by multi_work_size)
+        _multi_field(ev, p, didx, mode, nm, t, x, n, out, stab, slide_c, w1, gx)
         return
     # SLIDE on switch didx: Filippov's convex combination (thesis eq. 2.7-2.8)
     #     f12 = (1 - alpha) f_above + alpha f_below,
@@ -264,6 +293,19 @@ def _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx):
         sb = buf[0]
         filippov = stab[s].kind == SW_FILIPPOV
         if filippov and sa < 0.0 and sb > 0.0:
+            # on further Filippov surfaces of the corner modes too (a start on an
+            # intersection): sliding on the intersection or on some of its surfaces, as the
+            # multilinear weights decide (_settle_multi; buf, at least multi_work_size long,
+            # is its work vector)
+            mask = _on_surfaces(ev, p, t, y, n, xmax, k, a, stab, buf, hdx)
+            if mask != 0:
+                mask |= 1 << k
+                ref = _multi_reference(stab, mask, a)
+                if ref >= 0:
+                    dk, di, dm = _settle_multi(ev, p, t, y, n, nm, mask, ref, stab, buf, hdx,
+                                               hdx, buf)
+                    if dk >= 0:
+                        return dk, di, dm
             _project_surface(ev, p, k, t, y, n, hdx, buf)
             return SLIDE, s, a
         if sa >= 0.0 and sb > 0.0 or sa > 0.0 and sb >= 0.0:
@@ -330,6 +372,380 @@ def _rate_band(ev, p, k, mode, nm, t, x, n, hdx):
     return 64.0 * _EPS * xmax * gmax
 
 
+# --------------------------------------------------------------------------------------
+# sliding on the intersection of several switching surfaces (multilinear extension)
+# --------------------------------------------------------------------------------------
+
+@_hot
+def multi_work_size(n):
+    """Length of the work vector of :func:`_solve_lambda` for ``n`` states (the kernel's
+    ``gx`` and ``buf`` are at least this long; :func:`_multi_offsets`)."""
+    return _multi_offsets(n)[8] + (1 << MULTI_MAX) + 4
+
+
+@_hot
+def _multi_count(mask):
+    """The number of surfaces in the bit mask ``mask``."""
+    c = 0
+    m = mask
+    while m != 0:
+        c += m & 1
+        m >>= 1
+    return c
+
+
+@_hot
+def _multi_surface(mask, i):
+    """The ``i``-th surface (in increasing index) of the bit mask ``mask``."""
+    c = 0
+    k = 0
+    m = mask
+    while m != 0:
+        if m & 1:
+            if c == i:
+                return k
+            c += 1
+        m >>= 1
+        k += 1
+    return -1
+
+
+@_hot
+def _multi_corner(stab, mask, ref, c):
+    """The corner mode ``c`` of sliding on the surfaces of ``mask`` with reference ``ref`` (the
+    corner above all of them): bit ``i`` of ``c`` set, below the ``i``-th surface. Reached
+    from ``ref`` across one surface at a time (the product variants are joined pairwise:
+    :mod:`pwsdyn.model.discontinuities`); -1 if a switch is missing."""
+    m = ref
+    k = _multi_count(mask)
+    for i in range(k):
+        if (c >> i) & 1:
+            m = _partner(stab, _multi_surface(mask, i), m)
+            if m < 0:
+                return -1
+    return m
+
+
+@_hot
+def _small_solve(a, oa, b, ob, k):
+    """Solve the ``k x k`` system stored row-major in ``a[oa:]`` for the right-hand side
+    ``b[ob:ob + k]`` in place (Gaussian elimination with partial pivoting; ``k <=
+    MULTI_MAX``). Returns False where it is singular."""
+    for c in range(k):
+        piv = c
+        for r in range(c + 1, k):
+            if abs(a[oa + r * k + c]) > abs(a[oa + piv * k + c]):
+                piv = r
+        if a[oa + piv * k + c] == 0.0 or not np.isfinite(a[oa + piv * k + c]):
+            return False
+        if piv != c:
+            for q in range(k):
+                tmp = a[oa + c * k + q]
+                a[oa + c * k + q] = a[oa + piv * k + q]
+                a[oa + piv * k + q] = tmp
+            tmp = b[ob + c]
+            b[ob + c] = b[ob + piv]
+            b[ob + piv] = tmp
+        for r in range(c + 1, k):
+            fac = a[oa + r * k + c] / a[oa + c * k + c]
+            for q in range(c, k):
+                a[oa + r * k + q] -= fac * a[oa + c * k + q]
+            b[ob + r] -= fac * b[ob + c]
+    for c in range(k - 1, -1, -1):
+        acc = b[ob + c]
+        for q in range(c + 1, k):
+            acc -= a[oa + c * k + q] * b[ob + q]
+        b[ob + c] = acc / a[oa + c * k + c]
+    return True
+
+
+@_hot
+def _multi_weight(c, lam, ol, k, skip):
+    """``prod_i w_i(c)`` of corner ``c`` (``lambda_i`` below surface ``i``, ``1 - lambda_i``
+    above), leaving out factor ``skip`` (-1: none)."""
+    w = 1.0
+    for i in range(k):
+        if i == skip:
+            continue
+        w *= lam[ol + i] if (c >> i) & 1 else 1.0 - lam[ol + i]
+    return w
+
+
+@_hot
+def _solve_lambda(ev, p, mask, ref, nm, t, x, n, stab, w1, work):
+    """The weights ``lambda`` of the multilinear sliding field on the surfaces of ``mask``
+    (Dieci & Lopez 2011; the module docstring) at ``(t, x)``, into ``work`` (layout:
+    :func:`_multi_offsets`), with the corner fields, gradients and ``h_t`` the field needs.
+
+    ``lambda`` solves ``g_i = h_i,t + h_i,x f(lambda) = sum_c W_c(lambda) a_ic = 0`` with
+    ``a_ic = h_i,t + h_i,x f_c`` (the weights sum to one), by Newton's method with the exact
+    Jacobian of the multilinear form, ``dg_i/dlambda_j = sum_c dW_c/dlambda_j a_ic``, from the
+    centre ``lambda = 1/2`` (the same start at every call: the field is a function of
+    ``(t, x)`` alone, so a step taken again gives the same numbers), at most 30 iterations.
+    For a field affine in the signs of uncoupled contacts the system is triangular in each
+    ``lambda_i`` and one or two iterations are exact. Returns ``k`` (the number of surfaces),
+    or -1 where a corner mode is missing or the Newton matrix is singular (the rule has no
+    solution there)."""
+    if not _multi_set_corners(stab, mask, ref, n, work):
+        return -1
+    return _lambda_core(ev, p, mask, t, x, n, w1, work)
+
+
+@_hot
+def _multi_set_corners(stab, mask, ref, n, work):
+    """The corner modes of sliding on ``mask`` with reference ``ref`` into ``work`` (read by
+    :func:`_lambda_core`; the kernel sets them once per sliding state in its ``buf``, whose
+    watch functions have no switch table). False if a corner is missing."""
+    o_m = _multi_offsets(n)[8]
+    for c in range(1 << _multi_count(mask)):
+        m = _multi_corner(stab, mask, ref, c)
+        if m < 0:
+            return False
+        work[o_m + c] = m
+    return True
+
+
+@_hot
+def _lambda_core(ev, p, mask, t, x, n, w1, work):
+    """:func:`_solve_lambda` with the corner modes already in ``work``."""
+    k = _multi_count(mask)
+    nc = 1 << k
+    o_hx, o_ht, o_fc, o_a, o_lam, o_g, o_jac, o_dl, o_m = _multi_offsets(n)
+    for i in range(k):
+        ks = _multi_surface(mask, i)
+        ev(W_HX, ks, t, x, p, w1)
+        for q in range(n):
+            work[o_hx + i * n + q] = w1[q]
+        ev(W_HT, ks, t, x, p, w1)
+        work[o_ht + i] = w1[0]
+    for c in range(nc):
+        m = int(work[o_m + c])
+        ev(W_F, m, t, x, p, w1)
+        for q in range(n):
+            work[o_fc + c * n + q] = w1[q]
+        for i in range(k):
+            acc = work[o_ht + i]
+            for q in range(n):
+                acc += work[o_hx + i * n + q] * w1[q]
+            work[o_a + i * nc + c] = acc
+    for i in range(k):
+        work[o_lam + i] = 0.5
+    for it in range(30):
+        for i in range(k):
+            g = 0.0
+            for c in range(nc):
+                g += _multi_weight(c, work, o_lam, k, -1) * work[o_a + i * nc + c]
+            work[o_g + i] = -g
+            for j in range(k):
+                d = 0.0
+                for c in range(nc):
+                    sgn = 1.0 if (c >> j) & 1 else -1.0
+                    d += sgn * _multi_weight(c, work, o_lam, k, j) * work[o_a + i * nc + c]
+                work[o_jac + i * k + j] = d
+        if not _small_solve(work, o_jac, work, o_g, k):
+            return -1
+        step = 0.0
+        for i in range(k):
+            work[o_lam + i] += work[o_g + i]
+            step = max(step, abs(work[o_g + i]))
+        if not step <= 1e30:
+            return -1
+        if step <= 4.0 * _EPS:
+            break
+    return k
+
+
+@_hot
+def _multi_offsets(n):
+    """Offsets into the work vector of :func:`_solve_lambda`: gradients ``h_i,x`` (k rows of
+    n), ``h_i,t``, corner fields (2^k rows of n), tangency values ``a_ic``, ``lambda``, the
+    Newton residual, its matrix, a spare vector, the corner modes. Entries 0-3 stay free for
+    the scalar outputs of the compiled model."""
+    nc = 1 << MULTI_MAX
+    o_hx = 4
+    o_ht = o_hx + MULTI_MAX * n
+    o_fc = o_ht + MULTI_MAX
+    o_a = o_fc + nc * n
+    o_lam = o_a + MULTI_MAX * nc
+    o_g = o_lam + MULTI_MAX
+    o_jac = o_g + MULTI_MAX
+    o_dl = o_jac + MULTI_MAX * MULTI_MAX
+    o_m = o_dl + 2 * MULTI_MAX
+    return o_hx, o_ht, o_fc, o_a, o_lam, o_g, o_jac, o_dl, o_m
+
+
+@_hot
+def _multi_field(ev, p, mask, ref, nm, t, x, n, out, stab, slide_c, w1, work):
+    """The multilinear sliding field on the surfaces of ``mask`` (module docstring) into
+    ``out``, its tangency round-off removed along the gradients (as the ``k = 1`` field does:
+    ``h_i,t + h_i,x f = 0`` to round-off for every surface, so linear surfaces are conserved
+    exactly by the Runge-Kutta stages), with the stabilising term ``-C h_i h_i,x / |h_i,x|^2``
+    of each surface. NaN where the weights have no solution."""
+    k = _solve_lambda(ev, p, mask, ref, nm, t, x, n, stab, w1, work)
+    if k < 0:
+        for q in range(n):
+            out[q] = np.nan
+        return
+    nc = 1 << k
+    o_hx, o_ht, o_fc, o_a, o_lam, o_g, o_jac, o_dl, o_m = _multi_offsets(n)
+    for q in range(n):
+        out[q] = 0.0
+    for c in range(nc):
+        wc = _multi_weight(c, work, o_lam, k, -1)
+        for q in range(n):
+            out[q] += wc * work[o_fc + c * n + q]
+    # remove the residual of the k tangency conditions along the gradients: the Gram system
+    # (h_i,x . h_j,x) r = h_i,t + h_i,x f, then f -= sum_j r_j h_j,x
+    for i in range(k):
+        acc = work[o_ht + i]
+        for q in range(n):
+            acc += work[o_hx + i * n + q] * out[q]
+        work[o_g + i] = acc
+        for j in range(k):
+            d = 0.0
+            for q in range(n):
+                d += work[o_hx + i * n + q] * work[o_hx + j * n + q]
+            work[o_jac + i * k + j] = d
+    if _small_solve(work, o_jac, work, o_g, k):
+        for j in range(k):
+            for q in range(n):
+                out[q] -= work[o_g + j] * work[o_hx + j * n + q]
+    if slide_c != 0.0:
+        for i in range(k):
+            ev(W_H, _multi_surface(mask, i), t, x, p, w1)
+            hval = w1[0]
+            nrm2 = 0.0
+            for q in range(n):
+                nrm2 += work[o_hx + i * n + q] ** 2
+            if hval != 0.0 and nrm2 > 0.0:
+                g = slide_c * hval / nrm2
+                for q in range(n):
+                    out[q] -= g * work[o_hx + i * n + q]
+
+
+@_hot
+def _project_multi(ev, p, mask, t, y, n, hdx, buf):
+    """Bring a state back onto all surfaces of ``mask``: sweeps of the one-surface Newton
+    projection (:func:`_project_surface`), exact after one sweep for orthogonal linear
+    surfaces (independent contacts), a few for oblique ones."""
+    k = _multi_count(mask)
+    for sweep in range(4):
+        for i in range(k):
+            _project_surface(ev, p, _multi_surface(mask, i), t, y, n, hdx, buf)
+
+
+@_hot
+def _multi_reference(stab, mask, m):
+    """The corner of mode ``m`` above every surface of ``mask`` (-1 if a switch is missing)."""
+    k = _multi_count(mask)
+    for i in range(k):
+        ks = _multi_surface(mask, i)
+        found = False
+        for s in range(stab.shape[0]):
+            if stab[s].surface == ks:
+                if stab[s].above == m:
+                    found = True
+                    break
+                if stab[s].below == m:
+                    m = stab[s].above
+                    found = True
+                    break
+        if not found:
+            return -1
+    return m
+
+
+@_hot
+def _settle_multi(ev, p, t, y, n, nm, mask, ref, stab, buf, hdx, w1, work):
+    """The discrete state of a state on the intersection of the surfaces of ``mask`` (corner
+    ``ref`` above all of them): sliding on all of them where the weights of the multilinear
+    field lie in ``[0, 1]^k`` (an attracting intersection); otherwise the surface whose weight
+    lies farthest outside is left to the side its weight points to (``lambda_i < 0``: above,
+    ``> 1``: below) and the rest is settled again, down to sliding on one surface (the signs
+    of ``hdot`` on its two sides, thesis eq. 2.6-2.8) or a regular mode. The state is
+    projected onto the surfaces it slides on. Returns ``(dkind, didx, mode)``."""
+    o_hx, o_ht, o_fc, o_a, o_lam, o_g, o_jac, o_dl, o_m = _multi_offsets(n)
+    tol = 64.0 * _EPS
+    for rnd in range(MULTI_MAX + 1):
+        k = _multi_count(mask)
+        if k >= 2:
+            kk = _solve_lambda(ev, p, mask, ref, nm, t, y, n, stab, w1, work)
+            if kk < 0:
+                return -1, mask, ref
+            worst = -1
+            dev = tol
+            for i in range(k):
+                lam = work[o_lam + i]
+                d = max(-lam, lam - 1.0)
+                if d > dev:
+                    dev = d
+                    worst = i
+            if worst < 0:
+                _project_multi(ev, p, mask, t, y, n, hdx, buf)
+                return SLIDE_MULTI, mask, ref
+            ks = _multi_surface(mask, worst)
+            # the side it leaves to: where every corner field moves the state one way across
+            # it (a crossing), that way; otherwise (some corner fields point into it) the side
+            # its weight points to
+            amin = np.inf
+            amax = -np.inf
+            for c in range(1 << k):
+                amin = min(amin, work[o_a + worst * (1 << k) + c])
+                amax = max(amax, work[o_a + worst * (1 << k) + c])
+            below = work[o_lam + worst] > 1.0
+            if amin >= 0.0:
+                below = False
+            elif amax <= 0.0:
+                below = True
+            if below:
+                ref = _partner(stab, ks, ref)
+            mask &= ~(1 << ks)
+            ref = _multi_reference(stab, mask, ref)
+            if ref < 0:
+                return -1, mask, ref
+            if not _multi_set_corners(stab, mask, ref, n, work):
+                return -1, mask, ref
+            continue
+        if k == 1:
+            ks = _multi_surface(mask, 0)
+            b = _partner(stab, ks, ref)
+            s = _find_switch(stab, ks, ref, b)
+            if s < 0:
+                return REGULAR, -1, ref
+            ev(W_HD, ks * nm + ref, t, y, p, buf)
+            sa = buf[0]
+            ev(W_HD, ks * nm + b, t, y, p, buf)
+            sb = buf[0]
+            if stab[s].kind == SW_FILIPPOV and sa < 0.0 and sb > 0.0:
+                _project_surface(ev, p, ks, t, y, n, hdx, buf)
+                return SLIDE, s, ref
+            if sa >= 0.0 and sb > 0.0 or sa > 0.0 and sb >= 0.0:
+                return REGULAR, -1, ref
+            return REGULAR, -1, b
+        return REGULAR, -1, ref
+    return -1, mask, ref
+
+
+@_hot
+def _on_surfaces(ev, p, t, y, n, xmax, k, a, stab, buf, hdx):
+    """The bit mask of the Filippov surfaces other than ``k`` that bound mode ``a`` or its
+    partners across them and that the state lies on (within round-off,
+    :func:`_surface_offset`), at most ``MULTI_MAX - 1`` of them (0: none)."""
+    mask = 0
+    cnt = 0
+    for s in range(stab.shape[0]):
+        ks = stab[s].surface
+        if ks == k or stab[s].kind != SW_FILIPPOV or (mask >> ks) & 1:
+            continue
+        if stab[s].above != a and stab[s].below != a:
+            continue
+        hv, tol = _surface_offset(ev, p, ks, t, y, n, xmax, buf, hdx)
+        if abs(hv) <= tol and cnt < MULTI_MAX - 1 and ks < 63:
+            mask |= 1 << ks
+            cnt += 1
+    return mask
+
+
 def _state_field_signature():
     from numba import types as nt
 
@@ -341,12 +757,13 @@ def _state_field_signature():
 
 @njit(_state_field_signature(), cache=True)
 def state_field(ev, p, dkind, didx, mode, nm, t, x, etab, stab, slide_c, out):
-    """The vector field of a discrete state (``dkind``: REGULAR, STICK, SLIDE; ``didx``; mode)
+    """The vector field of a discrete state (``dkind``: REGULAR, STICK, SLIDE, SLIDE_MULTI;
+    ``didx``; mode)
     at ``(t, x)`` into ``out``: the same function the kernel integrates, for Python callers
     (Poincaré-map projections, shooting, projected saltation matrices)."""
     n = x.shape[0]
     w1 = np.zeros(n)
     w2 = np.zeros(n)
-    gx = np.zeros(n * n)
+    gx = np.zeros(max(n * n, multi_work_size(n)))
     hdx = np.zeros(n)
     _field(ev, p, dkind, didx, mode, nm, t, x, n, out, etab, stab, slide_c, w1, w2, gx, hdx)

@@ -8,22 +8,24 @@ import numpy as np
 from numba import njit
 
 from ...model.codegen import W_F, W_GUARD, W_H, W_HD, W_HHD
-from .._codes import (ACT_EVENT, ACT_EXIT_ABOVE, ACT_EXIT_BELOW, ACT_INTERSECTION, ACT_RELEASE,
-                      ACT_SWITCH, EV_IMPACT, IV_CHATTER, IV_JUMP,
+from .._codes import (ACT_EVENT, ACT_EXIT_ABOVE, ACT_EXIT_BELOW, ACT_EXIT_MULTI, ACT_INTERSECTION,
+                      ACT_RELEASE, ACT_SWITCH, EV_IMPACT, IV_CHATTER, IV_JUMP,
                       IV_STEP, K_CHATTER, K_STICK, K_TRANSITION, REGULAR, SAVE_DENSE, SAVE_EVENTS,
-                      SLIDE, STICK, ST_MAX_EVENTS, ST_MAX_STEPS, ST_NONFINITE, ST_STEP_TOO_SMALL,
+                      SLIDE, SLIDE_MULTI, STICK, ST_MAX_EVENTS, ST_MAX_STEPS, ST_NONFINITE, ST_STEP_TOO_SMALL,
                       ST_SUCCESS, ST_TERMINAL, ST_ZENO, SW_CONTINUOUS, VAR_NONE, VAR_SEGMENTS,
-                      WF_HDDOT, WF_HDOT, WF_SURFACE)
+                      WF_HDDOT, WF_HDOT, WF_LAMBDA, WF_SURFACE)
 from ._base import (EVENT_TABLE_TYPE, OPTIONS_TYPE, SWITCH_TABLE_TYPE, _COINCIDENT_ULPS, _EPS,
                     _EXACT_TERMS, _MAXW, _grow1, _grow2, _grow3,
                     _log_event, _ulp)
-from .fields import _field, _project_surface, _rate_band, _resolve, _rhs, _start_on_surface
+from .fields import (_field, _multi_corner, _multi_count, _multi_set_corners, _multi_surface,
+                     _project_multi, _project_surface, _rate_band, _resolve, _rhs,
+                     _start_on_surface, multi_work_size)
 from .steppers import (_affine_setup, _dense_eval, _error_norm, _exact_stepper, _step_dense,
                        _step_stages, _take_samples)
 from .watch import (_crosses, _graze_samples, _hdot_rate, _hermite_extrema, _merge_samples,
                     _surface_rate, _watch_pair, _watch_slope, _watch_value)
-from .actions import (_act_impact, _act_intersection, _act_release, _act_slide_exit, _act_switch,
-                      _act_transition, _action_saltation, _after_reset, _apply_saltation)
+from .actions import (_act_impact, _act_intersection, _act_multi_exit, _act_multi_intersection,
+                      _act_release, _act_slide_exit, _act_switch, _act_transition, _action_saltation, _after_reset, _apply_saltation)
 
 # --------------------------------------------------------------------------------------
 # dense output on demand
@@ -55,7 +57,7 @@ def _dense_coefficients(ev, p, etab, stab, options, A, C, P, s_fsal, t0, x0, nod
     Q = np.zeros((nY, max(deg, P.shape[1], _EXACT_TERMS if nz > 0 else 1)))
     w1 = np.zeros(n)
     w2 = np.zeros(n)
-    gx = np.zeros(n * n)
+    gx = np.zeros(max(n * n, multi_work_size(n)))
     hdx = np.zeros(n)
     jac = np.zeros(n * n)
     xt = np.zeros(n)
@@ -217,12 +219,12 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
     Q = np.zeros((nY, deg))
     w1 = np.zeros(n)
     w2 = np.zeros(n)
-    gx = np.zeros(n * n)
+    gx = np.zeros(max(n * n, multi_work_size(n)))
     hdx = np.zeros(n)
     jac = np.zeros(n * n)
     xt = np.zeros(n)
     ft = np.zeros(n)
-    buf = np.zeros(max(n, 2))
+    buf = np.zeros(max(n, 2, multi_work_size(n)))
     fbuf = np.zeros(n)
     xs = np.zeros(nY)
     Kland = np.zeros((s_ext, nY))
@@ -433,12 +435,32 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                         continue
                     if dkind == STICK and etab[j].surface == etab[didx].surface:
                         continue
-                    if dkind == SLIDE:
+                    if dkind == SLIDE or dkind == SLIDE_MULTI:
                         continue
                     wtype[nw] = WF_SURFACE; widx[nw] = etab[j].surface; wmode[nw] = mode
                     wdir[nw] = etab[j].direction; wact[nw] = ACT_EVENT; wref[nw] = j
                     nw += 1
                 for s in range(n_sw):
+                    if dkind == SLIDE_MULTI:
+                        # a further surface bounding a corner of the intersection: crossed
+                        # while sliding on the intersection, or joined to it
+                        if (didx >> stab[s].surface) & 1:
+                            continue
+                        adjacent = False
+                        for c in range(1 << _multi_count(didx)):
+                            mc = _multi_corner(stab, didx, mode, c)
+                            if stab[s].above == mc or stab[s].below == mc:
+                                adjacent = True
+                        dup = False
+                        for ww in range(nw):
+                            if wact[ww] == ACT_INTERSECTION and widx[ww] == stab[s].surface:
+                                dup = True
+                        if dup or not adjacent:
+                            continue
+                        wtype[nw] = WF_SURFACE; widx[nw] = stab[s].surface; wmode[nw] = mode
+                        wdir[nw] = 0; wact[nw] = ACT_INTERSECTION; wref[nw] = s
+                        nw += 1
+                        continue
                     if dkind == SLIDE:
                         # another surface bounding the sliding pair's modes: crossing it while
                         # sliding, or reaching the intersection of the two surfaces
@@ -490,6 +512,27 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                     nw += 1
                     for j in range(n_events):
                         if eactive[j, stab[didx].above] == 0 and eactive[j, stab[didx].below] == 0:
+                            continue
+                        wtype[nw] = WF_SURFACE; widx[nw] = etab[j].surface; wmode[nw] = mode
+                        wdir[nw] = etab[j].direction; wact[nw] = ACT_EVENT; wref[nw] = j
+                        nw += 1
+                if dkind == SLIDE_MULTI:
+                    # leave surface i of the intersection where its weight lambda_i reaches 0
+                    # (to the side above) or 1 (below): watch lambda_i and 1 - lambda_i, whose
+                    # corner modes are kept in buf (see _watch_value)
+                    _multi_set_corners(stab, didx, mode, n, buf)
+                    for i in range(_multi_count(didx)):
+                        for side in range(2):
+                            wtype[nw] = WF_LAMBDA; widx[nw] = 2 * i + side; wmode[nw] = didx
+                            wdir[nw] = -1; wact[nw] = ACT_EXIT_MULTI; wref[nw] = 2 * i + side
+                            nw += 1
+                    for j in range(n_events):
+                        active = False
+                        for c in range(1 << _multi_count(didx)):
+                            mc = _multi_corner(stab, didx, mode, c)
+                            if mc >= 0 and eactive[j, mc] != 0:
+                                active = True
+                        if not active:
                             continue
                         wtype[nw] = WF_SURFACE; widx[nw] = etab[j].surface; wmode[nw] = mode
                         wdir[nw] = etab[j].direction; wact[nw] = ACT_EVENT; wref[nw] = j
@@ -778,7 +821,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                         bad_watch = True
                         break
                     wv[w] = vals[w, 2]
-                    if wtype[w] == WF_HDDOT or wtype[w] == WF_HDOT:
+                    if wtype[w] == WF_HDDOT or wtype[w] == WF_HDOT or wtype[w] == WF_LAMBDA:
                         # release from sticking, exit from sliding: the free normal
                         # acceleration, or the normal velocity of the field beyond, may change
                         # sign only in a short window around its extremum inside the step (the
@@ -932,6 +975,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                     # one Newton step along h_x removes that (projection; it leaves the sliding
                     # field non-stiff, unlike a large gain C of the -C h grad h term)
                     _project_surface(ev, p, stab[didx].surface, t_new, ynew, n, hdx, buf)
+                elif dkind == SLIDE_MULTI:
+                    # the same onto every surface of the intersection
+                    _project_multi(ev, p, didx, t_new, ynew, n, hdx, buf)
                 if save_all:
                     if store_q:
                         for i in range(nY):
@@ -1160,11 +1206,18 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
             elif act == ACT_EXIT_ABOVE or act == ACT_EXIT_BELOW:
                 dkind, didx, mode, log_kind = _act_slide_exit(wref[w], act == ACT_EXIT_ABOVE,
                                                               stab)
+            elif act == ACT_EXIT_MULTI:
+                dkind, didx, mode, log_kind, log_ref = _act_multi_exit(
+                    ev, p, wref[w], old_idx, old_mode, nm, t, y, n, stab, buf, wk)
+            elif old_kind == SLIDE_MULTI:
+                status, dkind, didx, mode, log_kind, log_ref = _act_multi_intersection(
+                    ev, p, widx[w], new_sign, wref[w], old_idx, old_mode, nm, t, y, n, stab,
+                    slide_c, buf, fbuf, wk)
             else:
                 status, dkind, didx, mode, log_kind, log_ref = _act_intersection(
                     ev, p, widx[w], new_sign, wref[w], old_kind, old_idx, old_mode, nm, t, y, n,
                     etab, stab, slide_c, buf, fbuf, wk)
-            if act != ACT_INTERSECTION:
+            if act != ACT_INTERSECTION and act != ACT_EXIT_MULTI:
                 log_ref = wref[w]
 
             if log_kind >= 0:
@@ -1328,6 +1381,12 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                 # crossed surface widx[w] while sliding: we are on the new side of it
                 last_type = WF_SURFACE
                 last_sign = new_sign
+            elif act == ACT_EXIT_MULTI:
+                # left one surface of the intersection, to the side above (lambda_i = 0) or
+                # below (lambda_i = 1)
+                last_type = WF_SURFACE
+                last_idx = _multi_surface(old_idx, wref[w] // 2)
+                last_sign = 1.0 if wref[w] % 2 == 0 else -1.0
             else:
                 # sliding exit: we leave into the mode's side of the surface
                 last_type = WF_SURFACE

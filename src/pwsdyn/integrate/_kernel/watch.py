@@ -8,9 +8,9 @@ from __future__ import annotations
 import numpy as np
 
 from ...model.codegen import W_F, W_H, W_HD, W_HDT, W_HDX, W_HHD, W_HT, W_HX
-from .._codes import REGULAR, WF_HDOT, WF_SURFACE
+from .._codes import REGULAR, WF_HDOT, WF_LAMBDA, WF_SURFACE
 from ._base import _EPS, _FD_STEP, _dot, _hot, _ulp
-from .fields import _field, _rate_band
+from .fields import _field, _lambda_core, _multi_offsets, _rate_band
 from .steppers import _dense_eval
 
 # --------------------------------------------------------------------------------------
@@ -25,6 +25,14 @@ def _watch_value(ev, p, wtype, widx, wmode, nm, t, x, n, buf, fbuf, hdx):
     if wtype == WF_HDOT:
         ev(W_HD, widx * nm + wmode, t, x, p, buf)
         return buf[0]
+    if wtype == WF_LAMBDA:
+        # exit from sliding on an intersection: lambda_i (widx = 2 i) or 1 - lambda_i
+        # (widx = 2 i + 1) of the multilinear field on the surfaces of the mask wmode, whose
+        # corner modes the kernel keeps in buf (set when the watch list is built)
+        if _lambda_core(ev, p, wmode, t, x, n, fbuf, buf) < 0:
+            return np.nan
+        lam = buf[_multi_offsets(n)[4] + widx // 2]
+        return 1.0 - lam if widx % 2 == 1 else lam
     # WF_HDDOT: free normal acceleration hdot_t + hdot_x f
     ev(W_F, wmode, t, x, p, fbuf)
     ev(W_HDX, widx * nm + wmode, t, x, p, hdx)
