@@ -56,8 +56,8 @@ Watch functions
 ---------------
 In each discrete state the kernel watches a small list of scalar functions of ``(t, x)`` for
 zero crossings: surfaces ``h`` (events, switches), normal velocities ``hdot`` (sliding exit),
-normal accelerations ``hddot`` (release from sticking) and the weights ``lambda_i``,
-``1 - lambda_i`` of sliding on an intersection (exit from one of its surfaces). On every accepted step each is
+normal accelerations ``hddot`` (release from sticking) and ``min(lambda_i, 1 - lambda_i)`` of
+the weights of sliding on an intersection (exit from one of its surfaces). On every accepted step each is
 sampled on the dense output -- surfaces at the ends and at the interior extrema of the cubic
 Hermite fit from ``h`` and ``hdot`` at the ends, the other functions at the ends and the
 midpoint (the normal acceleration of a sticking motion also at the extrema of its Hermite

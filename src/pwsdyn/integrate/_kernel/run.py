@@ -518,14 +518,15 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                         nw += 1
                 if dkind == SLIDE_MULTI:
                     # leave surface i of the intersection where its weight lambda_i reaches 0
-                    # (to the side above) or 1 (below): watch lambda_i and 1 - lambda_i, whose
-                    # corner modes are kept in buf (see _watch_value)
+                    # (to the side above) or 1 (below): one watch per surface,
+                    # min(lambda_i, 1 - lambda_i) (each watch costs a Newton solve over all
+                    # corner fields per sample), whose corner modes are kept in buf (see
+                    # _watch_value)
                     _multi_set_corners(stab, didx, mode, n, buf)
                     for i in range(_multi_count(didx)):
-                        for side in range(2):
-                            wtype[nw] = WF_LAMBDA; widx[nw] = 2 * i + side; wmode[nw] = didx
-                            wdir[nw] = -1; wact[nw] = ACT_EXIT_MULTI; wref[nw] = 2 * i + side
-                            nw += 1
+                        wtype[nw] = WF_LAMBDA; widx[nw] = i; wmode[nw] = didx
+                        wdir[nw] = -1; wact[nw] = ACT_EXIT_MULTI; wref[nw] = i
+                        nw += 1
                     for j in range(n_events):
                         active = False
                         for c in range(1 << _multi_count(didx)):
@@ -1121,6 +1122,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
             new_sign = best_sign
             chatter_tail = False
             contact_stick = False
+            exit_below = False
             if act == ACT_EVENT:
                 # Is the crossing an event? (Written out here, as the re-trigger guard below: a
                 # call passing the watch arrays measured a few % of an event-dominated run.)
@@ -1207,7 +1209,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                 dkind, didx, mode, log_kind = _act_slide_exit(wref[w], act == ACT_EXIT_ABOVE,
                                                               stab)
             elif act == ACT_EXIT_MULTI:
-                dkind, didx, mode, log_kind, log_ref = _act_multi_exit(
+                dkind, didx, mode, log_kind, log_ref, exit_below = _act_multi_exit(
                     ev, p, wref[w], old_idx, old_mode, nm, t, y, n, stab, buf, wk)
             elif old_kind == SLIDE_MULTI:
                 status, dkind, didx, mode, log_kind, log_ref = _act_multi_intersection(
@@ -1385,8 +1387,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                 # left one surface of the intersection, to the side above (lambda_i = 0) or
                 # below (lambda_i = 1)
                 last_type = WF_SURFACE
-                last_idx = _multi_surface(old_idx, wref[w] // 2)
-                last_sign = 1.0 if wref[w] % 2 == 0 else -1.0
+                last_idx = _multi_surface(old_idx, wref[w])
+                last_sign = -1.0 if exit_below else 1.0
             else:
                 # sliding exit: we leave into the mode's side of the surface
                 last_type = WF_SURFACE
