@@ -13,9 +13,10 @@ from .._codes import (ACT_EVENT, ACT_INTERSECTION, ACT_SWITCH, K_CHATTER, K_CROS
                       K_RELEASE, K_SLIDE_END, K_SLIDE_START, MULTI_MAX, REGULAR, SLIDE,
                       SLIDE_MULTI, STICK, ST_INTERSECTION, ST_SUCCESS, SW_FILIPPOV)
 from ._base import EVENT_TABLE_TYPE, SWITCH_TABLE_TYPE, _FD_STEP, _dot, _hot, _hot_inline
-from .fields import (_field, _find_switch, _impact_direction, _multi_count, _multi_offsets,
-                     _multi_field, _multi_reference, _on_surfaces, _multi_surface, _partner, _project_multi, _project_surface,
-                     _resolve, _settle_multi, _solve_lambda, multi_work_size)
+from .fields import (_field, _find_switch, _impact_direction, _multi_count, _multi_field,
+                     _multi_offsets, _multi_reference, _multi_surface, _on_surfaces, _partner,
+                     _project_multi, _project_surface, _resolve, _settle_multi, _solve_lambda,
+                     multi_work_size)
 from .watch import _free_normal_acc, _grazing, _project_stick, _stays_in_contact, _surface_rate
 
 @njit(cache=True)

@@ -11,8 +11,9 @@ from ...model.codegen import W_F, W_GUARD, W_H, W_HD, W_HHD
 from .._codes import (ACT_EVENT, ACT_EXIT_ABOVE, ACT_EXIT_BELOW, ACT_EXIT_MULTI, ACT_INTERSECTION,
                       ACT_RELEASE, ACT_SWITCH, EV_IMPACT, IV_CHATTER, IV_JUMP,
                       IV_STEP, K_CHATTER, K_STICK, K_TRANSITION, REGULAR, SAVE_DENSE, SAVE_EVENTS,
-                      SLIDE, SLIDE_MULTI, STICK, ST_MAX_EVENTS, ST_MAX_STEPS, ST_NONFINITE, ST_STEP_TOO_SMALL,
-                      ST_SUCCESS, ST_TERMINAL, ST_ZENO, SW_CONTINUOUS, VAR_NONE, VAR_SEGMENTS,
+                      SLIDE, SLIDE_MULTI, STICK, ST_MAX_EVENTS, ST_MAX_STEPS, ST_NONFINITE,
+                      ST_STEP_TOO_SMALL, ST_SUCCESS, ST_TERMINAL, ST_ZENO, SW_CONTINUOUS,
+                      VAR_NONE, VAR_SEGMENTS,
                       WF_HDDOT, WF_HDOT, WF_LAMBDA, WF_SURFACE)
 from ._base import (EVENT_TABLE_TYPE, OPTIONS_TYPE, SWITCH_TABLE_TYPE, _COINCIDENT_ULPS, _EPS,
                     _EXACT_TERMS, _MAXW, _grow1, _grow2, _grow3,
@@ -25,7 +26,8 @@ from .steppers import (_affine_setup, _dense_eval, _error_norm, _exact_stepper, 
 from .watch import (_crosses, _graze_samples, _hdot_rate, _hermite_extrema, _merge_samples,
                     _surface_rate, _watch_pair, _watch_slope, _watch_value)
 from .actions import (_act_impact, _act_intersection, _act_multi_exit, _act_multi_intersection,
-                      _act_release, _act_slide_exit, _act_switch, _act_transition, _action_saltation, _after_reset, _apply_saltation)
+                      _act_release, _act_slide_exit, _act_switch, _act_transition,
+                      _action_saltation, _after_reset, _apply_saltation)
 
 # --------------------------------------------------------------------------------------
 # dense output on demand
