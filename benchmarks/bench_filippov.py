@@ -227,7 +227,25 @@ def two_contacts(params, period, cycles, rtol, atol, repeats):
           f"{s2['events']} events vs {s1['steps']} steps, {s1['events']} events for one block; "
           f"both stuck {100 * multi / t_end:.0f}% of the time; CPU cost ratio two/one per "
           f"step {per_step:.2f}, per time unit {per_time:.2f}")
+    # the sliding steps alone: both blocks stuck to a slow belt (x' = V, v = V) for a long
+    # time, steps limited so that the run is made of them, against one block stuck alone
+    slow = dict(two["parameters"], V1=1e-3, V2=1e-3)
+    model2s = pwsdyn.load_model(dict(two, parameters=slow))
+    run_kw = dict(rtol=rtol, atol=atol, method="RK45", dense=False, max_step=0.05,
+                  max_steps=100_000_000)
+    stuck_one = Timer(lambda: pwsdyn.simulate(MODEL, [0.0, 1e-3], (0.0, 500.0),
+                                              params=dict(params, V=1e-3), **run_kw))
+    stuck_two = Timer(lambda: pwsdyn.simulate(model2s, [0.0, 1e-3, 0.0, 1e-3], (0.0, 500.0),
+                                              **run_kw))
+    interleaved([(stuck_one, repeats), (stuck_two, repeats)])
+    assert str(stuck_two.result.state[-1]).startswith("slide_multi:")
+    per_slide_step = ((stuck_two.cpu / stuck_two.result.stats["steps"])
+                      / (stuck_one.cpu / stuck_one.result.stats["steps"]))
+    print(f"sliding steps: slide_multi (2 contacts) / slide (1 contact) CPU per step "
+          f"{per_slide_step:.1f} ({1e6 * stuck_one.cpu / stuck_one.result.stats['steps']:.2f} "
+          f"us per slide step)")
     return dict(cycles=cycles, steps_one=s1["steps"], steps_two=s2["steps"],
+                ratio_slide_multi_step=per_slide_step,
                 events_one=s1["events"], events_two=s2["events"],
                 share_both_stuck=multi / t_end, ratio_per_step=per_step,
                 ratio_per_time=per_time)

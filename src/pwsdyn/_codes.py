@@ -46,7 +46,7 @@ MODEL_EVENT_KINDS = ("impact", "transition")
 EV_IMPACT, EV_TRANSITION = range(2)
 
 #: Watch function types: a surface ``h``, a normal velocity ``hdot`` (sliding exit), a normal
-#: acceleration ``hddot`` (release from sticking), a weight ``lambda_i`` or ``1 - lambda_i``
+#: acceleration ``hddot`` (release from sticking), ``min(lambda_i, 1 - lambda_i)`` of a weight
 #: of the multilinear sliding field on an intersection (exit from one of its surfaces).
 WATCH_TYPES = ("surface", "hdot", "hddot", "lambda")
 WF_SURFACE, WF_HDOT, WF_HDDOT, WF_LAMBDA = range(4)

@@ -33,11 +33,11 @@ class DiscreteState(str):
     ``DiscreteState(kind, name)`` with ``kind`` one of
     :data:`~pwsdyn.integrate.trajectory.STATE_KINDS` (``"mode"``, ``"stick"``, ``"slide"``,
     ``"slide_multi"``) and ``name`` the mode, impact event or switch; for ``slide_multi`` the
-    names of the surfaces slid on, joined by ``&`` (``slide_multi:v1&v2``; :attr:`surfaces`). It is the text the event log, the trajectory's
-    ``state`` and every file have always used (the mode's name, ``stick:<event>``,
-    ``slide:<switch>``) and a ``str``: it compares equal to that text, hashes like it and is
-    written as it, so code that compares states with strings keeps working. :meth:`parse` is the
-    one reader of that text.
+    names of the surfaces slid on, joined by ``&`` (``slide_multi:v1&v2``; :attr:`surfaces`).
+    It is the text the event log, the trajectory's ``state`` and every file have always used
+    (the mode's name, ``stick:<event>``, ``slide:<switch>``) and a ``str``: it compares equal to
+    that text, hashes like it and is written as it, so code that compares states with strings
+    keeps working. :meth:`parse` is the one reader of that text.
 
     Examples
     --------

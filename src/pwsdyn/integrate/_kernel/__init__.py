@@ -56,12 +56,12 @@ Watch functions
 ---------------
 In each discrete state the kernel watches a small list of scalar functions of ``(t, x)`` for
 zero crossings: surfaces ``h`` (events, switches), normal velocities ``hdot`` (sliding exit),
-normal accelerations ``hddot`` (release from sticking) and the weights ``lambda_i``,
-``1 - lambda_i`` of sliding on an intersection (exit from one of its surfaces). On every accepted step each is
-sampled on the dense output -- surfaces at the ends and at the interior extrema of the cubic
-Hermite fit from ``h`` and ``hdot`` at the ends, the other functions at the ends and the
-midpoint (the normal acceleration of a sticking motion also at the extrema of its Hermite
-fit, its slopes by central differences). Where such a function has one sign at two
+normal accelerations ``hddot`` (release from sticking) and ``min(lambda_i, 1 - lambda_i)`` of
+the weights of sliding on an intersection (exit from one of its surfaces). On every accepted
+step each is sampled on the dense output -- surfaces at the ends and at the interior extrema
+of the cubic Hermite fit from ``h`` and ``hdot`` at the ends, the other functions at the ends
+and the midpoint (the normal acceleration of a sticking motion also at the extrema of its
+Hermite fit, its slopes by central differences). Where such a function has one sign at two
 consecutive samples and an extremum towards zero between them (``hdot`` changes sign: near
 grazing, a short release window), that extremum is searched for on the dense output -- the
 exact flow on an exact step -- with a lower bound from the tangents at the bracket's ends
@@ -150,7 +150,8 @@ with ``f_in`` the sliding field before and ``f_out`` the multilinear one after, 
 reached; release, sliding exit and the exit from an intersection leave the field continuous
 (at ``lambda_i = 0`` or 1 the multilinear field is that of the remaining surfaces: ``S = I``).
 ``J`` is symbolic in a regular mode and a central difference (step ~ eps^(1/3)) of the
-sticking or sliding field (also on an intersection). Steps are accepted only when ``Phi`` meets the tolerances too.
+sticking or sliding field (also on an intersection). Steps are accepted only when ``Phi``
+meets the tolerances too.
 With ``opts.variational == VAR_SEGMENTS`` ``Phi`` restarts at the identity after every event and
 each event record carries the segment's ``Phi`` and ``S`` (the per-segment transfer matrices;
 see :mod:`pwsdyn.integrate._variational`).

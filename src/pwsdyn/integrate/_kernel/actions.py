@@ -13,9 +13,10 @@ from .._codes import (ACT_EVENT, ACT_INTERSECTION, ACT_SWITCH, K_CHATTER, K_CROS
                       K_RELEASE, K_SLIDE_END, K_SLIDE_START, MULTI_MAX, REGULAR, SLIDE,
                       SLIDE_MULTI, STICK, ST_INTERSECTION, ST_SUCCESS, SW_FILIPPOV)
 from ._base import EVENT_TABLE_TYPE, SWITCH_TABLE_TYPE, _FD_STEP, _dot, _hot, _hot_inline
-from .fields import (_field, _find_switch, _impact_direction, _multi_count, _multi_offsets,
-                     _multi_field, _multi_reference, _on_surfaces, _multi_surface, _partner, _project_multi, _project_surface,
-                     _resolve, _settle_multi, _solve_lambda, multi_work_size)
+from .fields import (_field, _find_switch, _impact_direction, _multi_count, _multi_field,
+                     _multi_offsets, _multi_reference, _multi_surface, _on_surfaces, _partner,
+                     _project_multi, _project_surface, _resolve, _settle_multi, _solve_lambda,
+                     multi_work_size)
 from .watch import _free_normal_acc, _grazing, _project_stick, _stays_in_contact, _surface_rate
 
 @njit(cache=True)
@@ -749,19 +750,21 @@ def _act_multi_intersection(ev, p, k3, new_sign, log_ref, old_idx, old_mode, nm,
 
 
 @_hot
-def _act_multi_exit(ev, p, code, old_idx, old_mode, nm, t, y, n, stab, buf, wk):
+def _act_multi_exit(ev, p, i, old_idx, old_mode, nm, t, y, n, stab, buf, wk):
     """Sliding on the intersection of the surfaces of ``old_idx`` (reference corner
-    ``old_mode``) ends on surface ``i = code // 2``: its weight ``lambda_i`` reached 0
-    (``code`` even: the motion leaves it to the side above) or 1 (odd: below). The other
+    ``old_mode``) ends on its ``i``-th surface: its weight ``lambda_i`` reached 0 (the motion
+    leaves it to the side above) or 1 (below; ``lambda_i > 1/2`` tells which). The other
     surfaces keep sliding as far as their own weights allow (:func:`_settle_multi`: on the
     intersection of the rest, on the one left, or none -- the released contact may make
     another one slip at once). Logged as ``slide_end`` on the switch of that surface at the
-    corner the motion leaves into. Returns ``(dkind, didx, mode, log_kind, log_ref)``."""
+    reference corner. Returns ``(dkind, didx, mode, log_kind, log_ref, below)``."""
     w1, w2, gx, hdx, jac, xt, ft = wk
-    i = code // 2
     ks = _multi_surface(old_idx, i)
+    below = False
+    if _solve_lambda(ev, p, old_idx, old_mode, nm, t, y, n, stab, w1, gx) > 0:
+        below = gx[_multi_offsets(n)[4] + i] > 0.5
     ref = old_mode
-    if code % 2 == 1:
+    if below:
         ref = _partner(stab, ks, ref)
     s_log = _find_switch(stab, ks, old_mode, _partner(stab, ks, old_mode))
     mask = old_idx & ~(1 << ks)
@@ -771,7 +774,7 @@ def _act_multi_exit(ev, p, code, old_idx, old_mode, nm, t, y, n, stab, buf, wk):
         dkind = REGULAR
         didx = -1
         mode = ref
-    return dkind, didx, mode, K_SLIDE_END, s_log
+    return dkind, didx, mode, K_SLIDE_END, s_log, below
 
 
 @njit(cache=True)

@@ -11,8 +11,9 @@ from ...model.codegen import W_F, W_GUARD, W_H, W_HD, W_HHD
 from .._codes import (ACT_EVENT, ACT_EXIT_ABOVE, ACT_EXIT_BELOW, ACT_EXIT_MULTI, ACT_INTERSECTION,
                       ACT_RELEASE, ACT_SWITCH, EV_IMPACT, IV_CHATTER, IV_JUMP,
                       IV_STEP, K_CHATTER, K_STICK, K_TRANSITION, REGULAR, SAVE_DENSE, SAVE_EVENTS,
-                      SLIDE, SLIDE_MULTI, STICK, ST_MAX_EVENTS, ST_MAX_STEPS, ST_NONFINITE, ST_STEP_TOO_SMALL,
-                      ST_SUCCESS, ST_TERMINAL, ST_ZENO, SW_CONTINUOUS, VAR_NONE, VAR_SEGMENTS,
+                      SLIDE, SLIDE_MULTI, STICK, ST_MAX_EVENTS, ST_MAX_STEPS, ST_NONFINITE,
+                      ST_STEP_TOO_SMALL, ST_SUCCESS, ST_TERMINAL, ST_ZENO, SW_CONTINUOUS,
+                      VAR_NONE, VAR_SEGMENTS,
                       WF_HDDOT, WF_HDOT, WF_LAMBDA, WF_SURFACE)
 from ._base import (EVENT_TABLE_TYPE, OPTIONS_TYPE, SWITCH_TABLE_TYPE, _COINCIDENT_ULPS, _EPS,
                     _EXACT_TERMS, _MAXW, _grow1, _grow2, _grow3,
@@ -25,7 +26,8 @@ from .steppers import (_affine_setup, _dense_eval, _error_norm, _exact_stepper, 
 from .watch import (_crosses, _graze_samples, _hdot_rate, _hermite_extrema, _merge_samples,
                     _surface_rate, _watch_pair, _watch_slope, _watch_value)
 from .actions import (_act_impact, _act_intersection, _act_multi_exit, _act_multi_intersection,
-                      _act_release, _act_slide_exit, _act_switch, _act_transition, _action_saltation, _after_reset, _apply_saltation)
+                      _act_release, _act_slide_exit, _act_switch, _act_transition,
+                      _action_saltation, _after_reset, _apply_saltation)
 
 # --------------------------------------------------------------------------------------
 # dense output on demand
@@ -518,14 +520,15 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                         nw += 1
                 if dkind == SLIDE_MULTI:
                     # leave surface i of the intersection where its weight lambda_i reaches 0
-                    # (to the side above) or 1 (below): watch lambda_i and 1 - lambda_i, whose
-                    # corner modes are kept in buf (see _watch_value)
+                    # (to the side above) or 1 (below): one watch per surface,
+                    # min(lambda_i, 1 - lambda_i) (each watch costs a Newton solve over all
+                    # corner fields per sample), whose corner modes are kept in buf (see
+                    # _watch_value)
                     _multi_set_corners(stab, didx, mode, n, buf)
                     for i in range(_multi_count(didx)):
-                        for side in range(2):
-                            wtype[nw] = WF_LAMBDA; widx[nw] = 2 * i + side; wmode[nw] = didx
-                            wdir[nw] = -1; wact[nw] = ACT_EXIT_MULTI; wref[nw] = 2 * i + side
-                            nw += 1
+                        wtype[nw] = WF_LAMBDA; widx[nw] = i; wmode[nw] = didx
+                        wdir[nw] = -1; wact[nw] = ACT_EXIT_MULTI; wref[nw] = i
+                        nw += 1
                     for j in range(n_events):
                         active = False
                         for c in range(1 << _multi_count(didx)):
@@ -1121,6 +1124,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
             new_sign = best_sign
             chatter_tail = False
             contact_stick = False
+            exit_below = False
             if act == ACT_EVENT:
                 # Is the crossing an event? (Written out here, as the re-trigger guard below: a
                 # call passing the watch arrays measured a few % of an event-dominated run.)
@@ -1207,7 +1211,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                 dkind, didx, mode, log_kind = _act_slide_exit(wref[w], act == ACT_EXIT_ABOVE,
                                                               stab)
             elif act == ACT_EXIT_MULTI:
-                dkind, didx, mode, log_kind, log_ref = _act_multi_exit(
+                dkind, didx, mode, log_kind, log_ref, exit_below = _act_multi_exit(
                     ev, p, wref[w], old_idx, old_mode, nm, t, y, n, stab, buf, wk)
             elif old_kind == SLIDE_MULTI:
                 status, dkind, didx, mode, log_kind, log_ref = _act_multi_intersection(
@@ -1385,8 +1389,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                 # left one surface of the intersection, to the side above (lambda_i = 0) or
                 # below (lambda_i = 1)
                 last_type = WF_SURFACE
-                last_idx = _multi_surface(old_idx, wref[w] // 2)
-                last_sign = 1.0 if wref[w] % 2 == 0 else -1.0
+                last_idx = _multi_surface(old_idx, wref[w])
+                last_sign = -1.0 if exit_below else 1.0
             else:
                 # sliding exit: we leave into the mode's side of the surface
                 last_type = WF_SURFACE

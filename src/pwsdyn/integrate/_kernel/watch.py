@@ -26,13 +26,14 @@ def _watch_value(ev, p, wtype, widx, wmode, nm, t, x, n, buf, fbuf, hdx):
         ev(W_HD, widx * nm + wmode, t, x, p, buf)
         return buf[0]
     if wtype == WF_LAMBDA:
-        # exit from sliding on an intersection: lambda_i (widx = 2 i) or 1 - lambda_i
-        # (widx = 2 i + 1) of the multilinear field on the surfaces of the mask wmode, whose
-        # corner modes the kernel keeps in buf (set when the watch list is built)
+        # exit from sliding on an intersection: min(lambda_i, 1 - lambda_i), i = widx, of the
+        # multilinear field on the surfaces of the mask wmode (zero where lambda_i reaches 0 or
+        # 1; its kink at 1/2 is far from the zero), whose corner modes the kernel keeps in buf
+        # (set when the watch list is built)
         if _lambda_core(ev, p, wmode, t, x, n, fbuf, buf) < 0:
             return np.nan
-        lam = buf[_multi_offsets(n)[4] + widx // 2]
-        return 1.0 - lam if widx % 2 == 1 else lam
+        lam = buf[_multi_offsets(n)[4] + widx]
+        return min(lam, 1.0 - lam)
     # WF_HDDOT: free normal acceleration hdot_t + hdot_x f
     ev(W_F, wmode, t, x, p, fbuf)
     ev(W_HDX, widx * nm + wmode, t, x, p, hdx)
