@@ -309,6 +309,12 @@ def test_saltation_matrices_at_entry_and_exit():
     expected = np.eye(3)
     expected[:, 0] = [0.0, 0.0, 0.75]
     np.testing.assert_allclose(S, expected, rtol=0, atol=1e-12)
+    # the projected form (between sections) S_p = S - f_after h_x / (h_x f_before): the
+    # first column gains (0, 0, 9/8) / (1/2), so it is (0, 0, 3); it kills f_before
+    S_p = event_saltations(tr, "projected")[1]
+    expected[:, 0] = [0.0, 0.0, 3.0]
+    np.testing.assert_allclose(S_p, expected, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(S_p @ [-0.5, 0.0, 1.5], 0.0, rtol=0, atol=1e-12)
     tr = pwsdyn.simulate(two_blocks(), [0.0] * 4, (0.0, 3.0), variational=True, **TIGHT)
     assert tr.events[2].kind == "slide_end"
     np.testing.assert_allclose(event_saltations(tr)[2], np.eye(4), rtol=0, atol=1e-12)
