@@ -178,3 +178,55 @@ def test_nonlinear_weights_are_refused_clearly():
                           f"(slide_multi:x&y) slide_end:x (slide:y) slide_end:y ({below})")
     with pytest.raises(pwsdyn.OrbitError, match="not linear in the weights.*plain shooting"):
         OrbitProblem(m, sig)
+
+
+def test_switch_variants_follow_the_signature(on_signature):
+    """The belt's mode is split at both surfaces, so two switches are named ``w1`` (one with
+    ``w2 > 0``, one with ``w2 < 0``): sliding on ``w1`` with block 2 slower than the belt, and
+    on ``w2`` after block 1 released below, take the variants between the modes with
+    ``w2 < 0`` and ``w1 < 0``; the intersection keeps the corner above both."""
+    prob, _ = OrbitProblem.from_orbit(on_signature)
+    m = prob.model
+    names = list(m.mode_names)
+    kinds = [(f.kind, f.index) for f in prob.fields]
+    assert kinds[0] == ("mode", names.index("blocks[w1<0,w2<0]"))
+    sw1, sw2 = m.switches[kinds[1][1]], m.switches[kinds[3][1]]
+    assert (sw1.name, names[sw1.above], names[sw1.below]) == (
+        "w1", "blocks[w1>0,w2<0]", "blocks[w1<0,w2<0]")
+    assert (sw2.name, names[sw2.above], names[sw2.below]) == (
+        "w2", "blocks[w1<0,w2>0]", "blocks[w1<0,w2<0]")
+    assert kinds[2] == ("slide_multi", 0b11) and names[prob.fields[2].mode] == \
+        "blocks[w1>0,w2>0]"
+    # block 1 leaves the intersection below (its weight rises to 1)
+    assert prob.bounds[2].cond[-1] == 1 and prob.bounds[2].direction == 1
+
+
+#: Two relays and a state driven by the product of their signs (tests/test_intersections.py):
+#: the field is bilinear in the signs but the tangency conditions on x = y = 0 are linear.
+BILINEAR = {"name": "two-relays", "states": ["x", "y", "z"],
+            "modes": {"m": {"x": "0.5 - sign(x)", "y": "sign(x) - 2*sign(y)",
+                            "z": "1 + sign(x)*sign(y)"}}}
+
+
+def test_closed_form_field_of_a_bilinear_field_is_the_kernels():
+    """On x = y = 0 the weights solve ``0.5 - (1 - 2 a) = 0`` and
+    ``(1 - 2 a) - 2 (1 - 2 b) = 0``: ``a = 1/4``, ``b = 3/8``, so ``z' = 1 + (1/2)(1/4)
+    = 9/8`` (the multilinear extension of ``sign(x) sign(y)`` is the product of the mean
+    signs). The generated field matches it and the kernel's Newton iteration to 1e-14."""
+    import sympy as sp
+
+    from pwsdyn.orbits._segments import FieldKey, _Symbolic
+
+    m = pwsdyn.load_model(BILINEAR)
+    ctx = ModelContext(m, {})
+    st = ctx.state("slide_multi:x&y")
+    sym = _Symbolic(m, "convex")
+    field, lam = sym.multi(st.index, st.mode)
+    fn = sp.lambdify(m.state_symbols, list(field))
+    assert [float(v) for v in lam] == pytest.approx([0.25, 0.375], abs=1e-15)
+    assert list(sym.field(FieldKey("slide_multi", st.index, st.mode))) == list(field)
+    for z in (-1.0, 0.3, 2.0):
+        x = np.array([0.0, 0.0, z])
+        np.testing.assert_allclose(fn(*x), [0.0, 0.0, 9 / 8], rtol=0, atol=1e-14)
+        np.testing.assert_allclose(ctx.field(0.0, x, st), [0.0, 0.0, 9 / 8], rtol=0,
+                                   atol=1e-14)
