@@ -230,3 +230,17 @@ def test_closed_form_field_of_a_bilinear_field_is_the_kernels():
         np.testing.assert_allclose(fn(*x), [0.0, 0.0, 9 / 8], rtol=0, atol=1e-14)
         np.testing.assert_allclose(ctx.field(0.0, x, st), [0.0, 0.0, 9 / 8], rtol=0,
                                    atol=1e-14)
+
+
+def test_admissibility_sees_a_weight_past_one(on_signature):
+    """The intersection segment run 0.3 past its end (block 1's spring force beyond its
+    static friction, ``lambda_1 = (1 + S_1 / Fs1) / 2 > 1``): not admissible, with the
+    weight named as the reason."""
+    prob, u = OrbitProblem.from_orbit(on_signature)
+    i = [f.kind for f in prob.fields].index("slide_multi")
+    bad = u.copy()
+    bad[prob._Tcol(i)] += 0.3
+    adm = prob.admissibility(bad)
+    assert not adm.admissible
+    assert any("'w1' on the intersection (its weight must stay <= 1)" in v
+               for v in adm.violations)
