@@ -11,8 +11,8 @@ import numpy as np
 
 from ._base import ADMISSIBILITY_RTOL
 from ._sampling import lowest_point
-from .surfaces import (guard_holds, model_context, normal_acceleration, normal_velocity,
-                       state_field, surface)
+from .surfaces import (ScalarFunction, guard_holds, model_context, normal_acceleration,
+                       normal_velocity, state_field, surface)
 
 
 @dataclass(frozen=True)
@@ -105,6 +105,27 @@ def _interior(prob, i, s, ctx, p):
             checks.append(("side", f"contact of sticking on {m.events[fk.index].name!r} "
                            f"(the free normal acceleration must press into the surface)",
                            normal_acceleration(ctx, k, fk.mode), -1))
+    elif fk.kind == "slide_multi":
+        # the weights of the multilinear field stay in [0, 1] (each surface's corner fields
+        # keep pointing into it): a weight below 0 or above 1 is a surface the motion has
+        # left to the side above or below without its slide_end
+        names = [m.surfaces[k].name for k in range(len(m.surfaces)) if (fk.index >> k) & 1]
+        for j, nm in enumerate(names):
+            lam = _weight(prob, i, j, p)
+            checks.append(("side", f"sliding region of {nm!r} on the intersection (its weight "
+                           f"must stay >= 0)", lam, +1))
+            checks.append(("side", f"sliding region of {nm!r} on the intersection (its weight "
+                           f"must stay <= 1)", ScalarFunction(lambda t, x, f=lam: f(t, x) - 1.0),
+                           -1))
+        corners = {fk.mode}
+        for k in range(len(m.surfaces)):
+            if (fk.index >> k) & 1:
+                corners |= {sw.below for sw in m.switches
+                            if sw.surface == k and sw.above in corners}
+        for j, e in enumerate(m.events):
+            if corners & set(e.modes):
+                checks.append(("event", f"{e.kind} event {e.name!r}", surface(ctx, e.surface),
+                               j))
     else:
         sw = m.switches[fk.index]
         k = sw.surface
@@ -179,6 +200,15 @@ def _at_boundary(prob, i, s, ctx):
             if s.tau < te:
                 out.append(f"chattering on {e.name!r} at t = {te:.10g}: the accumulation "
                            f"time lies before the first impact")
+    if b.kind == "slide_start" and prob.fields[(i + 1) % prob.m].kind == "slide_multi":
+        # entry into sliding on an intersection: the weights of the multilinear field in
+        # [0, 1] at the entry (the fields of every corner point into the intersection)
+        lam = prob.multi_weights((i + 1) % prob.m, [te], [y])[0]
+        band = ADMISSIBILITY_RTOL * scale
+        if lam.min() < -band or lam.max() > 1 + band:
+            out.append(f"sliding on {prob.state_names[(i + 1) % prob.m]!r} starts at "
+                       f"t = {te:.10g} where its weights {np.round(lam, 12).tolist()} are not "
+                       f"all in [0, 1] (the intersection does not attract the motion)")
     elif b.kind in ("crossing", "slide_start"):
         sw = m.switches[b.ref]
         ha = normal_velocity(ctx, b.surface, sw.above)(te, y)
@@ -195,3 +225,11 @@ def _at_boundary(prob, i, s, ctx):
                            f"point to opposite sides (h_t + h_x f = {ha:.3e} above, "
                            f"{hb:.3e} below): the orbit should slide or cannot reach it")
     return out
+
+
+def _weight(prob, i, j, p) -> ScalarFunction:
+    """The weight ``lambda_j`` of segment ``i``'s sliding on an intersection, as a function
+    of ``(t, x)``."""
+    def fn(t, x):
+        return float(prob.multi_weights(i, [t], [x], p)[0, j])
+    return ScalarFunction(fn, rows=lambda ts, X: prob.multi_weights(i, ts, X, p)[:, j])

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import ArgumentError
-from .._codes import REGULAR, SLIDE, STICK
+from .._codes import REGULAR, SLIDE, SLIDE_MULTI, STICK
 from ..integrate.compiled import AfterEvents, KernelState, run_compiled
 from ._base import ADMISSIBILITY_RTOL
 from ._residual import _groups
@@ -79,6 +79,8 @@ def from_simulation(prob, t0: float, x0, p=None, *, horizon: float | None = None
         st = KernelState(REGULAR, -1, fk.index)
     elif fk.kind == "stick":
         st = KernelState(STICK, fk.index, fk.mode)
+    elif fk.kind == "slide_multi":
+        st = KernelState(SLIDE_MULTI, fk.index, fk.mode)
     else:
         st = KernelState(SLIDE, fk.index, int(ctx.stab[fk.index]["above"]))
     opts = dict(prob.opts, variational=False, dense=False, throw=False, mode=None)

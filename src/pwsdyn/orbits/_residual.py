@@ -299,26 +299,112 @@ class _OrbitProblemBase:
                 mode = _mode_by_name(m, regular[pos])
                 fk = FieldKey("stick", m.event_index(ref), mode)
             elif kind == "slide":
-                s = self._switch(ref)
+                s = self._switch(ref, self._near_modes(regular, pos))
                 fk = FieldKey("slide", s)
                 mode = int(m.switches[s].above)
+            elif kind == "slide_multi":
+                fk = self._multi_key(st, self._near_modes(regular, pos))
+                mode = fk.mode
             else:
                 raise ArgumentError(f"unknown discrete state {name!r} in the signature")
             fields.append(fk)
-            bounds.append(self._boundary(g, fk, mode))
+            near = [fk.index] if fk.kind == "mode" else self._near_modes(regular, pos)
+            bounds.append(self._boundary(g, fk, mode, near, pos))
             pos += len(g)
         self.fields = fields
         self.bounds = bounds
         self.state_names = names
 
-    def _switch(self, name):
-        for i, s in enumerate(self.model.switches):
-            if s.name == name:
-                return i
-        raise ArgumentError(f"unknown switch {name!r} in the signature; switches are "
-                            f"{[s.name for s in self.model.switches]}")
+    def _switch(self, name, near=()):
+        """The switch ``name``; where several switches share the name (the variants of a mode
+        split at several surfaces are joined by one switch per pair), the one between the
+        modes ``near`` (the first that fits)."""
+        cands = [i for i, s in enumerate(self.model.switches) if s.name == name]
+        if not cands:
+            raise ArgumentError(f"unknown switch {name!r} in the signature; switches are "
+                                f"{[s.name for s in self.model.switches]}")
+        for mode in near:
+            for i in cands:
+                if mode in (self.model.switches[i].above, self.model.switches[i].below):
+                    return i
+        return cands[0]
 
-    def _boundary(self, g, fk: FieldKey, mode: int) -> _Boundary:
+    def _near_modes(self, regular, pos) -> list:
+        """The regular modes nearest to the boundary at signature position ``pos``: the one
+        before it, then the one after it (they fix the sides of the surfaces not slid on)."""
+        sig = self.signature
+        out = [] if regular[pos] is None else [_mode_by_name(self.model, regular[pos])]
+        for back in range(len(sig)):
+            e = sig[(pos + back) % len(sig)]
+            if _is_mode(e.mode_after):
+                out.append(_mode_by_name(self.model, e.mode_after))
+                break
+        return out
+
+    def _multi_key(self, st, near) -> FieldKey:
+        """The field of sliding on the intersection ``st`` (``slide_multi:<a>&<b>...``): the
+        bit mask of its surfaces and the corner mode above all of them, reached from a mode
+        ``near`` across the surfaces it lies below (as the kernel codes the state)."""
+        m = self.model
+        idx = {s.name: k for k, s in enumerate(m.surfaces)}
+        names = st.surfaces
+        if len(names) < 2 or any(nm not in idx for nm in names):
+            raise ArgumentError(f"{str(st)!r} in the signature must name two or more "
+                                f"surfaces of model {m.name!r} {list(idx)}")
+        mask = 0
+        for nm in names:
+            mask |= 1 << idx[nm]
+        for mode in list(near) + list(range(len(m.modes))):
+            ref = mode
+            for k in sorted(idx[nm] for nm in names):
+                up = [sw.above for sw in m.switches if sw.surface == k and sw.below == ref]
+                if up:
+                    ref = int(up[0])
+                elif not any(sw.surface == k and sw.above == ref for sw in m.switches):
+                    ref = -1
+                    break
+            if ref >= 0:
+                return FieldKey("slide_multi", mask, ref)
+        raise ArgumentError(f"no mode of model {m.name!r} lies on every side of the "
+                            f"surfaces of {str(st)!r}")
+
+    def _multi_exit(self, g, fk: FieldKey, pos: int) -> _Boundary:
+        """The end of sliding on an intersection where the surface of switch event ``g[0]``
+        is left: its weight ``lambda_i`` reaches 0 (the motion leaves to the side above) or
+        1 (below). The side is read from the first regular mode of the signature after the
+        exit (an error where the surface is met again before one)."""
+        m, sig = self.model, self.signature
+        e = g[0]
+        s = self._switch(e.name)
+        k = m.switches[s].surface
+        ks = [j for j in range(len(m.surfaces)) if (fk.index >> j) & 1]
+        if k not in ks:
+            raise ArgumentError(f"a slide_end on {e.name!r} must end sliding on its surface, "
+                                f"not on the intersection {e.mode_before!r}")
+        i = ks.index(k)
+        side = None
+        for step in range(1, len(sig) + 1):
+            x = sig[(pos + step - 1) % len(sig)]
+            if step > 1 and x.kind in ("crossing", "slide_start", "slide_end") and \
+                    m.switches[self._switch(x.name)].surface == k:
+                break
+            if _is_mode(x.mode_after):
+                mode = _mode_by_name(m, x.mode_after)
+                if any(sw.surface == k and sw.above == mode for sw in m.switches):
+                    side = 0
+                elif any(sw.surface == k and sw.below == mode for sw in m.switches):
+                    side = 1
+                break
+        if side is None:
+            raise ArgumentError(f"the signature {sig} does not tell to which side of "
+                                f"{m.surfaces[k].name!r} the slide_end at position {pos} "
+                                f"leaves (no regular mode follows before that surface is "
+                                f"met again)")
+        # lambda_i falls to 0 (leaving above) or rises to 1 (leaving below)
+        return _Boundary(e.kind, tuple(g), s, k, fk.mode,
+                         ("lam", fk.index, fk.mode, i, side), 1 if side else -1)
+
+    def _boundary(self, g, fk: FieldKey, mode: int, near=(), pos: int = 0) -> _Boundary:
         m = self.model
         e = g[0]
         if e.kind in ("impact", "transition", "chatter"):
@@ -330,15 +416,18 @@ class _OrbitProblemBase:
             d = -1 if e.kind == "chatter" else int(ev.direction)
             return _Boundary(e.kind, tuple(g), j, k, mode, ("h", k), d)
         if e.kind in ("crossing", "slide_start"):
-            s = self._switch(e.name)
+            s = self._switch(e.name, near)
             sw = m.switches[s]
             k = sw.surface
             d = 0
             if fk.kind == "mode":
                 d = -1 if fk.index == sw.above else 1
             return _Boundary(e.kind, tuple(g), s, k, mode, ("h", k), d)
+        if e.kind == "slide_end" and fk.kind == "slide_multi":
+            return self._multi_exit(g, fk, pos)
         if e.kind == "slide_end":
-            s = self._switch(e.name)
+            s = (fk.index if fk.kind == "slide" and m.switches[fk.index].name == e.name
+                 else self._switch(e.name))
             sw = m.switches[s]
             out = _mode_by_name(m, e.mode_after)
             if fk.kind != "slide" or fk.index != s:
@@ -358,6 +447,12 @@ class _OrbitProblemBase:
 
     def _build_system(self):
         scalars, vectors = [], []
+        for fk in self.fields:
+            if fk.kind == "slide_multi":
+                # the weights of sliding on an intersection, for its admissibility check
+                # and monitors
+                scalars += [("lam", fk.index, fk.mode, i, 0)
+                            for i in range(bin(fk.index).count("1"))]
         for b in self.bounds:
             scalars.append(b.cond)
             if b.kind in ("impact", "transition"):
@@ -379,6 +474,27 @@ class _OrbitProblemBase:
             [self.params[k] for k in sysm.rest] or [0.0], dtype=float)
         self._fidx = [sysm.field_index(f) for f in self.fields]
         self._cidx = [sysm.scalar_index(b.cond) for b in self.bounds]
+
+    def multi_weights(self, i: int, ts, X, p=None) -> np.ndarray:
+        """The weights ``lambda`` (one column per surface, in increasing surface index) of
+        segment ``i``, sliding on an intersection, at the times ``ts`` and model states
+        ``X`` (rows): in ``[0, 1]`` while the segment is admissible, 0 where its motion
+        leaves a surface to the side above, 1 below."""
+        fk = self.fields[i]
+        if fk.kind != "slide_multi":
+            raise ArgumentError(f"segment {i} ({self.state_names[i]}) does not slide on an "
+                                f"intersection")
+        p = self._p(p)
+        sysm = self.sys
+        idx = [sysm.scalar_index(("lam", fk.index, fk.mode, j, 0))
+               for j in range(bin(fk.index).count("1"))]
+        X = np.atleast_2d(np.asarray(X, dtype=float))
+        out = np.empty((len(X), len(idx)))
+        for r, (t, x) in enumerate(zip(np.atleast_1d(ts), X)):
+            z = np.concatenate([x[:self.n], p])
+            for c, j in enumerate(idx):
+                out[r, c] = sysm.scalar(j, float(t), z, self._pv, grad=False)
+        return out
 
     # ==================================================================================
     # layout of u

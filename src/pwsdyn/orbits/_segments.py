@@ -26,6 +26,14 @@ Fields and derivatives (all from the model's expressions; ``f`` the mode's field
   ``alpha = hd_above / (hd_above - hd_below)``; for ``sliding='utkin'`` the family
   ``f(t, x, u)`` at the root of ``h_t + h_x f(u) = 0`` where that root is explicit (a family
   affine in ``u``, where it equals the convex field);
+* sliding on the intersection of ``k >= 2`` switching surfaces (the kernel's multilinear
+  extension of Dieci and Lopez, :mod:`pwsdyn.integrate`): ``sum_c prod_i w_i(c) f_c`` over
+  the ``2^k`` corner modes, ``w_i = lambda_i`` below surface ``i`` and ``1 - lambda_i``
+  above, with ``lambda`` the root of ``h_i,t + h_i,x f = 0``. Where those conditions are
+  linear in ``lambda`` (the coefficients of every ``lambda_i lambda_j`` vanish: fields affine
+  in the signs, as dry friction and relays written with ``sign``) the ``k x k`` linear system
+  is solved here in closed form; otherwise the rule has no closed form and the orbit problem
+  refuses it (plain shooting integrates it with the kernel's Newton iteration);
 * complete chattering (slides, "Local mapping at complete chattering"; Nordmark & Piiroinen
   2009; the kernel's ``_chatter_map``): ``Z = x + c v``, ``tau = t + b v`` with ``v = hd``,
   ``r = -(1 + hd_x W)``, ``b = 2 r / ((1 - r) a)``, ``c = (2 r f / a + W) / (1 - r)``, then
@@ -44,12 +52,13 @@ import numpy as np
 import sympy as sp
 
 from .._compiling import type_once
-from ..errors import ArgumentError, ModelError
+from ..errors import ArgumentError, ModelError, Status
 from ..model.cache import load_module
 from ..model.codegen import (W_AFFINE, W_F, W_FX, W_G, W_GT, W_GX, W_H,
                              W_HT, W_HX, CompiledModel, without_dirac_deltas, emit_evaluate)
 from ..model.discontinuities import U_SYMBOL
 from ..model.spec import Mode, Model
+from ._base import OrbitError
 
 _VERSION = "1"
 
@@ -57,7 +66,9 @@ _VERSION = "1"
 @dataclass(frozen=True)
 class FieldKey:
     """A segment's field: ``('mode', m)``, ``('stick', j, m)`` (impact event ``j``, constrained
-    mode ``m``) or ``('slide', s)`` (switch ``s``)."""
+    mode ``m``), ``('slide', s)`` (switch ``s``) or ``('slide_multi', mask, m)`` (sliding on
+    the intersection of the surfaces in the bit mask ``mask``, ``m`` the corner mode above all
+    of them, as the kernel codes it)."""
 
     kind: str
     index: int
@@ -78,7 +89,9 @@ class SegmentSystem:
     scalars : sequence of tuple
         Keys of scalar functions: ``('h', k)`` surface ``k``; ``('hd', k, m)`` its normal
         velocity in mode ``m``; ``('acc', k, m)`` the free normal acceleration;
-        ``('chat_dt', j, m)`` the time ``b v`` of the chattering map of impact event ``j``.
+        ``('chat_dt', j, m)`` the time ``b v`` of the chattering map of impact event ``j``;
+        ``('lam', mask, m, i, e)`` the weight ``lambda_i - e`` (``e`` 0 or 1) of the ``i``-th
+        surface of sliding on the intersection ``('slide_multi', mask, m)``.
     vectors : sequence of tuple
         Keys of vector functions (``n + q`` entries): ``('reset', j)`` the reset of event
         ``j``; ``('chat_z', j, m)`` the chattering map ``Z``; ``('hx', k)``, ``('hdx', k, m)``
@@ -229,6 +242,7 @@ class _Symbolic:
         self.t = model.t
         self.X = sp.Matrix(model.state_symbols)
         self.sliding = sliding
+        self._multi: dict = {}
 
     def f(self, mode: int) -> sp.Matrix:
         return sp.Matrix(self.m.modes[mode].rhs)
@@ -284,7 +298,56 @@ class _Symbolic:
             ha, hb = self.hd(k, sw.above), self.hd(k, sw.below)
             alpha = ha / (ha - hb)
             return (1 - alpha) * fa + alpha * fb
+        if key.kind == "slide_multi":
+            return self.multi(key.index, key.mode)[0]
         raise ValueError(key)
+
+    def multi(self, mask: int, ref: int):
+        """``(field, lambda)`` of sliding on the intersection of the surfaces of ``mask``
+        (corner ``ref`` above all of them): the multilinear extension at the root ``lambda``
+        of its tangency conditions, solved in closed form where they are linear in
+        ``lambda``; :class:`~pwsdyn.OrbitError` where they are not."""
+        got = self._multi.get((mask, ref))
+        if got is not None:
+            return got
+        m = self.m
+        ks = [k for k in range(len(m.surfaces)) if (mask >> k) & 1]
+        nk = len(ks)
+        lam = sp.symbols(f"lambda_0:{nk}", real=True)
+        total = sp.zeros(len(self.X), 1)
+        for c in range(1 << nk):
+            mode = ref
+            for i, k in enumerate(ks):
+                if (c >> i) & 1:
+                    mode = _below(m, k, mode)
+            weight = sp.Integer(1)
+            for i in range(nk):
+                weight *= lam[i] if (c >> i) & 1 else 1 - lam[i]
+            total += weight * self.f(mode)
+        # the tangency conditions h_i,t + h_i,x f(lambda) = 0, multilinear in lambda
+        conds = [sp.diff(self.h(k), self.t) + (self.grad(self.h(k)) * total)[0] for k in ks]
+        names = "&".join(m.surfaces[k].name for k in ks)
+        for i, g in enumerate(conds):
+            for a in range(nk):
+                for b in range(a + 1, nk):
+                    d2 = sp.expand(sp.diff(g, lam[a], lam[b]))
+                    if d2 != 0 and sp.simplify(d2) != 0:
+                        raise OrbitError(
+                            Status.SIGNATURE,
+                            f"sliding on the intersection {names} of model {m.name!r}: its "
+                            f"tangency condition on {m.surfaces[ks[i]].name!r} is not linear "
+                            f"in the weights (the coefficient of {lam[a]}*{lam[b]} is "
+                            f"{str(d2)[:120]}), so the multilinear rule has no closed form and "
+                            f"an orbit problem cannot follow such a segment; plain shooting "
+                            f"(find_periodic_orbit without `signature`) integrates it")
+        zero = {v: 0 for v in lam}
+        A = sp.Matrix(nk, nk, lambda i, j: sp.diff(conds[i], lam[j]).subs(zero))
+        b = sp.Matrix([g.subs(zero) for g in conds])
+        sol = A.LUsolve(-b)
+        sol = [sp.cancel(v) if v.count_ops() < 400 else v for v in sol]
+        field = total.subs(dict(zip(lam, sol)))
+        got = self._multi[(mask, ref)] = (field, sol)
+        return got
 
     def chatter(self, j: int, mode: int):
         ev = self.m.events[j]
@@ -309,6 +372,8 @@ class _Symbolic:
             return self.acc(key[1], key[2])
         if kind == "chat_dt":
             return self.chatter(key[1], key[2])[1]
+        if kind == "lam":
+            return self.multi(key[1], key[2])[1][key[3]] - key[4]
         raise ValueError(key)
 
     def vector(self, key):
@@ -323,3 +388,13 @@ class _Symbolic:
         if kind == "hdx":
             return list(self.grad(self.hd(key[1], key[2])))
         raise ValueError(key)
+
+
+def _below(model, k: int, mode: int) -> int:
+    """The mode across surface ``k`` below ``mode`` (the product variants are joined pairwise
+    by switches, :mod:`pwsdyn.model.discontinuities`)."""
+    for sw in model.switches:
+        if sw.surface == k and sw.above == mode:
+            return int(sw.below)
+    raise ArgumentError(f"mode {model.modes[mode].name!r} of model {model.name!r} has no "
+                        f"switch to a mode below surface {model.surfaces[k].name!r}")

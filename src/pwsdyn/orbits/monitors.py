@@ -141,6 +141,11 @@ def dib_monitors(prob, u, p=None, evaluation=None) -> dict:
     * ``"AS/<switch>@<i>"`` at a sliding exit: the normal acceleration of the field the
       orbit leaves with, positive while it curves away (adding-sliding where it
       vanishes);
+    * ``"AS/<surface>:<above|below>/<i>"`` along a segment sliding on an intersection: the
+      smallest interior local minimum of the surface's weight ``lambda`` (``above``: the
+      motion leaves to the side above where it reaches 0) or of ``1 - lambda``
+      (``below``); where it touches zero a contact starts or ends its stick inside the
+      orbit (the multilinear field's analogue of adding-sliding);
     * ``"CC/<surface>@<i>"`` at an impact, transition or crossing ending a segment in a
       mode: the value of another surface of the mode there, signed positive on the
       segment's side (a corner collision where it vanishes: the event point reaches the
@@ -178,6 +183,8 @@ def dib_monitors(prob, u, p=None, evaluation=None) -> dict:
                 _put(out, MonitorKey(kind, name, i), hg, tg, xg)
         elif fk.kind == "slide" and s.T > 0:
             out.update(_sliding_monitors(prob, i, s, p, ctx))
+        elif fk.kind == "slide_multi" and s.T > 0:
+            out.update(_multi_monitors(prob, i, s, p))
         b = prob.bounds[i] if i < len(prob.bounds) else None
         if b is None:
             continue
@@ -231,7 +238,7 @@ def dib_monitors(prob, u, p=None, evaluation=None) -> dict:
                 into = 1.0 if fk.index == sw.above else -1.0
                 arrival = normal_velocity(ctx, b.surface, fk.index)(te, y)
                 _put(out, MonitorKey("GS", sw.name, i, "boundary"), -into * arrival, te, y)
-        elif b.kind == "slide_end":
+        elif b.kind == "slide_end" and fk.kind == "slide":
             # adding-sliding: the field the orbit leaves the surface with is tangent to it
             # at the exit (h_x f = 0) and its normal acceleration vanishes too (a cubic
             # tangency, the slides' <<h_x, f1>_x, f1> = 0): past it the orbit comes back
@@ -281,4 +288,32 @@ def _sliding_monitors(prob, i, s, p, ctx) -> dict:
             tg, hg = found
             _put(out, MonitorKey("AS", sw.name, i, side=side), hg, tg,
                  np.asarray(tr(tg)[:n], dtype=float))
+    return out
+
+
+def _multi_monitors(prob, i, s, p) -> dict:
+    """``"AS/<surface>:<above|below>/<i>"``: along segment ``i``, sliding on an intersection,
+    the smallest interior local minimum of each surface's weight ``lambda`` (``above``) and
+    of ``1 - lambda`` (``below``). Where one touches zero the multilinear field touches the
+    boundary of its region (the corner fields on that side of the surface turn tangent to
+    it): past it the motion leaves that surface inside the segment and returns to it (a
+    contact ends and restarts its stick inside the orbit)."""
+    tr, ts, Y = prob._dense_samples(i, s, p)
+    if tr is None or len(ts) < 3:
+        return {}
+    m, n = prob.model, prob.n
+    fk = prob.fields[i]
+    names = [m.surfaces[k].name for k in range(len(m.surfaces)) if (fk.index >> k) & 1]
+    lam = prob.multi_weights(i, ts, Y, p)
+    out: dict = {}
+    for j, nm in enumerate(names):
+        for side, sign, shift in (("above", 1.0, 0.0), ("below", -1.0, 1.0)):
+            def val(tt, j=j, sign=sign, shift=shift):
+                return sign * (float(prob.multi_weights(i, [tt], [tr(tt)[:n]], p)[0, j])
+                               - shift)
+            found = interior_minimum(val, ts, sign * (lam[:, j] - shift))
+            if found is not None:
+                tg, hg = found
+                _put(out, MonitorKey("AS", nm, i, side=side), hg, tg,
+                     np.asarray(tr(tg)[:n], dtype=float))
     return out

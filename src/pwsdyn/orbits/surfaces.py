@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._codes import REGULAR, STICK
+from .._codes import REGULAR, SLIDE_MULTI, STICK
 from ..integrate.compiled import KernelState, ModelContext
 from ._segments import FieldKey as FieldKey
 
@@ -87,11 +87,14 @@ def guard_holds(ctx, j: int, t, x) -> bool:
 
 
 def state_field(ctx, fk: FieldKey, t, x):
-    """The field of the discrete state ``fk`` (a mode, sticking, sliding) at ``(t, x)``."""
+    """The field of the discrete state ``fk`` (a mode, sticking, sliding on a surface or an
+    intersection) at ``(t, x)``."""
     if fk.kind == "mode":
         st = KernelState(REGULAR, -1, fk.index)
     elif fk.kind == "stick":
         st = KernelState(STICK, fk.index, fk.mode)
+    elif fk.kind == "slide_multi":
+        st = KernelState(SLIDE_MULTI, fk.index, fk.mode)
     else:
         st = ctx.sliding_state(fk.index)
     return ctx.field(t, x, st)
