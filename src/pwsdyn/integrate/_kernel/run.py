@@ -1022,8 +1022,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                     break
                 h_ev += dt
             # landing-step dense output (extra stages for DOP853; Taylor terms rescaled), where it
-            # is stored or sampled
-            if store_q or sdt > 0.0:
+            # is stored or a sample falls in the landing step (most events of a sweep have none)
+            if store_q or (sdt > 0.0 and s0 + sk * sdt <= t + h_ev):
                 stats[2] += _step_dense(ev, p, exact_now, dkind, didx, mode, nm, t, y, h_ev, h,
                         Kland, A, C, s_fsal, P, Q, ytmp, etab, stab, slide_c, wk, nz, aff)
             t_ev = min(t + h_ev, t_end)
@@ -1048,7 +1048,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                     pend_act[n_pend] = wact[ww]
                     pend_ref[n_pend] = wref[ww]
                     n_pend += 1
-            if sdt > 0.0:
+            if sdt > 0.0 and s0 + sk * sdt <= t + h_ev:
                 # samples up to the event (one at the event time takes the state before it)
                 n_samp, sk = _take_samples(t, h_ev, y, Q, nY, n, deg, s0, sdt, sk, t_end,
                                                  samp, n_samp, xs, max_samp)
