@@ -268,3 +268,33 @@ def test_written_out_taylor_terms_equal_the_loop_bit_for_bit():
         np.testing.assert_array_equal(outs[0][1], outs[1][1])
         np.testing.assert_array_equal(outs[0][2], outs[1][2])
         np.testing.assert_allclose(outs[1][3], (expm(h * M[1]) @ z0)[:2], rtol=0, atol=1e-14)
+
+
+@pytest.mark.parametrize("x0", [-0.5, -0.3, -1.0, -0.05])
+def test_impact_located_on_the_exact_flow_to_a_few_ulp(x0):
+    """The first impact of the damped impact oscillator from rest (eps = 0.1, omega = 2.8,
+    stop at 0), located on the exact flow by Newton with the closed bracket, against the
+    closed form's root by ``brentq`` at full precision: within 6 ulp of t (the kernel closes
+    the bracket to 2 * max(|t|, 1) * eps, up to 4 ulp for 1 <= t < 2, and the closed form
+    evaluated in double precision moves its root by about one more)."""
+    from scipy.optimize import brentq
+
+    eps, w = 0.1, 2.8
+    tr = pwsdyn.simulate("impact-oscillator", [x0, 0.0], 30.0, exact=True, dense=False,
+                         params={"eps": eps, "omega": w, "sigma": 0.0, "r": 0.8})
+    t1 = float(tr.event_times("impact")[0])
+    d = (1 - w * w) ** 2 + (eps * w) ** 2
+    a_s, b_c = (1 - w * w) / d, -eps * w / d       # particular a sin(wt) + b cos(wt)
+    z, wd = eps / 2, math.sqrt(1 - eps * eps / 4)
+    c1 = x0 - b_c
+    c2 = (0.0 - a_s * w + z * c1) / wd
+
+    def x(t):
+        return (math.exp(-z * t) * (c1 * math.cos(wd * t) + c2 * math.sin(wd * t))
+                + a_s * math.sin(w * t) + b_c * math.cos(w * t))
+
+    ts = np.linspace(0.0, t1 + 0.5, 20001)
+    xs = np.array([x(s) for s in ts])
+    i = np.flatnonzero((xs[:-1] < 0) & (xs[1:] >= 0))[0]
+    ref = brentq(x, ts[i], ts[i + 1], xtol=1e-16, rtol=4 * np.finfo(float).eps)
+    assert abs(t1 - ref) <= 6 * np.spacing(ref), (t1, ref)

@@ -178,6 +178,43 @@ def test_ball_started_at_rest_reports_the_whole_period_stuck():
         assert np.all(ds.events_per_period.values == 0)
 
 
+def test_a_rerun_resumes_from_the_windows_of_an_earlier_rerun(monkeypatch):
+    """A chunk rerun from a new state (the chunk before it was rerun and hands on another
+    state) takes the windows of its earlier rerun from the first value that lies on their
+    attractor: one value integrated, not the chunk, and the rows after it are that rerun's.
+    Here the earlier rerun is the chunk's own confirmed result and the guess a window of
+    another outcome (a failed status), so only the earlier rerun can be rejoined."""
+    from pwsdyn.explore import _sweep as S
+
+    seen = {}
+    real_stitch = S.stitch
+
+    def spy(tasks, *args):
+        final, info = real_stitch(tasks, *args)
+        seen.update(tasks=tasks, final=final)
+        return final, info
+
+    monkeypatch.setattr(S, "stitch", spy)
+    _ball(5, 1)
+    tasks, final = seen["tasks"], seen["final"]
+    task, earlier = tasks[2], final[2]
+    start = S.handed_on(final[1], np.array(task["settings"]["x0"]), 1e8)
+    other = {k: np.array(v, copy=True) for k, v in earlier.items()}
+    other["status"][:] = -1
+    calls = []
+    real_window = S.run_window
+    monkeypatch.setattr(S, "run_window", lambda *a, **k: calls.append(1) or real_window(*a, **k))
+    got = S.sweep_chunk({**task, "x_start": start.tolist(), "warmup": 0,
+                         "values": task["values"][task["warmup"]:], "guess": other,
+                         "alts": [other, earlier]})
+    assert len(calls) == 1
+    assert got["rerun"][0]
+    for k in S._CHUNK_VARS:
+        if k != "x_start":
+            np.testing.assert_array_equal(got[k][1:], earlier[k][1:], err_msg=k)
+    assert same_attractor(S.row(got, 0), S.row(earlier, 0), 1.0, KW["samples"], False)
+
+
 def test_same_attractor_compares_windows_not_states():
     """Two windows of one period-2 cycle recorded at different phases of it are the same
     attractor; another period-2 cycle, another period, or sticking time are not."""

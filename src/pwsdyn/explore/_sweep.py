@@ -27,7 +27,9 @@ sticking and sliding time and the section points of the cycle, to a tolerance
 settled on another of coexisting attractors), the chunk is rerun from that state in the
 same task until a value whose window lies on the guess's attractor at that value (the rerun
 has rejoined the guess; the guess's later values stand) or to its end, which may change the
-state it hands on: the chunk after it is then checked again. Windows with no period found
+state it hands on: the chunk after it is then checked again, and where it was rerun before
+(from the state that has just been replaced) its new rerun resumes from those stored windows
+at the first value that lies on their attractor instead of integrating the rest again. Windows with no period found
 (chaos, a long transient) never agree: nothing tells one attractor from another there and
 the state handed on depends sensitively on the start (chaotic stretches cost what a
 sequential sweep costs).
@@ -389,7 +391,9 @@ def sweep_chunk(task: dict) -> dict:
     first row is then the check); where a later value run from ``x_start`` lies on the
     guess's attractor at that value the rerun has rejoined the guess: it stops, and the
     guess's rows after that value complete the result. ``rerun`` marks the rows run from
-    ``x_start``.
+    ``x_start``. ``task["alts"]`` (optional): earlier reruns of this chunk from other
+    starts; where a value lies on the attractor of one of them at that value, the rerun
+    resumes from it (its later rows complete the result) instead of integrating them again.
     """
     ctx = ModelContext.get(task["model"])
     model = ctx.model
@@ -402,6 +406,7 @@ def sweep_chunk(task: dict) -> dict:
     x = x0.copy() if start is None else np.array(start, dtype=float)
     guess = task.get("guess")
     check = task.get("check") if guess is None else row(guess, 0)
+    alts = task.get("alts") or ()
     values = task["values"]
     nw = task["warmup"]
     nv = len(values) - nw
@@ -441,6 +446,16 @@ def sweep_chunk(task: dict) -> dict:
                     if k not in ("x_start", "rerun"):
                         v[r + 1:] = guess[k][r + 1:]
                 return res
+            for alt in alts:
+                if r + 1 < nv and same_attractor(row(res, r), row(alt, r), T, s["samples"],
+                                                 use_phase):
+                    # on the attractor of an earlier rerun of this chunk (from a state that
+                    # a rerun of the chunk before has since replaced): its later rows are
+                    # the sequence from here, to the same tolerance as a rejoined guess
+                    for k, v in res.items():
+                        if k != "x_start":
+                            v[r + 1:] = alt[k][r + 1:]
+                    return res
         # continue the final state into the next value; restart from x0 after a failure
         ok = w["status"] == 0 and check_bound(w["x_end"], s["bound"])
         x = np.array(w["x_end"], dtype=float) if ok else x0.copy()
@@ -509,9 +524,12 @@ def stitch(tasks: list, chains: list, guesses: dict, reruns: dict, run, x0, boun
                     continue
                 t = tasks[i]
                 starts[i] = xs
+                # earlier reruns of the chunk (from states since replaced): a rerun that
+                # reaches one of their attractors resumes from their windows
+                alts = [r for (j, _), r in tried.items() if j == i and not isinstance(r, str)]
                 todo.append((i, {**t, "x_start": xs.tolist(), "warmup": 0,
                                  "values": t["values"][t["warmup"]:],
-                                 "guess": guesses[i]}))
+                                 "guess": guesses[i], "alts": alts}))
         if not todo:
             if all(i in final for chain in chains for i in chain):
                 return final, info

@@ -64,7 +64,7 @@ def _dense_coeffs(K, P, h, nY, s_ext, deg, out):
             out[i, k] = h * acc
 
 
-@njit(cache=True)
+@_hot
 def _take_samples(t, h, y, Q, nY, n, deg, s0, sdt, k, t_end, samp, n_samp, xs, max_samp):
     """Record the states at the sample times ``s0 + k sdt`` in ``(t, t + h]`` (and not past
     ``t_end``) from the step's dense output into ``samp`` (allocated for all of them), at most
