@@ -74,62 +74,6 @@ def _crosses(v0, v1, direction):
 
 
 @_hot
-def _locate_exact(ev, p, km, t, h, y, Q, nY, deg, a_th, b_th, fa, fb, xs, buf):
-    """The crossing of surface ``h_k`` (``km = k * nm + mode``: a regular mode) inside the
-    bracket ``[a_th, b_th]`` of an exact step's dense output, ``fa`` and ``fb`` the surface
-    values at its ends (``fa != 0`` on the side not yet crossed). Returns the end of the final
-    bracket on the crossed side, the bracket closed to the resolution of the Illinois search
-    it replaces there (``(b - a) h <= 2 ulp(t)``).
-
-    The dense output of an exact step is the exact flow (its Taylor terms to 1e-18), so its
-    derivative in ``theta`` is ``h f`` and ``d h_k / d theta = h hdot_k``, which the compiled
-    model returns with ``h_k`` in one call (``W_HHD``): safeguarded Newton (bisection where
-    the Newton point leaves the bracket or does not halve the step before last, as Numerical
-    Recipes' ``rtsafe``) converges quadratically, ~5 evaluations from a step's bracket where
-    Illinois with its bisection safeguard takes ~16 (measured on the impact oscillator). The
-    bracket is closed by taking a Newton point that is closer than an ulp of ``t`` one ulp
-    beyond the root it predicts, so the next value lies on the other side."""
-    th = (a_th * fb - b_th * fa) / (fb - fa) if fb != fa else 0.5 * (a_th + b_th)
-    if not (a_th < th < b_th):
-        th = 0.5 * (a_th + b_th)
-    dx_old = b_th - a_th
-    dx = dx_old
-    for it in range(200):
-        if (b_th - a_th) * h <= 2.0 * _ulp(t + b_th * h):
-            break
-        _dense_eval(y, Q, th, nY, deg, xs)
-        ev(W_HHD, km, t + th * h, xs, p, buf)
-        g = buf[0]
-        gd = buf[1] * h
-        if (g > 0.0) == (fa > 0.0) and g != 0.0:
-            a_th = th
-        else:
-            b_th = th
-        if (b_th - a_th) * h <= 2.0 * _ulp(t + b_th * h):
-            break
-        tol = _ulp(t + th * h) / h
-        if g == 0.0:
-            # on the surface: close the bracket from the side not crossed
-            nxt = th - tol
-        elif (not np.isfinite(gd) or gd == 0.0 or ((th - b_th) * gd - g) * ((th - a_th) * gd - g)
-              > 0.0 or abs(2.0 * g) > abs(dx_old * gd)):
-            # Newton would leave the bracket or converges too slowly: bisect
-            dx_old = dx
-            dx = 0.5 * (b_th - a_th)
-            nxt = a_th + dx
-        else:
-            dx_old = dx
-            dx = g / gd
-            nxt = th - dx
-            if abs(dx) < tol:
-                nxt = th - dx - (tol if dx > 0.0 else -tol)
-        if not (a_th < nxt < b_th):
-            nxt = 0.5 * (a_th + b_th)
-        th = nxt
-    return b_th
-
-
-@_hot
 def _watch_slope(ev, p, wtype, widx, wmode, nm, t, h, y, Q, n, deg, th, xs, buf, fbuf, hdx):
     """d/dt of a watch function along the step's dense output at ``theta``: a central
     difference (relative step ``_FD_STEP`` of the step; the dense output is a polynomial, so
