@@ -40,8 +40,8 @@ from scipy.spatial import cKDTree
 from .. import _validate as V
 from ..errors import ArgumentError
 from ..model.spec import as_model
-from ._points import ManifoldError, PeriodicPoint, find_periodic_point
-from ._sections import MapSection
+from ._points import ManifoldError, PeriodicPoint, find_periodic_point, section_point
+from ._sections import MapSection, StroboscopicSection
 from ._tangency import Contact, as_point, root as contact_root
 
 if TYPE_CHECKING:
@@ -185,6 +185,19 @@ class Crisis:
         return save_dataset(self.to_dataset(), path, overwrite=overwrite)
 
 
+def _check_flow(model, caller):
+    """A flow is taken through its stroboscopic section: it must be forced (a section map)
+    with two states (a planar map)."""
+    if getattr(model, "is_map", False):
+        return
+    if model.forcing_period is None or model.n_states != 2:
+        raise ArgumentError(f"{caller}: a flow is taken through its stroboscopic section, a "
+                            "planar map: it needs a forcing period and two states; "
+                            f"{model.name!r} has {model.n_states} states and "
+                            f"{'a' if model.forcing_period is not None else 'no'} forcing "
+                            "period")
+
+
 def _attractor(sec: MapSection, x, transient: int, iterations: int, escape: float):
     """Iterate; the recorded samples, or ``None`` when the orbit leaves (no piece applies,
     not finite, beyond ``escape``)."""
@@ -316,9 +329,23 @@ class _Contact:
 class _Context:
     def __init__(self, model, param, params):
         self.model, self.param, self.params = model, param, dict(params or {})
+        self.is_map = bool(getattr(model, "is_map", False))
 
     def section(self, p):
-        return MapSection(self.model, {**self.params, self.param: float(p)}, 1)
+        prm = {**self.params, self.param: float(p)}
+        if self.is_map:
+            return MapSection(self.model, prm, 1)
+        # a forced flow: its stroboscopic map at phase 0, over the forcing period at p
+        T = self.model.forcing_period_value(prm)
+        return StroboscopicSection(self.model, prm, 0.0, float(T), 1)
+
+
+def _periodic(sec, x, period):
+    """A periodic point of the section's map from ``x``: a map model's, or a point of a flow's
+    stroboscopic map at the section's phase."""
+    if sec.is_map:
+        return find_periodic_point(sec.model, x, period, params=sec.params)
+    return section_point(sec.model, x, period, params=sec.params, t0=sec.t0)
 
 
 def _candidates(ctx, p, samples, periods, seeds) -> list:
@@ -442,8 +469,11 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
 
     Parameters
     ----------
-    model : MapModel, str, path or dict
-        A one- or two-dimensional map model (``kind = "map"``).
+    model : MapModel, Model, str, path or dict
+        A one- or two-dimensional map model (``kind = "map"``), or a forced two-state flow,
+        taken through its stroboscopic section ``x(0) -> x(T)`` (``T`` its forcing period at
+        each parameter value): a planar map whose saddles are found by Newton with the runs'
+        monodromy matrices and whose manifolds :func:`pwsdyn.manifold` grows.
     param : str
         The parameter varied.
     span : (float, float)
@@ -493,10 +523,11 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
     >>> round(float(c.point[0]), 9)     # the edge mu - sqrt(mu) meets mu / (1 - lam)
     -0.25
     """
-    model = as_model(model, kind="map", caller="locate_crisis()")
+    model = as_model(model, caller="locate_crisis()")
     if model.n_states > 2:
         raise ArgumentError("locate_crisis(): one- and two-dimensional maps are handled so "
                             f"far, {model.name!r} has {model.n_states} states")
+    _check_flow(model, "locate_crisis()")
     if param not in model.parameters:
         raise ArgumentError(f"locate_crisis(): {model.name!r} has no parameter {param!r}")
     tol = V.positive("tol", tol)
@@ -581,7 +612,7 @@ def _saddles(sec, samples, periods) -> list:
     for period in periods:
         for s in seeds:
             try:
-                pt = find_periodic_point(sec.model, s, period, params=sec.params)
+                pt = _periodic(sec, s, period)
             except ManifoldError:
                 continue
             if not _is_saddle(pt):
@@ -701,8 +732,10 @@ def locate_tangency(model, param: str, span, unstable, stable=None, *, params=No
 
     Parameters
     ----------
-    model : MapModel, str, path or dict
-        A two-dimensional map model (``kind = "map"``).
+    model : MapModel, Model, str, path or dict
+        A two-dimensional map model (``kind = "map"``), or a forced two-state flow through
+        its stroboscopic section (saddles given as states are found on the section at phase
+        0; a saddle given as a :class:`~pwsdyn.PeriodicPoint` keeps its own phase).
     param : str
         The parameter varied.
     span : (float, float)
@@ -744,7 +777,8 @@ def locate_tangency(model, param: str, span, unstable, stable=None, *, params=No
     ManifoldError
         A saddle is lost, or the contact does not change sign over ``span``.
     """
-    model = as_model(model, kind="map", caller="locate_tangency()")
+    model = as_model(model, caller="locate_tangency()")
+    _check_flow(model, "locate_tangency()")
     if model.n_states != 2:
         raise ArgumentError("locate_tangency(): the manifolds must be curves that cut the "
                             f"plane: a two-dimensional map, {model.name!r} has "

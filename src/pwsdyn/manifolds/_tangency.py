@@ -34,7 +34,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from ._manifold import manifold
-from ._points import ManifoldError, PeriodicPoint, find_periodic_point
+from ._points import ManifoldError, PeriodicPoint, find_periodic_point, refind, section_point
 
 
 def _saddle(pt) -> bool:
@@ -136,9 +136,8 @@ class Contact:
             guesses = self.known[near]
         P0, S0 = guesses
         prm = {**self.params, self.param: float(p)}
-        P = find_periodic_point(self.model, P0.x, P0.period, params=prm)
-        S = P if self.homoclinic else find_periodic_point(self.model, S0.x, S0.period,
-                                                          params=prm)
+        P = refind(self.model, P0, prm)
+        S = P if self.homoclinic else refind(self.model, S0, prm)
         if not (_saddle(P) and _saddle(S)):
             raise ManifoldError(f"a saddle is no longer a saddle at {self.param} = {p}")
         Wu = manifold(self.model, P, "unstable", arclength=self.arclength, tol=self.tol,
@@ -235,10 +234,12 @@ class Contact:
         return g
 
 
-def as_point(model, pt, params, period):
+def as_point(model, pt, params, period, t0=0.0):
     if isinstance(pt, PeriodicPoint):
         return pt
-    return find_periodic_point(model, pt, period, params=params)
+    if getattr(model, "is_map", False):
+        return find_periodic_point(model, pt, period, params=params)
+    return section_point(model, pt, period, params=params, t0=t0)
 
 
 def root(contact, a, b, tol, history):

@@ -1,0 +1,59 @@
+"""Crises of impacting flows through their stroboscopic section (issue 25).
+
+A forced two-state flow's stroboscopic map ``x(0) -> x(T)`` is a planar map: its saddles are
+found by Newton with the runs' monodromy matrices (``pwsdyn.manifolds._points.section_point``)
+and their manifolds grown by :func:`pwsdyn.manifold` from such a point, which is what
+:func:`pwsdyn.locate_crisis` and :func:`pwsdyn.locate_tangency` need of a flow.
+
+The crisis example is an impacting softening (Helmholtz) oscillator,
+``x'' + eps x' + x - x^2 = a sin(omega t)`` with a rigid stop at ``x = -s`` (``v -> -r v``):
+orbits that pass over the potential's hilltop at ``x = 1`` escape to infinity (the run fails
+in finite time). At ``omega = 1``, ``eps = 0.1``, ``r = 0.8``, ``s = 0.3`` the impacting
+period-1 orbit doubles at ``a ~ 0.121`` and the cascade ends in a chaotic attractor (one
+impact every period) at ``a ~ 0.1305``, which is destroyed at a boundary crisis near
+``a = 0.132``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import pwsdyn
+from pwsdyn.errors import ArgumentError
+from pwsdyn.manifolds._points import section_point
+
+HELMHOLTZ = {"name": "helmholtz-impact", "states": ["x", "v"], "forcing_period": "2*pi/omega",
+             "parameters": {"eps": 0.1, "omega": 1.0, "a": 0.1, "r": 0.8, "s": 0.3},
+             "modes": {"free": {"x": "v", "v": "-eps*v - x + x**2 + a*sin(omega*t)"}},
+             "events": [{"name": "impact", "kind": "impact", "surface": "x + s",
+                         "direction": -1, "reset": {"v": "-r*v"}}]}
+
+
+def test_a_saddle_on_the_section_is_the_periodic_orbits_point():
+    # the impact oscillator's flip saddle at omega = 2.8 (test_manifolds.py) found twice: by
+    # shooting (find_periodic_orbit) and by Newton on the stroboscopic map; same point and
+    # multipliers to the integration's accuracy (rtol 1e-10, a multiplier ~3 amplifying it)
+    P = {"omega": 2.8}
+    orbit = pwsdyn.find_periodic_orbit("impact-oscillator", [-0.29, -0.58], params=P)
+    pt = section_point("impact-oscillator", [-0.29, -0.58], params=P, t0=orbit.t0)
+    assert pt.converged and pt.section_period == pytest.approx(2 * np.pi / 2.8, rel=1e-15)
+    assert np.allclose(pt.x, orbit.x0, atol=1e-8)
+    assert np.allclose(np.sort(pt.multipliers.real), np.sort(np.real(orbit.multipliers)),
+                       atol=1e-6)
+    assert pt.pieces == ("impact:0",)
+    # the manifold grown from the point is the one grown from the orbit: the same saddle,
+    # multiplier and branches to the integration's accuracy (both use the same runs)
+    a = pwsdyn.manifold("impact-oscillator", orbit, arclength=0.2, tol=1e-6)
+    b = pwsdyn.manifold("impact-oscillator", pt, arclength=0.2, tol=1e-6)
+    assert b.section == "stroboscopic" and b.status == ("arclength", "arclength")
+    assert b.multiplier == pytest.approx(a.multiplier, rel=1e-6)
+    for pa, pb in zip(a.pieces, b.pieces):
+        # tolerance: the polylines are drawn with tol = 1e-6, the saddles agree to 1e-8
+        assert b.distance(pa).max() < 1e-5 and a.distance(pb).max() < 1e-5
+
+
+def test_flows_without_a_planar_section_are_refused():
+    with pytest.raises(ArgumentError, match="forcing period"):
+        pwsdyn.locate_crisis({k: v for k, v in HELMHOLTZ.items() if k != "forcing_period"},
+                             "a", (0.12, 0.14))
