@@ -22,6 +22,7 @@ import pytest
 import pwsdyn
 from pwsdyn.errors import ArgumentError
 from pwsdyn.manifolds._points import section_point
+from pwsdyn.manifolds._sections import StroboscopicSection
 
 HELMHOLTZ = {"name": "helmholtz-impact", "states": ["x", "v"], "forcing_period": "2*pi/omega",
              "parameters": {"eps": 0.1, "omega": 1.0, "a": 0.1, "r": 0.8, "s": 0.3},
@@ -57,3 +58,59 @@ def test_flows_without_a_planar_section_are_refused():
     with pytest.raises(ArgumentError, match="forcing period"):
         pwsdyn.locate_crisis({k: v for k, v in HELMHOLTZ.items() if k != "forcing_period"},
                              "a", (0.12, 0.14))
+
+
+
+def _escape_time(a, x, n, t0=0.0):
+    """Forcing periods before the orbit of ``x`` (at phase ``t0``) escapes over the hilltop
+    (the run fails, as the solution blows up in finite time, or ``|x| > 10``); ``None`` when
+    it stays ``n`` periods. Brute force: the integrator alone, none of the geometry."""
+    sec = StroboscopicSection(pwsdyn.load_model(HELMHOLTZ), {"a": a}, t0, 2 * np.pi)
+    x = np.array(x, dtype=float)
+    for k in range(n):
+        x, sig, _ = sec.evaluate(x)
+        if sig is None or abs(x[0]) > 10.0:
+            return k
+    return None
+
+
+def _attractor_points(a, t0, m):
+    """``m`` points of the chaotic attractor at ``a`` (phase ``t0``), 50 periods apart."""
+    sec = StroboscopicSection(pwsdyn.load_model(HELMHOLTZ), {"a": a}, 0.0, t0 or 2 * np.pi)
+    x = np.array([0.0, -0.55])
+    if t0:
+        x = sec.evaluate(x)[0]
+    sec = StroboscopicSection(pwsdyn.load_model(HELMHOLTZ), {"a": a}, t0, 2 * np.pi)
+    out = []
+    for k in range(1000 + 50 * m):
+        x = sec.evaluate(x)[0]
+        if k >= 1000 and k % 50 == 0:
+            out.append(x)
+    return np.array(out)
+
+
+#: The crisis bracketed by brute force (bisection on escape, below): 20 points of the
+#: attractor at a = 0.1315 all stay 20000 forcing periods at the lower end, and some of them
+#: leave within 20000 at the upper end.
+BRUTE = (0.131608984, 0.131609375)
+
+
+def test_the_chaotic_attractor_is_bounded_below_the_crisis_and_escapes_above():
+    # cheap brute force on both sides: ten points of the attractor at a = 0.1315 stay 3000
+    # periods there, and all of them leave within 3000 periods at a = 0.1318 (mean escape
+    # times there are a few hundred periods)
+    pts = _attractor_points(0.1315, 0.0, 10)
+    assert np.ptp(pts[:, 0]) > 0.3                   # spread over the chaotic band
+    assert all(_escape_time(0.1315, p, 3000) is None for p in pts)
+    times = [_escape_time(0.1318, p, 3000) for p in pts]
+    assert all(t is not None for t in times)
+
+
+@pytest.mark.slow
+def test_the_brute_force_bracket_of_the_crisis():
+    # the bisection's last bracket, repeated: no escape of 20 points in 20000 periods at its
+    # lower end, some escape at its upper end (the escape time diverges at the crisis, so the
+    # finite run puts the lower end slightly below the true value at worst)
+    pts = _attractor_points(0.1315, 0.0, 20)
+    assert all(_escape_time(BRUTE[0], p, 20000) is None for p in pts)
+    assert any(_escape_time(BRUTE[1], p, 20000) is not None for p in pts)

@@ -327,17 +327,18 @@ class _Contact:
 
 
 class _Context:
-    def __init__(self, model, param, params):
+    def __init__(self, model, param, params, t0: float = 0.0):
         self.model, self.param, self.params = model, param, dict(params or {})
         self.is_map = bool(getattr(model, "is_map", False))
+        self.t0 = t0
 
     def section(self, p):
         prm = {**self.params, self.param: float(p)}
         if self.is_map:
             return MapSection(self.model, prm, 1)
-        # a forced flow: its stroboscopic map at phase 0, over the forcing period at p
+        # a forced flow: its stroboscopic map at phase t0, over the forcing period at p
         T = self.model.forcing_period_value(prm)
-        return StroboscopicSection(self.model, prm, 0.0, float(T), 1)
+        return StroboscopicSection(self.model, prm, self.t0, float(T), 1)
 
 
 def _periodic(sec, x, period):
@@ -443,7 +444,8 @@ def _locate(ctx, bounded, p_hi, periods, tol, back: int = 4):
 def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float = 1e-12,
                   steps: int = 41, transient: int = 2000, iterations: int = 2000,
                   periods=(1, 2), escape: float = 1e8, jump: float = 1.5,
-                  arclength: float | None = None, manifold_tol: float = 1e-9) -> "Crisis":
+                  arclength: float | None = None, manifold_tol: float = 1e-9,
+                  seeds=None, t0: float = 0.0) -> "Crisis":
     """A boundary or interior crisis of a one-dimensional map's attractor, or a boundary crisis
     of a planar map's attractor, located from the geometry.
 
@@ -504,6 +506,15 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
         Planar maps: the manifolds' ``tol`` (the deviation of their chords from the curves),
         which bounds the error of a smooth contact; a polygonal one (a piecewise-linear map's)
         is exact.
+    seeds : sequence of states, optional
+        Planar maps: more starting points for the saddles' Newton, besides the attractor and
+        the grid around it (a boundary saddle far from the attractor, or one whose map
+        expands so strongly that Newton needs a close guess).
+    t0 : float
+        Flows: the phase of the stroboscopic section, ``x(t0) -> x(t0 + T)``. A manifold
+        that reaches an impact surface at the section's time ends there (its continuation
+        past the reset is not followed): choose a phase at which the attractor's contact
+        with the boundary saddle's stable manifold is away from the surfaces.
 
     Returns
     -------
@@ -541,10 +552,12 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
     jump = V.positive("jump", jump)
     if arclength is not None:
         arclength = V.positive("arclength", arclength)
-    ctx = _Context(model, param, params)
+    if seeds is not None:
+        seeds = np.array([V.state_vector(model, q).astype(float) for q in seeds])
+    ctx = _Context(model, param, params, float(t0))
     if model.n_states == 2:
         return _locate_planar(ctx, a, b, x, tol, steps, transient, iterations, periods,
-                              escape, arclength, manifold_tol)
+                              escape, arclength, manifold_tol, seeds=seeds)
     values = np.linspace(a, b, steps)
     bounded = []        # (value, samples) of the sweep so far
     for p in values:
@@ -600,14 +613,15 @@ def _orbit(sec: MapSection, x, transient: int, iterations: int, escape: float):
     return out
 
 
-def _saddles(sec, samples, periods) -> list:
+def _saddles(sec, samples, periods, extra=None) -> list:
     """The saddles of the given periods found by Newton from points of the attractor and of a
     grid over its bounding box widened by its size on every side, each cycle once."""
     lo, hi = samples.min(axis=0), samples.max(axis=0)
     w = np.maximum(hi - lo, 1e-9 * (1 + np.abs(hi)))
     g = [np.linspace(l - wi, h + wi, 7) for l, h, wi in zip(lo, hi, w)]
     seeds = np.vstack([samples[:: max(1, len(samples) // 20)],
-                       np.array(np.meshgrid(*g)).reshape(2, -1).T])
+                       np.array(np.meshgrid(*g)).reshape(2, -1).T]
+                      + ([] if extra is None else [extra]))
     found: list = []
     for period in periods:
         for s in seeds:
@@ -634,7 +648,7 @@ def _is_saddle(pt) -> bool:
 
 
 def _locate_planar(ctx, a, b, x, tol, steps, transient, iterations, periods, escape,
-                   arclength, manifold_tol, back: int = 4):
+                   arclength, manifold_tol, back: int = 4, seeds=None):
     """A planar map's boundary crisis: the sweep, then :func:`_first_contact`."""
     values = np.linspace(a, b, steps)
     bounded = []
@@ -656,7 +670,7 @@ def _locate_planar(ctx, a, b, x, tol, steps, transient, iterations, periods, esc
     best, previous = None, None
     for p_lo, samples in bounded[::-1][:back + 1]:
         found = _first_contact(ctx, p_lo, p_hi, samples, tol, periods, arclength,
-                               manifold_tol)
+                               manifold_tol, seeds)
         if found is None:
             if best is not None:
                 break
@@ -674,14 +688,15 @@ def _locate_planar(ctx, a, b, x, tol, steps, transient, iterations, periods, esc
     return _result(ctx.model, ctx.param, contact, r, "boundary", (p_lo, p_hi), history)
 
 
-def _first_contact(ctx, p_lo, p_hi, samples, tol, periods, arclength, manifold_tol):
+def _first_contact(ctx, p_lo, p_hi, samples, tol, periods, arclength, manifold_tol,
+                   seeds=None):
     """The contact root between ``p_lo`` and ``p_hi`` nearest ``p_lo`` over the pairs
     ``(P, S)`` of saddles, ``S`` off the attractor (on its basin's boundary) and ``P`` on it
     or ``S`` itself; ``(root, contact, history)`` or ``None``."""
     sec = ctx.section(p_lo)
     diameter = float(np.linalg.norm(samples.max(axis=0) - samples.min(axis=0)))
     length = arclength if arclength is not None else 4.0 * max(diameter, 1e-9)
-    saddles = _saddles(sec, samples, periods)
+    saddles = _saddles(sec, samples, periods, seeds)
     # the recorded orbit's spacing: a saddle on the attractor is about as close to it as its
     # points are to each other, one on the basin's boundary is farther by far
     tree = cKDTree(samples)
