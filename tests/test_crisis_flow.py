@@ -114,3 +114,17 @@ def test_the_brute_force_bracket_of_the_crisis():
     pts = _attractor_points(0.1315, 0.0, 20)
     assert all(_escape_time(BRUTE[0], p, 20000) is None for p in pts)
     assert any(_escape_time(BRUTE[1], p, 20000) is not None for p in pts)
+
+
+def test_a_jump_of_the_contact_function_is_not_a_root():
+    # Brent's method on g(p) = p - 0.3 (a zero) and on a step at 0.3 (a jump of the contact
+    # function, as when the ball's content changes at once): both "converge", only the first
+    # is a tangency
+    from scipy.optimize import brentq
+
+    from pwsdyn.manifolds._tangency import _jumps
+
+    for f, jump in ((lambda p: 0.3 - p, False), (lambda p: 0.04 if p < 0.3 else -0.05, True)):
+        history = [(0.0, f(0.0)), (1.0, f(1.0))]
+        brentq(lambda p: history.append((p, f(p))) or f(p), 0.0, 1.0, xtol=1e-12)
+        assert _jumps(history) is jump

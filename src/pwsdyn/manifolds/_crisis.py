@@ -790,7 +790,9 @@ def locate_tangency(model, param: str, span, unstable, stable=None, *, params=No
     Raises
     ------
     ManifoldError
-        A saddle is lost, or the contact does not change sign over ``span``.
+        A saddle is lost, or the contact does not change sign over ``span``, or changes it
+        only by a jump (Brent's method closing in on a discontinuity, not a tangency: the
+        secant slope of its last bracket a thousand times the whole span's).
     """
     model = as_model(model, caller="locate_tangency()")
     _check_flow(model, "locate_tangency()")
@@ -815,6 +817,7 @@ def locate_tangency(model, param: str, span, unstable, stable=None, *, params=No
     root = contact_root(contact, a, b, tol, history)
     if root is None:
         raise ManifoldError(f"locate_tangency(): the manifolds' contact does not change sign "
-                            f"between {param} = {a} and {b}")
+                            f"between {param} = {a} and {b}, or only by a jump (no "
+                            "tangency there)")
     return _result(model, param, contact, root, "tangency", (a, b), history)
 

@@ -259,6 +259,32 @@ def root(contact, a, b, tol, history):
     if gb > 0:
         return None
     try:
-        return brentq(g, a, b, xtol=tol)
+        r = brentq(g, a, b, xtol=tol)
     except (ValueError, RuntimeError):
         return None
+    return None if _jumps(history) else r
+
+
+def _jumps(history, factor: float = 1e3) -> bool:
+    """Whether Brent's method closed in on a jump of the contact function rather than a
+    zero: the secant slope over its last sign change exceeds the one over the whole bracket
+    (its first two evaluations) ``factor`` times. A contact moves with the parameter at a
+    finite rate, so the two slopes are alike at a zero; they part at a jump, where the side
+    or the ball's content changes at once (a manifold cut by an impact at the section's
+    time, its continuation not grown), and no tangency is there."""
+    if len(history) < 3:
+        return False
+    (q0, g0), (q1, g1) = history[0], history[1]
+    if q0 == q1:
+        return False
+    outer = abs(g1 - g0) / abs(q1 - q0)
+    pos = [(q, v) for q, v in history if v > 0]
+    neg = [(q, v) for q, v in history if v <= 0]
+    if not pos or not neg:
+        return False
+    # the last sign change: the positive and non-positive evaluations nearest each other
+    qp, vp = min(pos, key=lambda t: min(abs(t[0] - q) for q, _ in neg))
+    qn, vn = min(neg, key=lambda t: abs(t[0] - qp))
+    if qp == qn:
+        return False
+    return abs(vp - vn) / abs(qp - qn) > factor * outer
