@@ -128,3 +128,54 @@ def test_a_jump_of_the_contact_function_is_not_a_root():
         history = [(0.0, f(0.0)), (1.0, f(1.0))]
         brentq(lambda p: history.append((p, f(p))) or f(p), 0.0, 1.0, xtol=1e-12)
         assert _jumps(history) is jump
+
+
+#: The heteroclinic tangency of the period-1 flip saddle's unstable manifold (the attractor)
+#: with the stable manifold of a period-3 saddle at the attractor's tip (multipliers 11.0 and
+#: 0.0036), located by locate_tangency with manifolds drawn to tol 1e-7.
+A_GEOM = 0.13161156641
+
+
+@pytest.mark.slow
+def test_the_flows_crisis_located_from_the_geometry_and_by_brute_force():
+    # ~90 s: the manifolds of the stroboscopic map grown at every parameter Brent evaluates
+    m = pwsdyn.load_model(HELMHOLTZ)
+    P = section_point(m, [0.13595082, -0.57193283], 1, params={"a": 0.1315})
+    S = section_point(m, [0.37701732, -0.5001123], 3, params={"a": 0.1315})
+    assert P.multipliers[0].real < -1 and S.multipliers[0].real > 1 > abs(S.multipliers[1])
+    c = pwsdyn.locate_tangency(m, "a", (0.1315, 0.1318), P, S, arclength=1.0,
+                               manifold_tol=1e-7, tol=1e-10)
+    # tolerance: a second run with manifold_tol 1e-6 gave 0.13161154809 (1.8e-8 lower); the
+    # contact moves at ~23 per unit of a, so tol 1e-7 bounds the error by ~1e-8
+    assert abs(c.value - A_GEOM) < 5e-8
+    assert c.saddle.period == 3 and c.unstable.period == 1
+    # the contact function went through zero, not a jump: its last values are tiny
+    assert min(abs(g) for _, g in c.history[-3:]) < 1e-8
+    # brute force on both sides (the same 20 points of the attractor at a = 0.1315): all stay
+    # 20000 periods at the brute-force bracket's lower end; all leave at A_GEOM + 4e-5 (after
+    # a few hundred periods) and many already at A_GEOM + 1e-6 (12 and 16 of 20 in two runs
+    # whose orbits differ by rounding: chaotic escapes are a statistic, hence the margin)
+    pts = _attractor_points(0.1315, 0.0, 20)
+    assert all(_escape_time(BRUTE[0], p, 20000) is None for p in pts)
+    assert all(_escape_time(A_GEOM + 4e-5, p, 20000) is not None for p in pts)
+    left = [_escape_time(A_GEOM + 1e-6, p, 20000) for p in pts]
+    assert sum(t is not None for t in left) >= 5
+    # the geometry's value is 2.2e-6 above the first escapes: a few points leave (after
+    # thousands of periods) between BRUTE[1] and A_GEOM, through a contact the manifolds
+    # grown here do not show (see the guide); the two agree to 3e-6
+    assert 0 < A_GEOM - BRUTE[1] < 3e-6
+
+
+@pytest.mark.slow
+def test_locate_crisis_follows_the_flows_attractor_to_the_same_tangency():
+    # ~3-5 min: the whole pipeline on the stroboscopic section (phase 0): the sweep brackets
+    # the escape, the saddles of periods 1 and 3 are found around the attractor (none given),
+    # and the first contact is the tangency above, at manifold_tol 1e-6 (locate_tangency at
+    # that tolerance gave 0.13161154808551)
+    c = pwsdyn.locate_crisis(HELMHOLTZ, "a", (0.1314, 0.1320), x0=[0.0, -0.55], periods=(1, 3),
+                             steps=7, arclength=1.0, manifold_tol=1e-6, tol=1e-9)
+    assert c.kind == "boundary" and c.bracket[1] == pytest.approx(0.1317)
+    assert c.bracket[0] <= 0.1316
+    assert c.saddle.period == 3 and c.unstable.period == 1
+    # tolerance: the root's tol 1e-9 and the manifolds' 1e-6 (1.8e-8 from the 1e-7 value)
+    assert abs(c.value - A_GEOM) < 5e-8
