@@ -179,3 +179,44 @@ def test_locate_crisis_follows_the_flows_attractor_to_the_same_tangency():
     assert c.saddle.period == 3 and c.unstable.period == 1
     # tolerance: the root's tol 1e-9 and the manifolds' 1e-6 (1.8e-8 from the 1e-7 value)
     assert abs(c.value - A_GEOM) < 5e-8
+
+
+HELMHOLTZ_TOML = """
+name = "helmholtz-impact"
+states = ["x", "v"]
+forcing_period = "2*pi/omega"
+[parameters]
+eps = 0.1
+omega = 1.0
+a = 0.1
+r = 0.8
+s = 0.3
+[modes.free]
+x = "v"
+v = "-eps*v - x + x**2 + a*sin(omega*t)"
+[[events]]
+name = "impact"
+kind = "impact"
+surface = "x + s"
+direction = -1
+reset = { v = "-r*v" }
+"""
+
+
+def test_pwsdyn_crisis_takes_a_forced_flow(tmp_path):
+    # the command runs a flow through its section: here the attractor (period one, well
+    # below the cascade) stays bounded over the span, which is a clean "no crisis" error;
+    # a bad --seed is refused
+    from click.testing import CliRunner
+
+    from pwsdyn.cli import main
+
+    path = tmp_path / "helmholtz.toml"
+    path.write_text(HELMHOLTZ_TOML)
+    base = ["crisis", str(path), "--param", "a", "--from", "0.1", "--to", "0.101",
+            "--x0", "0,-0.55", "--steps", "2", "--t0", "1.0"]
+    res = CliRunner().invoke(main, base, catch_exceptions=False)
+    assert res.exit_code == 1 and "no crisis" in res.output, res.output
+    assert "Traceback" not in res.output
+    res = CliRunner().invoke(main, base + ["--seed", "1,x"], catch_exceptions=False)
+    assert res.exit_code == 2 and "--seed" in res.output
