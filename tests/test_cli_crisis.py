@@ -83,7 +83,10 @@ def test_a_one_state_maps_crisis_without_a_figure(tmp_path):
     (["sqrt-map", "--param", "nope", "--from", 0.5, "--to", 0.1], 2, "unknown parameter"),
     (["sqrt-map", "--param", "mu", "--from", 0.5, "--to", 0.1, "--steps", 1], 2, "at least 2"),
     (["sqrt-map", "--param", "mu", "--from", 0.5, "--to", 0.1, "--tol", -1], 2, "positive"),
-    (["impact-oscillator", "--param", "omega", "--from", 2, "--to", 3], 1, "is a flow"),
+    # a flow is taken through its stroboscopic section: an unforced three-state one has none
+    (["relay-feedback", "--param", "zeta", "--from", 0.05, "--to", 0.1], 1, "is a flow"),
+    (["sqrt-map", "--param", "mu", "--from", 0.5, "--to", 0.1, "--seed", "1,2"], 2,
+     "expected 1 values"),
     (["sqrt-map", "--param", "mu", "--from", 0.5, "--to", 0.4, "-p", "lam=2", "--steps", 3],
      1, "no crisis"),
 ])

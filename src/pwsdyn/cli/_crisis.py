@@ -1,4 +1,5 @@
-"""``pwsdyn crisis``: a crisis of a map model's attractor located from the geometry
+"""``pwsdyn crisis``: a crisis of a map model's (or a forced flow's, through its stroboscopic
+section) attractor located from the geometry
 (:func:`pwsdyn.locate_crisis`), with a figure of the attractor at the located value, the
 boundary saddle's stable manifold and the contact point (:func:`pwsdyn.plot.plot_crisis`)."""
 
@@ -26,12 +27,20 @@ from ._output import _echo, _fail, _fmt, _write_outputs
 @click.option("--arclength", type=float, default=None,
               help="Planar maps: length of each branch of the manifolds (default four times "
                    "the attractor's diameter).")
+@click.option("--t0", "phase", type=float, default=0.0, show_default=True,
+              help="Flows: the phase of the stroboscopic section x(t0) -> x(t0 + T).")
+@click.option("--seed", "seeds", multiple=True, metavar="VALUES",
+              help="Planar maps and flows: a state (in state order, 1,0) from which Newton "
+                   "also looks for a saddle, as for a boundary saddle far from the attractor; "
+                   "may be repeated.")
 @output_options("Write the crisis (pwsdyn.Crisis.save) to this NetCDF file.",
                 "Write a figure of the attractor at the located value, the saddle's stable "
                 "manifold and the contact point (PNG; PDF, SVG... by suffix).")
-def crisis_cmd(model, params, sets, start, stop, x0, tol, steps, arclength, out, plot, force):
+def crisis_cmd(model, params, sets, start, stop, x0, tol, steps, arclength, phase, seeds, out,
+               plot, force):
     """Locate a boundary (or, for a one-state map, interior) crisis of the attractor of the map
-    MODEL reached from --x0, in the parameter --param NAME between --from and --to.
+    MODEL reached from --x0, in the parameter --param NAME between --from and --to. A forced
+    two-state flow is taken through its stroboscopic section at phase --t0 (a planar map).
 
     The attractor is followed through --steps values; where its orbit leaves (or, one-state
     maps, its extent jumps) the value is located from the geometry as the root of a contact
@@ -59,8 +68,20 @@ def crisis_cmd(model, params, sets, start, stop, x0, tol, steps, arclength, out,
     run = prepare(model, params, sets, x0, force=force, named="varied",
                   outputs=[("--out", out, "data"), ("--plot", plot, "figure")])
     mdl, param = run.model, run.named
-    if not getattr(mdl, "is_map", False):
-        _fail(f"{mdl.name!r} is a flow: crises are located for map models so far")
+    is_map = bool(getattr(mdl, "is_map", False))
+    if not is_map and (mdl.forcing_period is None or mdl.n_states != 2):
+        _fail(f"{mdl.name!r} is a flow: its crises are located through its stroboscopic "
+              "section, which needs a forcing period and two states")
+    seed_states = []
+    for text in seeds:
+        try:
+            seed_states.append([float(v) for v in text.split(",")])
+        except ValueError:
+            raise click.BadParameter(f"expected numbers in state order, got {text!r}",
+                                     param_hint="--seed") from None
+        if len(seed_states[-1]) != mdl.n_states:
+            raise click.BadParameter(f"expected {mdl.n_states} values, got {text!r}",
+                                     param_hint="--seed")
     fixed = {k: v for k, v in run.params.items() if k != param}
     guess = run.x0 if run.x0 is not None else mdl.defaults.get("x0")
     if guess is None:
@@ -68,7 +89,8 @@ def crisis_cmd(model, params, sets, start, stop, x0, tol, steps, arclength, out,
                                  "the attractor's basin", param_hint="--x0")
     with reported():
         c = pwsdyn.locate_crisis(mdl, param, (start, stop), x0=guess, params=fixed, tol=tol,
-                                 steps=steps, arclength=arclength)
+                                 steps=steps, arclength=arclength,
+                                 seeds=seed_states or None, t0=phase)
     _echo(f"model       {mdl.name} (hash {mdl.hash})")
     _echo(f"crisis      {c.kind} at {param} = {c.value!r}")
     _echo(f"bracket     {param} in [{_fmt(c.bracket[0])}, {_fmt(c.bracket[1])}] (the sweep)")
@@ -86,6 +108,10 @@ def crisis_cmd(model, params, sets, start, stop, x0, tol, steps, arclength, out,
         from ..model.iteration import iterate
         from ..plot import plot_crisis
 
+        if not is_map:
+            # a flow's attractor is drawn as the unstable manifold whose closure it is
+            plot_crisis(c, plot, overwrite=force)
+            return
         xs, _ = iterate(mdl, guess, 4000, params={**fixed, param: c.value}, transient=1000)
         plot_crisis(c, plot, attractor=xs, overwrite=force)
 

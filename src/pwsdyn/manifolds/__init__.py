@@ -8,8 +8,9 @@ unstable manifolds.
   map jumps and resolved where it folds or stretches (a border, grazing);
 * :func:`pwsdyn.locate_crisis` and :class:`pwsdyn.Crisis`: a boundary or interior crisis of a
   1-D map's attractor, located where its edge touches a repelling point's stable set, and a
-  boundary crisis of a planar map's attractor, located where a saddle's unstable manifold
-  first touches a boundary saddle's stable manifold;
+  boundary crisis of a planar map's attractor (a forced two-state flow's through its
+  stroboscopic section), located where a saddle's unstable manifold first touches a boundary
+  saddle's stable manifold;
 * :func:`pwsdyn.locate_tangency`: a homoclinic or heteroclinic tangency of two saddles'
   manifolds of a planar map, in one parameter;
 * :class:`pwsdyn.ManifoldError`.

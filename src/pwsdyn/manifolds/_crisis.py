@@ -40,8 +40,8 @@ from scipy.spatial import cKDTree
 from .. import _validate as V
 from ..errors import ArgumentError
 from ..model.spec import as_model
-from ._points import ManifoldError, PeriodicPoint, find_periodic_point
-from ._sections import MapSection
+from ._points import ManifoldError, PeriodicPoint, find_periodic_point, section_point
+from ._sections import MapSection, StroboscopicSection
 from ._tangency import Contact, as_point, root as contact_root
 
 if TYPE_CHECKING:
@@ -185,6 +185,19 @@ class Crisis:
         return save_dataset(self.to_dataset(), path, overwrite=overwrite)
 
 
+def _check_flow(model, caller):
+    """A flow is taken through its stroboscopic section: it must be forced (a section map)
+    with two states (a planar map)."""
+    if getattr(model, "is_map", False):
+        return
+    if model.forcing_period is None or model.n_states != 2:
+        raise ArgumentError(f"{caller}: a flow is taken through its stroboscopic section, a "
+                            "planar map: it needs a forcing period and two states; "
+                            f"{model.name!r} has {model.n_states} states and "
+                            f"{'a' if model.forcing_period is not None else 'no'} forcing "
+                            "period")
+
+
 def _attractor(sec: MapSection, x, transient: int, iterations: int, escape: float):
     """Iterate; the recorded samples, or ``None`` when the orbit leaves (no piece applies,
     not finite, beyond ``escape``)."""
@@ -314,11 +327,26 @@ class _Contact:
 
 
 class _Context:
-    def __init__(self, model, param, params):
+    def __init__(self, model, param, params, t0: float = 0.0):
         self.model, self.param, self.params = model, param, dict(params or {})
+        self.is_map = bool(getattr(model, "is_map", False))
+        self.t0 = t0
 
     def section(self, p):
-        return MapSection(self.model, {**self.params, self.param: float(p)}, 1)
+        prm = {**self.params, self.param: float(p)}
+        if self.is_map:
+            return MapSection(self.model, prm, 1)
+        # a forced flow: its stroboscopic map at phase t0, over the forcing period at p
+        T = self.model.forcing_period_value(prm)
+        return StroboscopicSection(self.model, prm, self.t0, float(T), 1)
+
+
+def _periodic(sec, x, period):
+    """A periodic point of the section's map from ``x``: a map model's, or a point of a flow's
+    stroboscopic map at the section's phase."""
+    if sec.is_map:
+        return find_periodic_point(sec.model, x, period, params=sec.params)
+    return section_point(sec.model, x, period, params=sec.params, t0=sec.t0)
 
 
 def _candidates(ctx, p, samples, periods, seeds) -> list:
@@ -416,7 +444,8 @@ def _locate(ctx, bounded, p_hi, periods, tol, back: int = 4):
 def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float = 1e-12,
                   steps: int = 41, transient: int = 2000, iterations: int = 2000,
                   periods=(1, 2), escape: float = 1e8, jump: float = 1.5,
-                  arclength: float | None = None, manifold_tol: float = 1e-9) -> "Crisis":
+                  arclength: float | None = None, manifold_tol: float = 1e-9,
+                  seeds=None, t0: float = 0.0) -> "Crisis":
     """A boundary or interior crisis of a one-dimensional map's attractor, or a boundary crisis
     of a planar map's attractor, located from the geometry.
 
@@ -442,8 +471,11 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
 
     Parameters
     ----------
-    model : MapModel, str, path or dict
-        A one- or two-dimensional map model (``kind = "map"``).
+    model : MapModel, Model, str, path or dict
+        A one- or two-dimensional map model (``kind = "map"``), or a forced two-state flow,
+        taken through its stroboscopic section ``x(0) -> x(T)`` (``T`` its forcing period at
+        each parameter value): a planar map whose saddles are found by Newton with the runs'
+        monodromy matrices and whose manifolds :func:`pwsdyn.manifold` grows.
     param : str
         The parameter varied.
     span : (float, float)
@@ -474,6 +506,15 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
         Planar maps: the manifolds' ``tol`` (the deviation of their chords from the curves),
         which bounds the error of a smooth contact; a polygonal one (a piecewise-linear map's)
         is exact.
+    seeds : sequence of states, optional
+        Planar maps: more starting points for the saddles' Newton, besides the attractor and
+        the grid around it (a boundary saddle far from the attractor, or one whose map
+        expands so strongly that Newton needs a close guess).
+    t0 : float
+        Flows: the phase of the stroboscopic section, ``x(t0) -> x(t0 + T)``. A manifold
+        that reaches an impact surface at the section's time ends there (its continuation
+        past the reset is not followed): choose a phase at which the attractor's contact
+        with the boundary saddle's stable manifold is away from the surfaces.
 
     Returns
     -------
@@ -493,10 +534,11 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
     >>> round(float(c.point[0]), 9)     # the edge mu - sqrt(mu) meets mu / (1 - lam)
     -0.25
     """
-    model = as_model(model, kind="map", caller="locate_crisis()")
+    model = as_model(model, caller="locate_crisis()")
     if model.n_states > 2:
         raise ArgumentError("locate_crisis(): one- and two-dimensional maps are handled so "
                             f"far, {model.name!r} has {model.n_states} states")
+    _check_flow(model, "locate_crisis()")
     if param not in model.parameters:
         raise ArgumentError(f"locate_crisis(): {model.name!r} has no parameter {param!r}")
     tol = V.positive("tol", tol)
@@ -510,10 +552,12 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
     jump = V.positive("jump", jump)
     if arclength is not None:
         arclength = V.positive("arclength", arclength)
-    ctx = _Context(model, param, params)
+    if seeds is not None:
+        seeds = np.array([V.state_vector(model, q).astype(float) for q in seeds])
+    ctx = _Context(model, param, params, float(t0))
     if model.n_states == 2:
         return _locate_planar(ctx, a, b, x, tol, steps, transient, iterations, periods,
-                              escape, arclength, manifold_tol)
+                              escape, arclength, manifold_tol, seeds=seeds)
     values = np.linspace(a, b, steps)
     bounded = []        # (value, samples) of the sweep so far
     for p in values:
@@ -569,19 +613,20 @@ def _orbit(sec: MapSection, x, transient: int, iterations: int, escape: float):
     return out
 
 
-def _saddles(sec, samples, periods) -> list:
+def _saddles(sec, samples, periods, extra=None) -> list:
     """The saddles of the given periods found by Newton from points of the attractor and of a
     grid over its bounding box widened by its size on every side, each cycle once."""
     lo, hi = samples.min(axis=0), samples.max(axis=0)
     w = np.maximum(hi - lo, 1e-9 * (1 + np.abs(hi)))
     g = [np.linspace(l - wi, h + wi, 7) for l, h, wi in zip(lo, hi, w)]
     seeds = np.vstack([samples[:: max(1, len(samples) // 20)],
-                       np.array(np.meshgrid(*g)).reshape(2, -1).T])
+                       np.array(np.meshgrid(*g)).reshape(2, -1).T]
+                      + ([] if extra is None else [extra]))
     found: list = []
     for period in periods:
         for s in seeds:
             try:
-                pt = find_periodic_point(sec.model, s, period, params=sec.params)
+                pt = _periodic(sec, s, period)
             except ManifoldError:
                 continue
             if not _is_saddle(pt):
@@ -603,7 +648,7 @@ def _is_saddle(pt) -> bool:
 
 
 def _locate_planar(ctx, a, b, x, tol, steps, transient, iterations, periods, escape,
-                   arclength, manifold_tol, back: int = 4):
+                   arclength, manifold_tol, back: int = 4, seeds=None):
     """A planar map's boundary crisis: the sweep, then :func:`_first_contact`."""
     values = np.linspace(a, b, steps)
     bounded = []
@@ -625,7 +670,7 @@ def _locate_planar(ctx, a, b, x, tol, steps, transient, iterations, periods, esc
     best, previous = None, None
     for p_lo, samples in bounded[::-1][:back + 1]:
         found = _first_contact(ctx, p_lo, p_hi, samples, tol, periods, arclength,
-                               manifold_tol)
+                               manifold_tol, seeds)
         if found is None:
             if best is not None:
                 break
@@ -643,14 +688,15 @@ def _locate_planar(ctx, a, b, x, tol, steps, transient, iterations, periods, esc
     return _result(ctx.model, ctx.param, contact, r, "boundary", (p_lo, p_hi), history)
 
 
-def _first_contact(ctx, p_lo, p_hi, samples, tol, periods, arclength, manifold_tol):
+def _first_contact(ctx, p_lo, p_hi, samples, tol, periods, arclength, manifold_tol,
+                   seeds=None):
     """The contact root between ``p_lo`` and ``p_hi`` nearest ``p_lo`` over the pairs
     ``(P, S)`` of saddles, ``S`` off the attractor (on its basin's boundary) and ``P`` on it
     or ``S`` itself; ``(root, contact, history)`` or ``None``."""
     sec = ctx.section(p_lo)
     diameter = float(np.linalg.norm(samples.max(axis=0) - samples.min(axis=0)))
     length = arclength if arclength is not None else 4.0 * max(diameter, 1e-9)
-    saddles = _saddles(sec, samples, periods)
+    saddles = _saddles(sec, samples, periods, seeds)
     # the recorded orbit's spacing: a saddle on the attractor is about as close to it as its
     # points are to each other, one on the basin's boundary is farther by far
     tree = cKDTree(samples)
@@ -701,8 +747,10 @@ def locate_tangency(model, param: str, span, unstable, stable=None, *, params=No
 
     Parameters
     ----------
-    model : MapModel, str, path or dict
-        A two-dimensional map model (``kind = "map"``).
+    model : MapModel, Model, str, path or dict
+        A two-dimensional map model (``kind = "map"``), or a forced two-state flow through
+        its stroboscopic section (saddles given as states are found on the section at phase
+        0; a saddle given as a :class:`~pwsdyn.PeriodicPoint` keeps its own phase).
     param : str
         The parameter varied.
     span : (float, float)
@@ -742,9 +790,12 @@ def locate_tangency(model, param: str, span, unstable, stable=None, *, params=No
     Raises
     ------
     ManifoldError
-        A saddle is lost, or the contact does not change sign over ``span``.
+        A saddle is lost, or the contact does not change sign over ``span``, or changes it
+        only by a jump (Brent's method closing in on a discontinuity, not a tangency: the
+        secant slope of its last bracket a thousand times the whole span's).
     """
-    model = as_model(model, kind="map", caller="locate_tangency()")
+    model = as_model(model, caller="locate_tangency()")
+    _check_flow(model, "locate_tangency()")
     if model.n_states != 2:
         raise ArgumentError("locate_tangency(): the manifolds must be curves that cut the "
                             f"plane: a two-dimensional map, {model.name!r} has "
@@ -766,6 +817,7 @@ def locate_tangency(model, param: str, span, unstable, stable=None, *, params=No
     root = contact_root(contact, a, b, tol, history)
     if root is None:
         raise ManifoldError(f"locate_tangency(): the manifolds' contact does not change sign "
-                            f"between {param} = {a} and {b}")
+                            f"between {param} = {a} and {b}, or only by a jump (no "
+                            "tangency there)")
     return _result(model, param, contact, root, "tangency", (a, b), history)
 

@@ -13,7 +13,7 @@ from ..errors import ArgumentError
 from ..model.spec import as_model
 from ..orbits import PeriodicOrbit
 from ._grow import grow, preimage, preimage_guarded
-from ._points import ManifoldError, PeriodicPoint, find_periodic_point
+from ._points import ManifoldError, PeriodicPoint, find_periodic_point, refind
 from ._sections import MapSection, StroboscopicSection, check_section
 
 if TYPE_CHECKING:
@@ -284,7 +284,9 @@ def manifold(model, point, kind: str = "unstable", *, params=None, section=None,
         The saddle: a :class:`~pwsdyn.PeriodicPoint` of a map model, a state of a map
         model's fixed or period-``period`` point (refined by
         :func:`~pwsdyn.find_periodic_point`), or a forced flow's
-        :class:`~pwsdyn.PeriodicOrbit` (its stroboscopic Poincaré map at the orbit's ``t0``).
+        :class:`~pwsdyn.PeriodicOrbit` (its stroboscopic Poincaré map at the orbit's ``t0``)
+        or its :class:`~pwsdyn.PeriodicPoint` on that section (one with ``section_period``,
+        as the saddles of :func:`pwsdyn.locate_crisis` of a flow).
     kind : {'unstable', 'stable'}
     params : dict, optional
         Parameter values (default: the point's, else the model's). A map's periodic point is
@@ -349,6 +351,21 @@ def manifold(model, point, kind: str = "unstable", *, params=None, section=None,
         _, _, J = sec.evaluate(p, jacobian=True)
         per, sec_name = int(getattr(point, "periods", 1) or 1), "stroboscopic"
         t0, section_period = float(point.t0), float(point.period)
+    elif isinstance(point, PeriodicPoint) and point.section_period is not None:
+        # a forced flow's point on its stroboscopic section (pwsdyn.locate_crisis of a flow)
+        model = as_model(model, kind="flow", caller="manifold()")
+        check_section(section, False)
+        if point.model.hash != model.hash:
+            raise ArgumentError("manifold(): the periodic point is of another model "
+                                f"({point.model.name!r})")
+        if params is not None and {**point.params, **params} != dict(point.params):
+            point = refind(model, point, {**point.params, **params})
+        params = dict(point.params)
+        t0, T = float(point.t0), float(point.section_period)
+        sec = StroboscopicSection(model, params, t0, point.period * T, 1, options)
+        p = np.array(point.x, dtype=float)
+        J = point.jacobian
+        per, sec_name, section_period = point.period, "stroboscopic", point.period * T
     else:
         model = as_model(model, kind="map", caller="manifold()")
         check_section(section, True)

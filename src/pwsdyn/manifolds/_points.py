@@ -16,7 +16,7 @@ import numpy as np
 from .. import _validate as V
 from ..errors import PwsdynError
 from ..model.spec import as_model
-from ._sections import MapSection
+from ._sections import MapSection, StroboscopicSection
 
 
 class ManifoldError(PwsdynError, RuntimeError):
@@ -49,6 +49,10 @@ class PeriodicPoint:
     history : list of float
         Newton residual ``max|F^k(x) - x| / (1 + max|x|)`` of each iterate, the last one last.
     converged : bool
+    t0, section_period : float or None
+        A forced flow's point on its stroboscopic section: the section's phase and the
+        forcing period ``T`` (``F`` is then ``x(t0) -> x(t0 + T)`` and the pieces are the
+        events of each period); ``None`` for a map model.
     """
 
     model: object
@@ -61,6 +65,8 @@ class PeriodicPoint:
     multipliers: np.ndarray
     history: list = field(default_factory=list)
     converged: bool = True
+    t0: float | None = None
+    section_period: float | None = None
 
     @property
     def saddle(self) -> bool:
@@ -178,3 +184,79 @@ def _point(model, sec, x, period, history, converged) -> PeriodicPoint:
                          cycle=cycle, pieces=tuple(pieces), jacobian=J,
                          multipliers=_sorted_eigs(J) if np.all(np.isfinite(J))
                          else np.full(len(x), np.nan), history=history, converged=converged)
+
+
+def section_point(model, x0, period: int = 1, *, params=None, t0: float = 0.0,
+                  tol: float | None = None, max_iter: int = 30,
+                  options=None) -> PeriodicPoint:
+    """A fixed or period-``period`` point of a forced flow's stroboscopic map
+    ``x(t0) -> x(t0 + T)`` (``T`` the forcing period at ``params``), by Newton on
+    ``F^k(x) - x`` with the monodromy matrix of the runs (their saltation matrices included)
+    as ``D F^k``: the planar map whose saddles and manifolds a flow's crisis is made of.
+
+    ``tol`` defaults to ten times the integration tolerance (the residual can go no lower
+    than the runs' error). The pieces are the events of each period, as
+    ``"kind:index"`` names joined by ``","`` (``""`` for a period without events).
+    """
+    model = as_model(model, kind="flow", caller="section_point()")
+    period = V.integer("period", period, lo=1)
+    ctx = StroboscopicSection(model, params, t0, 1.0, 1, options)
+    T = ctx.ctx.forcing_period
+    if T is None:
+        raise ManifoldError(f"{model.name!r} has no forcing period: no stroboscopic section")
+    one = StroboscopicSection(model, ctx.params, t0, float(T), 1, options)
+    sec = one.iterate(period)
+    if tol is None:
+        tol = 10.0 * max(one.opts["rtol"], one.opts["atol"])
+    x = V.state_vector(model, x0).astype(float)
+    history: list = []
+    reason = "the iterations ran out"
+    for _ in range(max_iter + 1):
+        y, sig, J = sec.evaluate(x, jacobian=True)
+        if sig is None:
+            reason = "the run failed or left the admissible side of an impact surface"
+            break
+        r = y - x
+        res = float(np.max(np.abs(r))) / (1.0 + float(np.max(np.abs(x))))
+        history.append(res)
+        if res <= tol:
+            break
+        if len(history) > max_iter:
+            break
+        try:
+            dx = np.linalg.solve(J - np.eye(len(x)), -r)
+        except np.linalg.LinAlgError:
+            reason = "D F^k - I is singular at the iterate (a multiplier 1)"
+            break
+        x = x + dx
+    converged = bool(history) and history[-1] <= tol
+    # the cycle and its monodromy over the ``period`` forcing periods, from the last iterate
+    cycle, pieces, Jt, z = [], [], np.eye(len(x)), x
+    for _ in range(period):
+        cycle.append(z)
+        w, s, Jk = one.evaluate(z, jacobian=True)
+        if s is None:
+            Jt = Jt * np.nan
+            pieces.append("")
+            break
+        pieces.append(",".join(one.piece_names(s)))
+        Jt = Jk @ Jt
+        z = w
+    pt = PeriodicPoint(model=model, params=dict(one.params), x=np.array(x, dtype=float),
+                       period=period, cycle=np.array(cycle), pieces=tuple(pieces), jacobian=Jt,
+                       multipliers=_sorted_eigs(Jt) if np.all(np.isfinite(Jt))
+                       else np.full(len(x), np.nan), history=history, converged=converged,
+                       t0=float(t0), section_period=float(T))
+    if not converged:
+        raise ManifoldError("section_point(): Newton did not converge: " + reason
+                            + " (residuals " + " ".join(f"{h:.2e}" for h in history) + ")",
+                            result=pt)
+    return pt
+
+
+def refind(model, point: PeriodicPoint, params) -> PeriodicPoint:
+    """``point`` found again at ``params`` from its position: a map's periodic point, or a
+    flow's point on its stroboscopic section at the same phase."""
+    if point.section_period is None:
+        return find_periodic_point(model, point.x, point.period, params=params)
+    return section_point(model, point.x, point.period, params=params, t0=point.t0)

@@ -34,7 +34,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from ._manifold import manifold
-from ._points import ManifoldError, PeriodicPoint, find_periodic_point
+from ._points import ManifoldError, PeriodicPoint, find_periodic_point, refind, section_point
 
 
 def _saddle(pt) -> bool:
@@ -136,9 +136,8 @@ class Contact:
             guesses = self.known[near]
         P0, S0 = guesses
         prm = {**self.params, self.param: float(p)}
-        P = find_periodic_point(self.model, P0.x, P0.period, params=prm)
-        S = P if self.homoclinic else find_periodic_point(self.model, S0.x, S0.period,
-                                                          params=prm)
+        P = refind(self.model, P0, prm)
+        S = P if self.homoclinic else refind(self.model, S0, prm)
         if not (_saddle(P) and _saddle(S)):
             raise ManifoldError(f"a saddle is no longer a saddle at {self.param} = {p}")
         Wu = manifold(self.model, P, "unstable", arclength=self.arclength, tol=self.tol,
@@ -235,10 +234,12 @@ class Contact:
         return g
 
 
-def as_point(model, pt, params, period):
+def as_point(model, pt, params, period, t0=0.0):
     if isinstance(pt, PeriodicPoint):
         return pt
-    return find_periodic_point(model, pt, period, params=params)
+    if getattr(model, "is_map", False):
+        return find_periodic_point(model, pt, period, params=params)
+    return section_point(model, pt, period, params=params, t0=t0)
 
 
 def root(contact, a, b, tol, history):
@@ -258,6 +259,32 @@ def root(contact, a, b, tol, history):
     if gb > 0:
         return None
     try:
-        return brentq(g, a, b, xtol=tol)
+        r = brentq(g, a, b, xtol=tol)
     except (ValueError, RuntimeError):
         return None
+    return None if _jumps(history) else r
+
+
+def _jumps(history, factor: float = 1e3) -> bool:
+    """Whether Brent's method closed in on a jump of the contact function rather than a
+    zero: the secant slope over its last sign change exceeds the one over the whole bracket
+    (its first two evaluations) ``factor`` times. A contact moves with the parameter at a
+    finite rate, so the two slopes are alike at a zero; they part at a jump, where the side
+    or the ball's content changes at once (a manifold cut by an impact at the section's
+    time, its continuation not grown), and no tangency is there."""
+    if len(history) < 3:
+        return False
+    (q0, g0), (q1, g1) = history[0], history[1]
+    if q0 == q1:
+        return False
+    outer = abs(g1 - g0) / abs(q1 - q0)
+    pos = [(q, v) for q, v in history if v > 0]
+    neg = [(q, v) for q, v in history if v <= 0]
+    if not pos or not neg:
+        return False
+    # the last sign change: the positive and non-positive evaluations nearest each other
+    qp, vp = min(pos, key=lambda t: min(abs(t[0] - q) for q, _ in neg))
+    qn, vn = min(neg, key=lambda t: abs(t[0] - qp))
+    if qp == qn:
+        return False
+    return abs(vp - vn) / abs(qp - qn) > factor * outer
