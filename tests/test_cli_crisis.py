@@ -94,3 +94,23 @@ def test_bad_input_is_a_clean_error(args, code, text):
     res = _run(["crisis", *args])
     assert res.exit_code == code, res.output
     assert text in res.output and "Traceback" not in res.output
+
+
+@pytest.mark.parametrize("extra, words", [
+    (["--rtol", "1e-9"], ["--rtol", "map", "applies to flows only"]),
+    (["--method", "RK45", "--atol", "1e-9"], ["--atol", "--method", "apply to flows only"]),
+    (["--t0", "1"], ["--t0", "flows only"]),
+])
+def test_integrator_options_and_phase_are_refused_for_a_map(extra, words):
+    """A map has no integrator and no section phase: the options that only a flow's runs take
+    are refused by name before any work, not ignored."""
+    res = CliRunner().invoke(main, ["crisis", "sqrt-map", "--param", "mu", "--from", "0.5",
+                                    "--to", "0.125", "-p", "lam=2", *extra])
+    assert res.exit_code == 2, res.output
+    for w in words:
+        assert w in res.output, (w, res.output)
+
+
+def test_the_api_refuses_integrator_options_for_a_map():
+    with pytest.raises(pwsdyn.errors.ArgumentError, match="apply to flows"):
+        pwsdyn.locate_crisis("sqrt-map", "mu", (0.5, 0.125), params={"lam": 2.0}, rtol=1e-9)

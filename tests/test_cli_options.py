@@ -37,7 +37,7 @@ WHERE_THEY_APPLY = {
     "--no-progress": {"sweep", "scan", "basins", "continue", "grazing"},
     "--workers": {"sweep", "scan", "basins"},
     "--scheduler": {"sweep", "scan", "basins"},
-    "--t0": {"simulate", "orbit", "continue", "grazing", "manifold"},
+    "--t0": {"simulate", "orbit", "continue", "grazing", "manifold", "crisis"},
 }
 
 #: Shared options with no API default to compare with: not given means "nothing" (no value
@@ -52,6 +52,9 @@ NOT_AN_API_ARGUMENT = {
     # default for scripts and notebooks
     ("continue", "--no-progress"),
     ("grazing", "--no-progress"),
+    # locate_crisis(t0=0.0) is the section's phase; the command takes the model's [defaults]
+    # t0 when --t0 is not given, as every command with --t0 does (else 0)
+    ("crisis", "--t0"),
 }
 
 _OPTION_IN_TEXT = re.compile(r"(?<![\w-])--[A-Za-z][A-Za-z0-9]*(?:-[A-Za-z0-9]+)*")

@@ -152,6 +152,7 @@ MINIMAL = {
     "continue": ["m", "--from", "0", "--to", "1"],
     "grazing": ["m", "--from", "0", "--to", "1"],
     "manifold": ["m"],
+    "crisis": ["m", "--from", "0", "--to", "1"],
 }
 
 
@@ -213,6 +214,9 @@ SAME_DEFAULT = [
         ("--tol", "tol"), ("--period", "period"))],
     ("manifold", "--t0", pwsdyn.find_periodic_orbit, "t0"),
     ("manifold", "--force", pwsdyn.Manifold.save, "overwrite"),
+    *[("crisis", flag, pwsdyn.locate_crisis, name) for flag, name in (
+        ("--tol", "tol"), ("--steps", "steps"), ("--arclength", "arclength"))],
+    ("crisis", "--force", pwsdyn.Crisis.save, "overwrite"),
     # the flag is the negation of the API's `progress` (see test_option_default_is_the_api's)
     ("sweep", "--no-progress", pwsdyn.sweep, "progress"),
     ("basins", "--no-progress", pwsdyn.basins, "progress"),
@@ -248,7 +252,8 @@ def test_every_option_gives_a_plain_value_when_not_given(command):
 SHOOTING = {**DEFAULTS, **SHOOTING_DEFAULTS}
 LIBRARY_DEFAULT = [(cmd, flag, DEFAULTS) for cmd in ("simulate", "sweep", "scan", "basins")
                    for flag in ("--rtol", "--atol", "--method", "--exact", "--sliding")] + \
-                  [("manifold", flag, DEFAULTS)     # the manifold's runs: pwsdyn.manifold's
+                  [(cmd, flag, DEFAULTS)     # the section map's runs: pwsdyn.manifold's
+                   for cmd in ("manifold", "crisis")
                    for flag in ("--rtol", "--atol", "--method", "--sliding")] + \
                   [(cmd, flag, SHOOTING) for cmd in ("orbit", "continue", "grazing")
                    for flag in ("--rtol", "--atol", "--method", "--sliding")]
@@ -279,7 +284,7 @@ def test_shooting_defaults_are_the_apis(tmp_path):
 
 def test_every_model_running_command_has_the_same_shared_options():
     for command in ("simulate", "orbit", "sweep", "scan", "basins", "continue", "grazing",
-                    "manifold"):
+                    "manifold", "crisis"):
         for flag in ("-p", "--param", "-s", "--set", "--x0", "--rtol", "--atol", "--method",
                      "--sliding", "--out", "--plot", "--force"):
             _option(command, flag)

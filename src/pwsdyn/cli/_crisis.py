@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import click
 
-from ._common import model_argument, output_options, param_options, prepare, reported, x0_option
+from ._common import (method_option, model_argument, output_options, param_options, prepare,
+                      reported, sliding_option, tolerance_options, x0_option)
 from ._main import main
 from ._output import _echo, _fail, _fmt, _write_outputs
 
@@ -27,17 +28,21 @@ from ._output import _echo, _fail, _fmt, _write_outputs
 @click.option("--arclength", type=float, default=None,
               help="Planar maps: length of each branch of the manifolds (default four times "
                    "the attractor's diameter).")
-@click.option("--t0", "phase", type=float, default=0.0, show_default=True,
-              help="Flows: the phase of the stroboscopic section x(t0) -> x(t0 + T).")
+@click.option("--t0", type=float, default=None,
+              help="Flows: the phase of the stroboscopic section x(t0) -> x(t0 + T) (default "
+                   "the model's defaults.t0, else 0).")
 @click.option("--seed", "seeds", multiple=True, metavar="VALUES",
               help="Planar maps and flows: a state (in state order, 1,0) from which Newton "
                    "also looks for a saddle, as for a boundary saddle far from the attractor; "
                    "may be repeated.")
+@tolerance_options()
+@method_option()
+@sliding_option()
 @output_options("Write the crisis (pwsdyn.Crisis.save) to this NetCDF file.",
                 "Write a figure of the attractor at the located value, the saddle's stable "
                 "manifold and the contact point (PNG; PDF, SVG... by suffix).")
-def crisis_cmd(model, params, sets, start, stop, x0, tol, steps, arclength, phase, seeds, out,
-               plot, force):
+def crisis_cmd(model, params, sets, start, stop, x0, tol, steps, arclength, t0, seeds,
+               rtol, atol, method, sliding, out, plot, force):
     """Locate a boundary (or, for a one-state map, interior) crisis of the attractor of the map
     MODEL reached from --x0, in the parameter --param NAME between --from and --to. A forced
     two-state flow is taken through its stroboscopic section at phase --t0 (a planar map).
@@ -47,6 +52,10 @@ def crisis_cmd(model, params, sets, start, stop, x0, tol, steps, arclength, phas
     function: the attractor's edge against the saddle's stable set (one-state maps), or the
     unstable manifold of a saddle against the stable manifold of the boundary saddle (planar
     maps), to --tol.
+
+    Flows only: --rtol, --atol, --method and --sliding apply to the runs of the section map
+    (its saddles and manifolds); not given, each takes a simulation's default, as
+    pwsdyn.locate_crisis takes them.
 
     \b
     Examples:
@@ -66,9 +75,17 @@ def crisis_cmd(model, params, sets, start, stop, x0, tol, steps, arclength, phas
         raise click.BadParameter(f"must be a positive number, got {arclength}",
                                  param_hint="--arclength")
     run = prepare(model, params, sets, x0, force=force, named="varied",
-                  outputs=[("--out", out, "data"), ("--plot", plot, "figure")])
+                  outputs=[("--out", out, "data"), ("--plot", plot, "figure")], rtol=rtol,
+                  atol=atol, method=method, sliding=sliding)
     mdl, param = run.model, run.named
     is_map = bool(getattr(mdl, "is_map", False))
+    if is_map:
+        flow_only = [f for f, v in (("--rtol", rtol), ("--atol", atol), ("--method", method),
+                                    ("--sliding", sliding)) if v is not None]
+        if flow_only:
+            raise click.BadParameter(f"{mdl.name!r} is a map: {', '.join(flow_only)} "
+                                     f"{'applies' if len(flow_only) == 1 else 'apply'} to "
+                                     "flows only", param_hint=flow_only[0])
     if not is_map and (mdl.forcing_period is None or mdl.n_states != 2):
         _fail(f"{mdl.name!r} is a flow: its crises are located through its stroboscopic "
               "section, which needs a forcing period and two states")
@@ -82,6 +99,11 @@ def crisis_cmd(model, params, sets, start, stop, x0, tol, steps, arclength, phas
         if len(seed_states[-1]) != mdl.n_states:
             raise click.BadParameter(f"expected {mdl.n_states} values, got {text!r}",
                                      param_hint="--seed")
+    if is_map and t0 is not None:
+        raise click.BadParameter(f"{mdl.name!r} is a map: --t0 applies to flows only",
+                                 param_hint="--t0")
+    # the section's phase: --t0, else the model's [defaults] t0 (as every command with --t0)
+    phase = float(t0 if t0 is not None else (mdl.defaults.get("t0") or 0.0))
     fixed = {k: v for k, v in run.params.items() if k != param}
     guess = run.x0 if run.x0 is not None else mdl.defaults.get("x0")
     if guess is None:
@@ -90,7 +112,7 @@ def crisis_cmd(model, params, sets, start, stop, x0, tol, steps, arclength, phas
     with reported():
         c = pwsdyn.locate_crisis(mdl, param, (start, stop), x0=guess, params=fixed, tol=tol,
                                  steps=steps, arclength=arclength,
-                                 seeds=seed_states or None, t0=phase)
+                                 seeds=seed_states or None, t0=phase, **run.options)
     _echo(f"model       {mdl.name} (hash {mdl.hash})")
     _echo(f"crisis      {c.kind} at {param} = {c.value!r}")
     _echo(f"bracket     {param} in [{_fmt(c.bracket[0])}, {_fmt(c.bracket[1])}] (the sweep)")

@@ -118,8 +118,9 @@ def manifold_cmd(model, params, sets, x0, period, t0, transient, kind, arclength
                                     ("--atol", atol), ("--method", method),
                                     ("--sliding", sliding)) if v is not None]
         if flow_only:
-            raise click.BadParameter(f"{mdl.name!r} is a map: {', '.join(flow_only)} apply "
-                                     "to flows only", param_hint=flow_only[0])
+            raise click.BadParameter(f"{mdl.name!r} is a map: {', '.join(flow_only)} "
+                                     f"{'applies' if len(flow_only) == 1 else 'apply'} to "
+                                     "flows only", param_hint=flow_only[0])
         guess = run.x0 if run.x0 is not None else mdl.defaults.get("x0")
         if guess is None:
             raise click.BadParameter(f"model {mdl.name!r} has no [defaults] x0: give a guess "

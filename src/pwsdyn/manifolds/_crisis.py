@@ -185,10 +185,14 @@ class Crisis:
         return save_dataset(self.to_dataset(), path, overwrite=overwrite)
 
 
-def _check_flow(model, caller):
+def _check_flow(model, caller, options=None):
     """A flow is taken through its stroboscopic section: it must be forced (a section map)
-    with two states (a planar map)."""
+    with two states (a planar map). Integrator ``options`` are for a flow's runs; a map has
+    none."""
     if getattr(model, "is_map", False):
+        if options:
+            raise ArgumentError(f"{caller}: integrator options ({', '.join(sorted(options))}) "
+                                f"apply to flows; {model.name!r} is a map")
         return
     if model.forcing_period is None or model.n_states != 2:
         raise ArgumentError(f"{caller}: a flow is taken through its stroboscopic section, a "
@@ -327,10 +331,11 @@ class _Contact:
 
 
 class _Context:
-    def __init__(self, model, param, params, t0: float = 0.0):
+    def __init__(self, model, param, params, t0: float = 0.0, options=None):
         self.model, self.param, self.params = model, param, dict(params or {})
         self.is_map = bool(getattr(model, "is_map", False))
         self.t0 = t0
+        self.options = dict(options or {})    # a flow's integrator options
 
     def section(self, p):
         prm = {**self.params, self.param: float(p)}
@@ -338,7 +343,7 @@ class _Context:
             return MapSection(self.model, prm, 1)
         # a forced flow: its stroboscopic map at phase t0, over the forcing period at p
         T = self.model.forcing_period_value(prm)
-        return StroboscopicSection(self.model, prm, self.t0, float(T), 1)
+        return StroboscopicSection(self.model, prm, self.t0, float(T), 1, self.options)
 
 
 def _periodic(sec, x, period):
@@ -346,7 +351,8 @@ def _periodic(sec, x, period):
     stroboscopic map at the section's phase."""
     if sec.is_map:
         return find_periodic_point(sec.model, x, period, params=sec.params)
-    return section_point(sec.model, x, period, params=sec.params, t0=sec.t0)
+    return section_point(sec.model, x, period, params=sec.params, t0=sec.t0,
+                         options=sec.options)
 
 
 def _candidates(ctx, p, samples, periods, seeds) -> list:
@@ -445,7 +451,7 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
                   steps: int = 41, transient: int = 2000, iterations: int = 2000,
                   periods=(1, 2), escape: float = 1e8, jump: float = 1.5,
                   arclength: float | None = None, manifold_tol: float = 1e-9,
-                  seeds=None, t0: float = 0.0) -> "Crisis":
+                  seeds=None, t0: float = 0.0, **options) -> "Crisis":
     """A boundary or interior crisis of a one-dimensional map's attractor, or a boundary crisis
     of a planar map's attractor, located from the geometry.
 
@@ -515,6 +521,9 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
         that reaches an impact surface at the section's time ends there (its continuation
         past the reset is not followed): choose a phase at which the attractor's contact
         with the boundary saddle's stable manifold is away from the surfaces.
+    **options
+        Flows: integrator options of the section map's runs (``rtol``, ``atol``, ``method``,
+        ... as for :func:`pwsdyn.manifold`); a map takes none.
 
     Returns
     -------
@@ -538,7 +547,7 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
     if model.n_states > 2:
         raise ArgumentError("locate_crisis(): one- and two-dimensional maps are handled so "
                             f"far, {model.name!r} has {model.n_states} states")
-    _check_flow(model, "locate_crisis()")
+    _check_flow(model, "locate_crisis()", options)
     if param not in model.parameters:
         raise ArgumentError(f"locate_crisis(): {model.name!r} has no parameter {param!r}")
     tol = V.positive("tol", tol)
@@ -554,7 +563,7 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
         arclength = V.positive("arclength", arclength)
     if seeds is not None:
         seeds = np.array([V.state_vector(model, q).astype(float) for q in seeds])
-    ctx = _Context(model, param, params, float(t0))
+    ctx = _Context(model, param, params, float(t0), options)
     if model.n_states == 2:
         return _locate_planar(ctx, a, b, x, tol, steps, transient, iterations, periods,
                               escape, arclength, manifold_tol, seeds=seeds)
@@ -710,7 +719,8 @@ def _first_contact(ctx, p_lo, p_hi, samples, tol, periods, arclength, manifold_t
             if not (p_on or P is S):
                 continue     # W^u(P) is not in the attractor's closure
             contact = Contact(sec.model, ctx.param, ctx.params, P, S, arclength=length,
-                              tol=manifold_tol, max_points=20_000, exclude=length / 10.0)
+                              tol=manifold_tol, max_points=20_000, exclude=length / 10.0,
+                              options=ctx.options)
             history: list = []
             try:
                 g0 = contact.start(p_lo, P, S)
@@ -735,7 +745,7 @@ def _result(model, param, contact, root, kind, bracket, history):
 def locate_tangency(model, param: str, span, unstable, stable=None, *, params=None,
                     period: int = 1, tol: float = 1e-10, arclength: float = 10.0,
                     manifold_tol: float = 1e-9, max_points: int = 20_000,
-                    exclude: float | None = None):
+                    exclude: float | None = None, **options):
     """The first homoclinic or heteroclinic tangency, in one parameter, of the unstable
     manifold of a saddle of a planar map with the stable manifold of a saddle.
 
@@ -779,6 +789,9 @@ def locate_tangency(model, param: str, span, unstable, stable=None, *, params=No
         For a homoclinic tangency, points within this distance of the saddle (where the
         manifolds cross) are not searched for the nearest approach (default ``arclength /
         10``).
+    **options
+        Flows: integrator options of the section map's runs, as for :func:`pwsdyn.manifold`;
+        a map takes none.
 
     Returns
     -------
@@ -795,7 +808,7 @@ def locate_tangency(model, param: str, span, unstable, stable=None, *, params=No
         secant slope of its last bracket a thousand times the whole span's).
     """
     model = as_model(model, caller="locate_tangency()")
-    _check_flow(model, "locate_tangency()")
+    _check_flow(model, "locate_tangency()", options)
     if model.n_states != 2:
         raise ArgumentError("locate_tangency(): the manifolds must be curves that cut the "
                             f"plane: a two-dimensional map, {model.name!r} has "
@@ -806,11 +819,11 @@ def locate_tangency(model, param: str, span, unstable, stable=None, *, params=No
     arclength = V.positive("arclength", arclength)
     a, b = (float(v) for v in span)
     prm = {**dict(params or {}), param: a}
-    P = as_point(model, unstable, prm, period)
-    S = P if stable is None else as_point(model, stable, prm, period)
+    P = as_point(model, unstable, prm, period, options=options)
+    S = P if stable is None else as_point(model, stable, prm, period, options=options)
     exclude = arclength / 10.0 if exclude is None else V.positive("exclude", exclude)
     contact = Contact(model, param, params, P, S, arclength=arclength, tol=manifold_tol,
-                       max_points=max_points, exclude=exclude)
+                       max_points=max_points, exclude=exclude, options=options)
     history: list = []
     g0 = contact.start(a, P, S)
     history.append((a, g0))

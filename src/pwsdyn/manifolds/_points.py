@@ -254,9 +254,11 @@ def section_point(model, x0, period: int = 1, *, params=None, t0: float = 0.0,
     return pt
 
 
-def refind(model, point: PeriodicPoint, params) -> PeriodicPoint:
+def refind(model, point: PeriodicPoint, params, options=None) -> PeriodicPoint:
     """``point`` found again at ``params`` from its position: a map's periodic point, or a
-    flow's point on its stroboscopic section at the same phase."""
+    flow's point on its stroboscopic section at the same phase (its runs with the integrator
+    ``options``)."""
     if point.section_period is None:
         return find_periodic_point(model, point.x, point.period, params=params)
-    return section_point(model, point.x, point.period, params=params, t0=point.t0)
+    return section_point(model, point.x, point.period, params=params, t0=point.t0,
+                         options=options)

@@ -120,8 +120,10 @@ class Contact:
     nearest parameter evaluated (saddles by Newton from there)."""
 
     def __init__(self, model, param, params, unstable, stable, *, arclength, tol,
-                 max_points, exclude):
+                 max_points, exclude, options=None):
         self.model, self.param, self.params = model, param, dict(params or {})
+        # a flow's integrator options, for its saddles' and manifolds' runs
+        self.options = dict(options or {})
         self.arclength, self.tol, self.max_points = arclength, tol, max_points
         self.exclude = exclude
         self.homoclinic = unstable is stable
@@ -136,14 +138,14 @@ class Contact:
             guesses = self.known[near]
         P0, S0 = guesses
         prm = {**self.params, self.param: float(p)}
-        P = refind(self.model, P0, prm)
-        S = P if self.homoclinic else refind(self.model, S0, prm)
+        P = refind(self.model, P0, prm, self.options)
+        S = P if self.homoclinic else refind(self.model, S0, prm, self.options)
         if not (_saddle(P) and _saddle(S)):
             raise ManifoldError(f"a saddle is no longer a saddle at {self.param} = {p}")
         Wu = manifold(self.model, P, "unstable", arclength=self.arclength, tol=self.tol,
-                      max_points=self.max_points)
+                      max_points=self.max_points, **self.options)
         Ws = manifold(self.model, S, "stable", arclength=self.arclength, tol=self.tol,
-                      max_points=self.max_points)
+                      max_points=self.max_points, **self.options)
         return P, S, Wu, Ws
 
     def start(self, p, P, S):
@@ -234,12 +236,12 @@ class Contact:
         return g
 
 
-def as_point(model, pt, params, period, t0=0.0):
+def as_point(model, pt, params, period, t0=0.0, options=None):
     if isinstance(pt, PeriodicPoint):
         return pt
     if getattr(model, "is_map", False):
         return find_periodic_point(model, pt, period, params=params)
-    return section_point(model, pt, period, params=params, t0=t0)
+    return section_point(model, pt, period, params=params, t0=t0, options=options)
 
 
 def root(contact, a, b, tol, history):
