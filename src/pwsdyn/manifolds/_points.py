@@ -137,18 +137,33 @@ def find_periodic_point(model, x0, period: int = 1, *, params=None, tol: float =
     tol = V.positive("tol", tol)
     sec = MapSection(model, params, period)
     x = V.state_vector(model, x0).astype(float)
+    x, history, converged, reason = _newton(
+        sec, x, tol, max_iter,
+        "no piece of the map applies (or the image is not finite) at the iterate")
+    if converged:
+        return _point(model, sec, x, period, history, True)
+    last = _point(model, sec, x, period, history, False)
+    raise ManifoldError(f"find_periodic_point(): Newton did not converge: {reason} "
+                        "(residuals " + " ".join(f"{h:.2e}" for h in history) + ")",
+                        result=last)
+
+
+def _newton(sec, x, tol: float, max_iter: int, no_image: str):
+    """Newton's method on ``F^k(x) - x`` with the section's Jacobian ``D F^k`` (a map's pieces,
+    or a flow's monodromy with its saltation matrices): ``(x, residuals, converged, reason)``,
+    the residual relative to ``1 + |x|``; ``no_image`` is the reason where ``F^k`` has none."""
     history: list = []
     reason = "the iterations ran out"
     for _ in range(max_iter + 1):
         y, sig, J = sec.evaluate(x, jacobian=True)
         if sig is None:
-            reason = "no piece of the map applies (or the image is not finite) at the iterate"
+            reason = no_image
             break
         r = y - x
         res = float(np.max(np.abs(r))) / (1.0 + float(np.max(np.abs(x))))
         history.append(res)
         if res <= tol:
-            return _point(model, sec, x, period, history, True)
+            return x, history, True, ""
         if len(history) > max_iter:
             break
         try:
@@ -157,10 +172,7 @@ def find_periodic_point(model, x0, period: int = 1, *, params=None, tol: float =
             reason = "D F^k - I is singular at the iterate (a multiplier 1)"
             break
         x = x + dx
-    last = _point(model, sec, x, period, history, False)
-    raise ManifoldError(f"find_periodic_point(): Newton did not converge: {reason} "
-                        "(residuals " + " ".join(f"{h:.2e}" for h in history) + ")",
-                        result=last)
+    return x, history, False, reason
 
 
 def _point(model, sec, x, period, history, converged) -> PeriodicPoint:
@@ -209,27 +221,9 @@ def section_point(model, x0, period: int = 1, *, params=None, t0: float = 0.0,
     if tol is None:
         tol = 10.0 * max(one.opts["rtol"], one.opts["atol"])
     x = V.state_vector(model, x0).astype(float)
-    history: list = []
-    reason = "the iterations ran out"
-    for _ in range(max_iter + 1):
-        y, sig, J = sec.evaluate(x, jacobian=True)
-        if sig is None:
-            reason = "the run failed or left the admissible side of an impact surface"
-            break
-        r = y - x
-        res = float(np.max(np.abs(r))) / (1.0 + float(np.max(np.abs(x))))
-        history.append(res)
-        if res <= tol:
-            break
-        if len(history) > max_iter:
-            break
-        try:
-            dx = np.linalg.solve(J - np.eye(len(x)), -r)
-        except np.linalg.LinAlgError:
-            reason = "D F^k - I is singular at the iterate (a multiplier 1)"
-            break
-        x = x + dx
-    converged = bool(history) and history[-1] <= tol
+    x, history, converged, reason = _newton(
+        sec, x, tol, max_iter,
+        "the run failed or left the admissible side of an impact surface")
     # the cycle and its monodromy over the ``period`` forcing periods, from the last iterate
     cycle, pieces, Jt, z = [], [], np.eye(len(x)), x
     for _ in range(period):
