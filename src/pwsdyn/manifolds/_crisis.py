@@ -512,7 +512,7 @@ def locate_crisis(model, param: str, span, *, x0=None, params=None, tol: float =
         Planar maps: the manifolds' ``tol`` (the deviation of their chords from the curves),
         which bounds the error of a smooth contact; a polygonal one (a piecewise-linear map's)
         is exact.
-    seeds : sequence of states, optional
+    seeds : sequence of array_like, optional
         Planar maps: more starting points for the saddles' Newton, besides the attractor and
         the grid around it (a boundary saddle far from the attractor, or one whose map
         expands so strongly that Newton needs a close guess).
