@@ -40,7 +40,8 @@ from scipy.spatial import cKDTree
 from .. import _validate as V
 from ..errors import ArgumentError
 from ..model.spec import as_model
-from ._points import ManifoldError, PeriodicPoint, find_periodic_point, section_point
+from ._points import (ManifoldError, PeriodicPoint, find_periodic_point, multiplier_variables,
+                      section_point)
 from ._sections import MapSection, StroboscopicSection
 from ._tangency import Contact, as_point, root as contact_root
 
@@ -133,12 +134,7 @@ class Crisis:
                        {"long_name": "the saddle whose stable set is touched"}),
             "saddle_cycle": (("cycle", "state"), np.asarray(self.saddle.cycle, dtype=float),
                              {"long_name": "the points of the saddle's cycle"}),
-            "multiplier_real": (("multiplier",), mult.real,
-                                {"long_name": "real part of the saddle's multiplier",
-                                 "units": "1"}),
-            "multiplier_imag": (("multiplier",), mult.imag,
-                                {"long_name": "imaginary part of the saddle's multiplier",
-                                 "units": "1"}),
+            **multiplier_variables(mult),
             "history_param": (("evaluation",), hist[:, 0],
                               {"long_name": f"{self.param} at each evaluation of the contact "
                                             "function"}),

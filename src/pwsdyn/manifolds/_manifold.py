@@ -13,7 +13,8 @@ from ..errors import ArgumentError
 from ..model.spec import as_model
 from ..orbits import PeriodicOrbit
 from ._grow import grow, preimage, preimage_guarded
-from ._points import ManifoldError, PeriodicPoint, find_periodic_point, refind
+from ._points import (ManifoldError, PeriodicPoint, find_periodic_point, multiplier_variables,
+                      refind)
 from ._sections import MapSection, StroboscopicSection, check_section
 
 if TYPE_CHECKING:
@@ -172,12 +173,7 @@ class Manifold:
                            {"long_name": "saddle point"}),
                 "eigenvector": (("state",), np.asarray(self.eigenvector, dtype=float),
                                 {"long_name": "eigendirection at the saddle"}),
-                "multiplier_real": (("multiplier",), mult.real,
-                                    {"long_name": "real part of the saddle's multiplier",
-                                     "units": "1"}),
-                "multiplier_imag": (("multiplier",), mult.imag,
-                                    {"long_name": "imaginary part of the saddle's multiplier",
-                                     "units": "1"}),
+                **multiplier_variables(mult),
             },
             coords=state_coords(self.model))
         how = ("Newton preimages on the forward map" if self.kind == "stable"

@@ -148,6 +148,16 @@ def find_periodic_point(model, x0, period: int = 1, *, params=None, tol: float =
                         result=last)
 
 
+def multiplier_variables(mult) -> dict:
+    """The saddle's multipliers as the two real variables of a result's NetCDF file (complex
+    numbers have no NetCDF type): ``multiplier_real`` and ``multiplier_imag``."""
+    return {"multiplier_real": (("multiplier",), mult.real,
+                                {"long_name": "real part of the saddle's multiplier",
+                                 "units": "1"}),
+            "multiplier_imag": (("multiplier",), mult.imag,
+                                {"long_name": "imaginary part of the saddle's multiplier",
+                                 "units": "1"})}
+
 def _newton(sec, x, tol: float, max_iter: int, no_image: str):
     """Newton's method on ``F^k(x) - x`` with the section's Jacobian ``D F^k`` (a map's pieces,
     or a flow's monodromy with its saltation matrices): ``(x, residuals, converged, reason)``,
