@@ -65,6 +65,24 @@ def test_import_pwsdyn_is_cheap_and_complete():
     assert out == {"loaded": [], "missing": [], "star": [], "kernel": False}
 
 
+def test_public_modules_resolve_after_a_bare_import():
+    """``import pwsdyn`` then ``pwsdyn.io.load_trajectory`` or ``pwsdyn.plot.plot_scan``
+    works without importing the module first (a script that did not failed with an
+    AttributeError unless some other import had loaded it), and still loads no kernel."""
+    out = _json_tail(_run("""
+        import json, sys
+        import pwsdyn
+        names = {m: hasattr(getattr(pwsdyn, m), attr) for m, attr in (
+            ("io", "load_trajectory"), ("plot", "plot_scan"), ("model", "load_model"),
+            ("newton", "newton"), ("errors", "Status"), ("continuation", "Branch"))}
+        print(json.dumps({"names": names, "in_dir": "io" in dir(pwsdyn),
+                          "kernel": "pwsdyn.integrate._kernel" in sys.modules}))
+    """))
+    assert out["names"] == dict.fromkeys(("io", "plot", "model", "newton", "errors",
+                                          "continuation"), True)
+    assert out["in_dir"] and not out["kernel"]
+
+
 def test_public_names_are_the_subpackages_objects():
     import pwsdyn.explore
     import pwsdyn.integrate

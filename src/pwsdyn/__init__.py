@@ -41,6 +41,11 @@ _LAZY = {
     "Crisis": "manifolds", "locate_crisis": "manifolds", "locate_tangency": "manifolds",
 }
 
+#: Public subpackages and modules, imported on first access too (``pwsdyn.io.load_trajectory``,
+#: ``pwsdyn.plot.plot_scan`` after a bare ``import pwsdyn``).
+_SUBMODULES = frozenset({"continuation", "errors", "explore", "grazing", "integrate", "io",
+                         "manifolds", "model", "newton", "orbits", "plot", "stability"})
+
 __all__ = ["ArgumentError", "ExpressionError", "ModelError", "OutputExistsError", "PwsdynError",
            "StoreError", "SolveError", "Status", *_LAZY]
 
@@ -61,6 +66,8 @@ if TYPE_CHECKING:  # what static checkers and IDEs see; at run time see __getatt
 
 
 def __getattr__(name: str):
+    if name in _SUBMODULES:
+        return importlib.import_module(f".{name}", __name__)  # binds it in globals() too
     sub = _LAZY.get(name)
     if sub is None:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
@@ -70,4 +77,4 @@ def __getattr__(name: str):
 
 
 def __dir__():
-    return sorted(set(globals()) | set(__all__))
+    return sorted(set(globals()) | set(__all__) | _SUBMODULES)
