@@ -660,3 +660,27 @@ def test_one_legged_jumper_defaults():
             assert window.count(kind) == 1, (j, window)
     s0, s1 = traj(t_end - T - 1e-9), traj(t_end - 2 * T - 1e-9)
     np.testing.assert_allclose(s0, s1, rtol=0, atol=1e-3)
+
+
+def test_generated_cases_with_the_same_expressions_share_one_body():
+    """Cases whose expressions are the same are emitted once, behind one test of ``idx``
+    (runs of indices as ranges), and every case still evaluates its own expressions; the
+    split variants of a chain repeat most of their derivatives, which is what keeps the
+    4-block Burridge-Knopoff chain's code under the generator's limit."""
+    from pwsdyn.model.codegen import W_F, W_H, _generate_body, emit_evaluate
+    x, a = sp.Symbol("x", real=True), sp.Symbol("a", real=True)
+    cases = {(W_F, 0): [a * x], (W_F, 1): [a * x], (W_F, 2): [x + 1], (W_F, 3): [a * x],
+             (W_F, 4): [a * x], (W_H, 0): [x]}
+    src = emit_evaluate(cases, ("x",), ("a",))
+    assert src.count("out[0] = p_a*s_x") == 1, src
+    assert "if 0 <= idx <= 1 or 3 <= idx <= 4:" in src and "if idx == 2:" in src
+    ns: dict = {}
+    # (numba caches only functions of files: the text is compiled here as it is, uncached)
+    exec(compile(src.replace("cache=True", "cache=False"), "<generated>", "exec"), ns)
+    out = np.zeros(1)
+    for idx, want in ((0, 6.0), (1, 6.0), (2, 4.0), (3, 6.0), (4, 6.0)):
+        ns["evaluate"].py_func(W_F, idx, 0.0, np.array([3.0]), np.array([2.0]), out)
+        assert out[0] == want, idx
+    # the chains: a block's normal velocity depends on its own side only
+    sizes = [len(_generate_body(pwsdyn.burridge_knopoff(n))) for n in (2, 3, 4)]
+    assert sizes[-1] < 100_000 and sizes == sorted(sizes)

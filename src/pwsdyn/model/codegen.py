@@ -70,7 +70,7 @@ EVALUATE_SIGNATURE = types.void(types.int64, types.int64, types.float64, types.f
                                 types.float64[::1], types.float64[::1])
 EVALUATE_TYPE = types.FunctionType(EVALUATE_SIGNATURE)
 
-_CODEGEN_VERSION = "7"
+_CODEGEN_VERSION = "8"
 
 #: Largest generated module (characters) handed to the compiler -- numba's time grows faster
 #: than the source (40,000 characters, sixteen split modes, compile in about 7 s; the largest
@@ -237,26 +237,49 @@ def emit_evaluate(cases: dict, states, parameters) -> str:
         by_which.setdefault(which, []).append((idx, exprs))
     for which in sorted(by_which):
         lines.append(f"    if which == {which}:")
+        # cases with the same expressions share one body (emitted at the first of them): the
+        # variants of a mode split at several sign() terms repeat most of their derivatives
+        # (the normal velocity of a friction contact depends on its own side only), and
+        # numba's compile time grows with the text. The arithmetic is the same either way.
+        bodies: dict = {}
         for idx, exprs in sorted(by_which[which], key=lambda c: c[0]):
-            lines.append(f"        if idx == {idx}:")
-            exprs = [sp.sympify(e).xreplace(rename) for e in exprs]
-            if which == W_GUARD:
-                e = exprs[0]
-                code = pr.doprint(e)
-                lines.append(f"            out[0] = 1.0 if ({code}) else 0.0")
-                lines.append("            return")
-                continue
-            if which in (W_FU, W_HDU, W_HDUD):
-                lines.append("            u_sw = out[0]")
-            subs, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("_c"))
-            for sym, val in subs:
-                lines.append(f"            {sym} = {pr.doprint(val)}")
-            for k, e in enumerate(reduced):
-                code = pr.doprint(e)
-                lines.append(f"            out[{k}] = {code}")
-            lines.append("            return")
+            body = _case_body(pr, which, [sp.sympify(e).xreplace(rename) for e in exprs])
+            bodies.setdefault(body, []).append(idx)
+        for body, idxs in sorted(bodies.items(), key=lambda kv: kv[1][0]):
+            lines.append(f"        if {_idx_test(idxs)}:")
+            lines.extend(body)
     lines.append("    return")
     return "\n".join(lines) + "\n"
+
+
+def _idx_test(idxs) -> str:
+    """The condition ``idx`` is one of ``idxs`` (sorted): runs of consecutive values as
+    ranges, so that a long list stays one short line."""
+    runs, start = [], idxs[0]
+    for a, b in zip(idxs, idxs[1:] + [None]):
+        if b != a + 1:
+            runs.append((start, a))
+            start = b
+    parts = [f"idx == {lo}" if lo == hi else f"{lo} <= idx <= {hi}" for lo, hi in runs]
+    return " or ".join(parts)
+
+
+def _case_body(pr, which, exprs) -> tuple:
+    """The lines (indented) writing the expressions of one case into ``out``."""
+    lines = []
+    if which == W_GUARD:
+        lines.append(f"            out[0] = 1.0 if ({pr.doprint(exprs[0])}) else 0.0")
+        lines.append("            return")
+        return tuple(lines)
+    if which in (W_FU, W_HDU, W_HDUD):
+        lines.append("            u_sw = out[0]")
+    subs, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("_c"))
+    for sym, val in subs:
+        lines.append(f"            {sym} = {pr.doprint(val)}")
+    for k, e in enumerate(reduced):
+        lines.append(f"            out[{k}] = {pr.doprint(e)}")
+    lines.append("            return")
+    return tuple(lines)
 
 
 @dataclass
