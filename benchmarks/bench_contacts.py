@@ -1,4 +1,4 @@
-"""Benchmark: Burridge-Knopoff chains of n = 1..3 blocks (one friction contact per block).
+"""Benchmark: Burridge-Knopoff chains of n = 1..4 blocks (one friction contact per block).
 
 Model: ``pwsdyn.burridge_knopoff(n)`` (m = kp = 1, kc = 1, V = 0.2, Fs = 1, 1.1, ..., Fd =
 Fs/2, delta = 3), from rest, 1000 time units, ``rtol = atol = 1e-10``. For each n:
@@ -11,12 +11,13 @@ Fs/2, delta = 3), from rest, 1000 time units, ``rtol = atol = 1e-10``. For each 
 
 The loader splits a mode written with ``sign()`` into 2**n variants (at most
 ``MAX_SPLIT_MODES`` = 16) whose generated code must fit ``MAX_SOURCE_CHARS`` (100 000
-characters; 136 408 for n = 4), so n <= 3 here (``pwsdyn.model.chains.MAX_BLOCKS``).
+characters; 77 247 for n = 4, 208 784 for n = 5), so n <= 4 here
+(``pwsdyn.model.chains.MAX_BLOCKS``).
 Timings are reported, never asserted.
 
 Run::
 
-    python benchmarks/bench_contacts.py [--blocks 1 2 3] [--t-end 1000] [--repeats 3] [--save]
+    python benchmarks/bench_contacts.py [--blocks 1 2 3 4] [--t-end 1000] [--repeats 3] [--save]
 """
 
 from __future__ import annotations
@@ -84,7 +85,7 @@ def run_chain(n: int, t_end: float, repeats: int) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--blocks", type=int, nargs="+", default=[1, 2, 3])
+    ap.add_argument("--blocks", type=int, nargs="+", default=[1, 2, 3, 4])
     ap.add_argument("--t-end", type=float, default=1000.0)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--no-compile", action="store_true", help="skip the compile timings")

@@ -440,6 +440,45 @@ def test_burridge_knopoff_one_block_is_the_stick_slip_oscillator():
     np.testing.assert_allclose(a(ts), b(ts), rtol=0, atol=1e-8)
 
 
+#: four blocks with no coupling (kc = 0) and Coulomb friction (delta = 0): each is the
+#: oscillator x'' + x = -Fs sign(v - V); (Fs, x0, v0) chosen so that all four stick at once
+#: on [0.518, 2.784] (the closed form's arrival and release times)
+CHAIN4 = [(1.0, 0.0, 0.8), (0.8, 0.2, 0.5), (1.2, 0.1, 0.7), (0.9, -0.1, 0.6)]
+
+
+@needs_multi
+def test_four_block_chain_follows_each_closed_form_while_all_stick():
+    """The longest chain the builder makes (4 contacts, 16 modes, sliding on the
+    intersection of all four surfaces): uncoupled, each block follows its own Coulomb
+    oscillator's closed form to 1e-8 through the interval where all four stick at once,
+    and each block's arrival and release are events at their closed-form times (1e-9)."""
+    from pwsdyn.model.chains import MAX_BLOCKS
+    assert MAX_BLOCKS >= len(CHAIN4)
+    phases = [coulomb_oscillator(x0, v0, 1.0, F, BELT) for F, x0, v0 in CHAIN4]
+    assert max(ta for ta, *_ in phases) < min(tr for _, tr, *_ in phases)   # all four stick
+    end = min(tg for *_, tg, _ in phases) - 0.05
+    chain = pwsdyn.burridge_knopoff(4, kc=0.0, kp=1.0, m=1.0, V=BELT, delta=0.0,
+                                    Fs=[F for F, _, _ in CHAIN4])
+    x0 = [c for _, x, v in CHAIN4 for c in (x, v)]
+    traj = pwsdyn.simulate(chain, x0, end, rtol=1e-12, atol=1e-12)
+    assert traj.success, traj.message
+    ts = np.linspace(0.0, end, 2000)
+    got = traj(ts)
+    for i, (F, x, v) in enumerate(CHAIN4):
+        np.testing.assert_allclose(got[:, 2 * i:2 * i + 2].T,
+                                   np.array(coulomb_state(ts, x, v, 1.0, F, BELT)),
+                                   rtol=0, atol=1e-8)
+    times = np.array([e.t for e in traj.events])
+    for ta, tr, *_ in phases:
+        assert np.abs(times - ta).min() < 1e-9 and np.abs(times - tr).min() < 1e-9
+    # the run was on the intersection of all four surfaces while they all stuck
+    mid = 0.5 * (max(ta for ta, *_ in phases) + min(tr for _, tr, *_ in phases))
+    k = int(np.searchsorted(traj.t, mid)) - 1
+    from pwsdyn.integrate.trajectory import DiscreteState
+    state = DiscreteState.parse(str(traj.state[k]))
+    assert state.kind == "slide_multi" and len(state.surfaces) == 4, state
+
+
 def test_burridge_knopoff_refuses_what_it_cannot_build():
     from pwsdyn.model.chains import MAX_BLOCKS
     from pwsdyn.model.codegen import MAX_SOURCE_CHARS, _generate_body

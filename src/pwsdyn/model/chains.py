@@ -20,13 +20,15 @@ contact by contact, several at once on the intersection of their surfaces.
 
 The loader splits a mode written with ``sign()`` into one variant per combination of sides,
 :math:`2^n` for ``n`` contacts, and allows at most ``MAX_SPLIT_MODES`` (16) of them
-(:mod:`pwsdyn.model.discontinuities`); each variant gets its own field, Jacobians and the
-derivatives of every surface along it, so the generated code grows about threefold per block
-(3.7, 14.5, 46.7 and 136.4 thousand characters for 1 to 4 blocks) and the 4-block chain
-exceeds the code generator's limit of 100 000 characters (``MAX_SOURCE_CHARS`` of
-:mod:`pwsdyn.model.codegen`): chains of up to ``MAX_BLOCKS`` = 3 blocks. Compile times are
-measured in ``benchmarks/bench_contacts.py``. Longer chains need the signs as a vector
-argument of one field instead of :math:`2^n` product variants.
+(:mod:`pwsdyn.model.discontinuities`); each variant gets its own field and Jacobians, and
+the cases they share (the normal velocity of a contact depends on its own side only) are
+generated once. The code still grows about threefold per block (3.4, 10.3, 28.2, 77.2 and
+208.8 thousand characters for 1 to 5 blocks), and the 5-block chain would exceed both the
+16 modes and the code generator's limit of 100 000 characters (``MAX_SOURCE_CHARS`` of
+:mod:`pwsdyn.model.codegen`): chains of up to ``MAX_BLOCKS`` = 4 blocks, all four able to
+stick at once (``MULTI_MAX`` = 4 surfaces of the kernel's sliding on intersections). Compile
+times are measured in ``benchmarks/bench_contacts.py``. Longer chains need the signs as a
+vector argument of one field instead of :math:`2^n` product variants.
 """
 
 from __future__ import annotations
@@ -39,9 +41,10 @@ from .discontinuities import MAX_SPLIT_MODES
 from .spec import Model, load_model
 
 #: Most blocks :func:`pwsdyn.burridge_knopoff` builds: the ``2**n`` split modes must not exceed
-#: ``MAX_SPLIT_MODES`` (n <= 4), and their generated code must fit the code generator's
-#: ``MAX_SOURCE_CHARS`` (136 408 characters for n = 4, over the 100 000 allowed).
-MAX_BLOCKS = 3
+#: ``MAX_SPLIT_MODES`` (n <= 4), their generated code must fit the code generator's
+#: ``MAX_SOURCE_CHARS`` (77 247 characters for n = 4, 208 784 for n = 5) and every contact
+#: may stick at once (the kernel slides on intersections of up to four surfaces).
+MAX_BLOCKS = 4
 
 
 def _per_block(name: str, value, n: int) -> list[float]:
@@ -72,7 +75,7 @@ def burridge_knopoff(n: int, *, m: float = 1.0, kc: float = 1.0, kp: float = 1.0
     Parameters
     ----------
     n : int
-        Number of blocks, 1 to ``MAX_BLOCKS`` (3: the :math:`2^n` split modes of the ``sign()``
+        Number of blocks, 1 to ``MAX_BLOCKS`` (4: the :math:`2^n` split modes of the ``sign()``
         terms and their generated code are limited; see the module's notes).
     m, kc, kp : float
         Mass of each block, stiffness of the springs between neighbours and of each block's
