@@ -67,7 +67,10 @@ grazing, a short release window), that extremum is searched for on the dense out
 exact flow on an exact step -- with a lower bound from the tangents at the bracket's ends
 (:func:`_extremum_search`), so a crossing and re-crossing inside one step is found whenever
 it is deeper than the dense output's error. The earliest crossing is bracketed and located
-by the Illinois method on the dense output to a few ulps, then the step is re-taken exactly
+on the dense output to a few ulps -- by the Illinois method, or on an exact step (whose dense
+output is the exact flow, with derivative ``h f``) for a surface of a regular mode by
+safeguarded Newton with ``h`` and ``hdot`` from the model (``_locate_exact``) where the
+crossing is resolved above round-off (near a graze Illinois keeps it) -- then the step is re-taken exactly
 to that time ("landing step") and the time is polished with Newton steps on ``h`` (or
 ``hdot`` for a sliding exit) so the event state comes from the integrator itself, not from
 the interpolant.

@@ -23,8 +23,8 @@ from .fields import (_field, _multi_corner, _multi_count, _multi_set_corners, _m
                      _start_on_surface, multi_work_size)
 from .steppers import (_affine_setup, _dense_eval, _error_norm, _exact_stepper, _step_dense,
                        _step_stages, _take_samples)
-from .watch import (_crosses, _graze_samples, _hdot_rate, _hermite_extrema, _merge_samples,
-                    _surface_rate, _watch_pair, _watch_slope, _watch_value)
+from .watch import (_crosses, _graze_samples, _hdot_rate, _hermite_extrema, _locate_exact,
+                    _merge_samples, _surface_rate, _watch_pair, _watch_slope, _watch_value)
 from .actions import (_act_impact, _act_intersection, _act_multi_exit, _act_multi_intersection,
                       _act_release, _act_slide_exit, _act_switch, _act_transition,
                       _action_saltation, _after_reset, _apply_saltation)
@@ -907,6 +907,14 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                             # sign test below would take a zero end for the far side and slide
                             # the bracket to the step's end
                             b_th = a_th
+                        elif (exact_now and dkind == REGULAR and wtype[w] == WF_SURFACE
+                              and not forced):
+                            # the exact flow: Newton with the surface's rate, where the crossing
+                            # is resolved above round-off (else -1: Illinois below)
+                            got = _locate_exact(ev, p, widx[w] * nm + mode, t, h, y, Q, nY, deg,
+                                                a_th, b_th, fa, fb, xs, buf)
+                            if got >= 0.0:
+                                a_th = b_th = got
                         for it in range(400):
                             if (b_th - a_th) * h <= 2.0 * _ulp(t + b_th * h):
                                 break
