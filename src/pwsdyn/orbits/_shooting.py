@@ -129,19 +129,24 @@ class _Shooter:
             try:
                 # the Newton iterate exactly as it is (no start rule: the node's discrete
                 # state is part of the locked signature)
+                # (the end Jacobian only: the orbit's trajectory comes from dense runs)
                 r = run_compiled(cm, np.asarray(X[i], dtype=float), float(ts[i]),
                                  float(ts[i + 1]), p, opts, mode0=st.mode, dkind0=st.kind,
-                                 didx0=st.index, admit=False, checked=True)
+                                 didx0=st.index, admit=False, checked=True,
+                                 jacobian_only=True)
             except (ValueError, FloatingPointError) as exc:
                 raise _SimulationFailed(i, exc=exc) from None
             if r.status.failed or not np.all(np.isfinite(r.jacobian)):
-                raise _SimulationFailed(i, traj=r.trajectory(cm.model, opts, float(ts[i]),
-                                                             float(ts[i + 1])))
+                raise _SimulationFailed(i, traj=self._failed(X[i], st, ts[i], ts[i + 1]))
             end, s = self._end_of(r, st)
             runs.append(r)
             ends.append(end)
             sig.append(s)
         return runs, ends, tuple(sig)
+
+    def _failed(self, x, st, t0, t1) -> Trajectory:
+        """The failed run of an interval again, as a Trajectory (what the error reports)."""
+        return _trajectory(self.ctx, x, st, t0, t1, self.run_opts[False], admit=False)
 
     def _end_of(self, r, st):
         """``(end state, signature)`` of run ``r`` started in ``st``."""
@@ -197,6 +202,11 @@ class _Shooter:
     @staticmethod
     def norm(r, X) -> float:
         return float(np.max(np.abs(r)) / (1.0 + np.max(np.abs(X))))
+
+    def znorm(self, r, z) -> float:
+        """:meth:`norm` of the residual at the unknowns ``z`` (the node states are its first
+        ``N n`` entries: the same maximum, without making them a list)."""
+        return float(np.abs(r).max() / (1.0 + np.abs(z[:self.N * self.ctx.n]).max()))
 
 
 def _signature_of(events, end: KernelState, ctx: ModelContext) -> tuple:
@@ -526,8 +536,7 @@ def _newton(sh: _Shooter, X, T, *, tol, max_iter, lock_tol, history, allow_rebas
         # it is a multiplier 1 to the accuracy of the variational solution; the step is noise
         return max(sv[0], 1.0 + max(float(np.max(np.abs(tr.jacobian))) for tr in run["trajs"]))
 
-    def norm(r, z):
-        return sh.norm(r, unpack(z)[0])
+    norm = sh.znorm
 
     def on_accept(z, r, res):
         Xc, Tc = unpack(z)
@@ -722,7 +731,7 @@ def orbit_at(model, x0, *, params=None, period, t0=0.0, mode=None, tol: float = 
         raise OrbitError("simulation", _sim_message(sh, exc, [x0])) from None
     t1 = float(t0) + float(period)
     sh.states[0] = trajectory_start_state(
-        ctx, trajs[0].trajectory(ctx.cm.model, sh.run_opts[False], float(t0), t1))
+        ctx, _trajectory(ctx, x0, sh.states[0], float(t0), t1, sh.run_opts[False], admit=False))
     res = sh.norm(sh.residual([x0], float(period), trajs), [x0])
     return _build_orbit(sh, [x0], float(period), [res], converged=res <= tol)
 
