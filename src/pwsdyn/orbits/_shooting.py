@@ -41,7 +41,7 @@ from ..errors import ArgumentError
 from ..newton import TrialRejected, newton
 from ..integrate.compiled import (KernelState, ModelContext, check_state_name, event_states,
                                   initial_state, run_compiled, trajectory_start_state)
-from ..integrate.trajectory import DiscreteState, Trajectory
+from ..integrate.trajectory import DiscreteState, EventLog, Trajectory
 from ..model.spec import as_model
 from ..stability import floquet_multipliers
 from ._base import (MAX_ITER, MAX_NODES, MAX_PERIODS, RECURRENCE_MAX_PERIODS,
@@ -273,9 +273,15 @@ def _place_nodes(ctx, ref, st0, t0, T, nodes, max_nodes):
         return times, [st0] + [_state_at(ctx, ref, st0, t) for t in times[1:]]
     if nodes != "auto":
         raise ArgumentError(f"`nodes` must be 'auto' or a positive integer, got {nodes!r}")
-    evs = [e for e in ref.events if e.t < t0 + T]
-    states = event_states(ctx, evs, st0)
+    log = ref.events
+    times = log.t.tolist() if isinstance(log, EventLog) else [e.t for e in log]
+    if sum(t < t0 + T for t in times) < 2:
+        # no smooth segment between two events (a one-impact orbit): one node, and the
+        # log's records need not be made
+        return np.array([t0]), [st0]
+    evs = [e for e in log if e.t < t0 + T]
     cands = []
+    states = event_states(ctx, evs, st0)
     for k in range(len(evs) - 1):
         a, b = evs[k].t_after, evs[k + 1].t
         st = states[k][1]
@@ -471,12 +477,18 @@ def _events_near_nodes(trajs, ts, T, margin=1e-4) -> bool:
     trajectories or run results, one per interval)."""
     for i, tr in enumerate(trajs):
         if isinstance(tr, Trajectory):
-            for e in tr.events:
-                if e.t - ts[i] < margin * T or ts[i + 1] - e.t_after < margin * T:
-                    return True
+            evs = tr.events
+            if not isinstance(evs, EventLog):
+                for e in evs:
+                    if e.t - ts[i] < margin * T or ts[i + 1] - e.t_after < margin * T:
+                        return True
+                continue
+            # (the log's time columns: its records need not be made)
+            cols = evs.t, evs.t_after
         else:
-            a, b = ts[i], ts[i + 1]
-            for t, t_after in zip(tr.event_t.tolist(), tr.event_t_after.tolist()):
+            cols = tr.event_t, tr.event_t_after
+        a, b = ts[i], ts[i + 1]
+        for t, t_after in zip(cols[0].tolist(), cols[1].tolist()):
                 if t - a < margin * T or b - t_after < margin * T:
                     return True
     return False
