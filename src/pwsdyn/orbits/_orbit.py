@@ -361,8 +361,12 @@ class DeferredTrajectory:
 
 
 class _TrajectoryField:
-    """``PeriodicOrbit.trajectory``: a plain attribute, except that a
-    :class:`DeferredTrajectory` given to it is made (once) when it is read."""
+    """One period as a :class:`~pwsdyn.Trajectory`, with dense output and the variational
+    solution (``transfer_matrices``); for an orbit found by shooting it is integrated when
+    first read."""
+
+    # a plain attribute, except that a ``DeferredTrajectory`` given to it is made (once)
+    # when it is read; this docstring is the attribute's on the API pages
 
     def __get__(self, obj, owner=None):
         if obj is None:

@@ -136,7 +136,7 @@ class _Shooter:
                                  jacobian_only=True)
             except (ValueError, FloatingPointError) as exc:
                 raise _SimulationFailed(i, exc=exc) from None
-            if r.status.failed or not np.all(np.isfinite(r.jacobian)):
+            if r.status.failed or not np.isfinite(r.jacobian).all():
                 raise _SimulationFailed(i, traj=self._failed(X[i], st, ts[i], ts[i + 1]))
             end, s = self._end_of(r, st)
             runs.append(r)
@@ -159,18 +159,6 @@ class _Shooter:
             got = self._ends[key] = (end, _signature_of(evs, end, self.ctx))
         return got
 
-    def trajectories(self, X, T) -> list:
-        """The intervals as dense trajectories (for the orbit returned)."""
-        ts = self.times(T)
-        ctx, opts = self.ctx, self.run_opts[True]
-        out = []
-        for i in range(self.N):
-            st = self.states[i]
-            r = run_compiled(ctx.cm, np.asarray(X[i], dtype=float), float(ts[i]),
-                             float(ts[i + 1]), ctx.p, opts, mode0=st.mode, dkind0=st.kind,
-                             didx0=st.index, admit=False, checked=True)
-            out.append(r.trajectory(ctx.cm.model, opts, float(ts[i]), float(ts[i + 1])))
-        return out
 
     def residual(self, X, T, runs):
         N, n = self.N, self.ctx.n
@@ -207,6 +195,18 @@ class _Shooter:
         """:meth:`norm` of the residual at the unknowns ``z`` (the node states are its first
         ``N n`` entries: the same maximum, without making them a list)."""
         return float(np.abs(r).max() / (1.0 + np.abs(z[:self.N * self.ctx.n]).max()))
+
+
+def _dense_intervals(ctx: ModelContext, states, X, ts, opts) -> list:
+    """The shooting intervals from the node states ``X`` in discrete states ``states``
+    between the node times ``ts``, as dense trajectories (for the orbit returned)."""
+    out = []
+    for i, st in enumerate(states):
+        r = run_compiled(ctx.cm, np.asarray(X[i], dtype=float), float(ts[i]),
+                         float(ts[i + 1]), ctx.p, opts, mode0=st.mode, dkind0=st.kind,
+                         didx0=st.index, admit=False, checked=True)
+        out.append(r.trajectory(ctx.cm.model, opts, float(ts[i]), float(ts[i + 1])))
+    return out
 
 
 def _signature_of(events, end: KernelState, ctx: ModelContext) -> tuple:
@@ -546,7 +546,7 @@ def _newton(sh: _Shooter, X, T, *, tol, max_iter, lock_tol, history, allow_rebas
     def jac_scale(J, sv):
         # relative to the blocks' scale (M_i and I): a smallest singular value below 1e-9 of
         # it is a multiplier 1 to the accuracy of the variational solution; the step is noise
-        return max(sv[0], 1.0 + max(float(np.max(np.abs(tr.jacobian))) for tr in run["trajs"]))
+        return max(sv[0], 1.0 + max(float(np.abs(tr.jacobian).max()) for tr in run["trajs"]))
 
     norm = sh.znorm
 
@@ -674,7 +674,7 @@ def _build_orbit(sh: _Shooter, X, T, history, *, converged, runs=None) -> Period
     n = ctx.n
     # the monodromy as merge_intervals makes the trajectory's Jacobian: the product of the
     # intervals' Jacobians, from the identity
-    M = np.eye(n)
+    M = sh._eye
     events: list = []
     for r in runs:
         M = r.jacobian @ M
@@ -695,14 +695,14 @@ def _build_orbit(sh: _Shooter, X, T, history, *, converged, runs=None) -> Period
     # largest mismatch at the junctions of the intervals (the last one closes the period)
     closure = max(float(np.max(np.abs(runs[i].x - X[(i + 1) % len(runs)])))
                   for i in range(len(runs)))
-    # the dense runs, when the trajectory is read: a shooting problem of its own (the
-    # states of this one's nodes as they are now) and copies of the unknowns
-    dense = _Shooter(ctx, sh.t0, sh.T, sh.tau, list(sh.states), sh.autonomous, sh.opts)
-    Xd = [np.array(x, dtype=float) for x in X]
-    Td = float(T)
+    # the dense runs, when the trajectory is read: the nodes' discrete states as they are
+    # now, copies of the unknowns and node times
+    states, Xd, tsd = list(sh.states), [np.array(x, dtype=float) for x in X], ts.copy()
+    opts = sh.run_opts[True]
 
     def trajectory():
-        return merge_intervals(dense.trajectories(Xd, Td), t0=ts[0], t_end=ts[-1])
+        return merge_intervals(_dense_intervals(ctx, states, Xd, tsd, opts), t0=tsd[0],
+                               t_end=tsd[-1])
 
     return PeriodicOrbit(
         model=ctx.model, params=dict(ctx.params), t0=float(ts[0]), x0=x0,
