@@ -100,8 +100,11 @@ class _Shooter:
         # skip the check (every interval of every iteration runs with one of the two)
         self.run_opts = {d: dict(opts, dense=d, variational=True, throw=False)
                          for d in (False, True)}
-        # a forced orbit's node times are fixed
+        # a forced orbit's node times are fixed (an autonomous one's: see times)
         self._ts = None if autonomous else np.append(self.tau, self.t0 + self.T)
+        if self._ts is not None:
+            self._ts.flags.writeable = False
+        self._t_of = None
         # end state and event signature of an interval by its start state and event codes:
         # both are functions of the codes (the names are made from them), so the event log's
         # records and names are made once per distinct sequence, not once per run
@@ -113,8 +116,15 @@ class _Shooter:
         return len(self.tau)
 
     def times(self, T: float) -> np.ndarray:
-        if self.autonomous:
-            return np.append(self.t0 + T * self.frac, self.t0 + T)
+        """The node times and the end of the period, for the period ``T`` (read-only: an
+        autonomous problem's are kept for the last ``T`` asked, which residual, Jacobian and
+        node checks of one iterate all ask for)."""
+        if not self.autonomous:
+            return self._ts
+        if T != self._t_of:
+            ts = np.append(self.t0 + T * self.frac, self.t0 + T)
+            ts.flags.writeable = False
+            self._t_of, self._ts = T, ts
         return self._ts
 
     def run(self, X, T):
