@@ -35,14 +35,25 @@ Run::
 
 ``--save`` writes ``results/orbit.json``, keeping the rows of other labels (a run of the code
 before a change, ``PYTHONPATH`` at its ``src``, and one after sit side by side).
+
+``--base PATH`` times a previous version's ``src`` alongside this checkout's, in one run: worker
+processes of the two trees alternate for ``--rounds`` rounds (so both see the same load), each
+timing every case with its own scipy baseline; the best times per tree are reported (labels
+``before`` and ``after``) with the speed-up of pwsdyn between them, and the orbits the two
+trees found are compared bit for bit (state, period, multipliers; exit status 2 if they
+differ)::
+
+    python benchmarks/bench_orbit.py --base /path/to/old/src --save
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import platform
+import subprocess
 import sys
 import time
 from datetime import datetime, timezone
@@ -204,13 +215,80 @@ def timed(fn, repeats):
     return out, best_w, best_c
 
 
+def _digest(*arrays) -> str:
+    h = hashlib.sha256()
+    for a in arrays:
+        a = np.ascontiguousarray(np.asarray(a))
+        h.update(str(a.dtype).encode() + repr(a.shape).encode() + a.tobytes())
+    return h.hexdigest()[:16]
+
+
+def _run_tree(src: Path, args) -> list:
+    """The rows of one worker process with ``src`` first on the path."""
+    env = dict(os.environ, PYTHONPATH=str(src))
+    cmd = [sys.executable, __file__, "--worker", "--repeats", str(args.repeats)]
+    out = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
+    if out.returncode not in (0, 2):
+        sys.stderr.write(out.stderr)
+        raise SystemExit(f"worker for {src} failed")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main_base(args) -> int:
+    """Before (``--base``) and after (this checkout) in one run, alternating workers."""
+    trees = {"before": args.base.resolve(), "after": HERE.parent / "src"}
+    runs = {k: [] for k in trees}
+    for _ in range(args.rounds):
+        for k, src in trees.items():
+            runs[k].append(_run_tree(src, args))
+    rows, status = [], 0
+    print(f"{'case':<30} {'tree':<7} {'pwsdyn ms':>10} {'scipy ms':>10} {'ratio':>7} "
+          f"{'ratio CPU':>9}")
+    for i, case in enumerate(r["case"] for r in runs["after"][0]):
+        best = {}
+        for k in trees:
+            rs = [run[i] for run in runs[k]]
+            row = dict(rs[-1], label=k)
+            for key in ("pwsdyn_wall_s", "pwsdyn_cpu_s", "scipy_wall_s", "scipy_cpu_s"):
+                row[key] = min(r[key] for r in rs)
+            row["ratio_wall"] = row["scipy_wall_s"] / row["pwsdyn_wall_s"]
+            row["ratio_cpu"] = row["scipy_cpu_s"] / row["pwsdyn_cpu_s"]
+            best[k] = row
+            rows.append(row)
+            print(f"{case:<30} {k:<7} {1e3 * row['pwsdyn_wall_s']:>10.2f} "
+                  f"{1e3 * row['scipy_wall_s']:>10.2f} {row['ratio_wall']:>7.1f} "
+                  f"{row['ratio_cpu']:>9.1f}")
+        same = best["before"]["orbit_digest"] == best["after"]["orbit_digest"]
+        status = status if same else 2
+        print(f"{'':<30} pwsdyn after / before: wall "
+              f"{best['after']['pwsdyn_wall_s'] / best['before']['pwsdyn_wall_s']:.3f}, CPU "
+              f"{best['after']['pwsdyn_cpu_s'] / best['before']['pwsdyn_cpu_s']:.3f}; orbits "
+              + ("bit-identical" if same else "DIFFER"))
+    if args.save:
+        meta = dict(date=datetime.now(timezone.utc).isoformat(timespec="seconds"),
+                    machine=platform.machine(), python=platform.python_version(),
+                    numpy=np.__version__, scipy=scipy.__version__, cpus=os.cpu_count(),
+                    load=os.getloadavg(), repeats=args.repeats, rounds=args.rounds,
+                    trees={"before": "the src given as --base", "after": "this checkout's src"},
+                    identical=status == 0)
+        (HERE / "results").mkdir(exist_ok=True)
+        with open(HERE / "results" / "orbit.json", "w") as fh:
+            json.dump(dict(meta=meta, rows=rows), fh, indent=1, default=str)
+    return status
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--save", action="store_true", help="write results/orbit.json")
     ap.add_argument("--label", default="current",
                     help="name of this run's rows in the saved file (e.g. before, after)")
+    ap.add_argument("--base", type=Path, help="a previous version's src, timed alongside")
+    ap.add_argument("--rounds", type=int, default=3, help="worker rounds per tree (--base)")
+    ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.base is not None:
+        return main_base(args)
     cases = {"impact-oscillator, stable": forced_case("stable"),
              "impact-oscillator, unstable": forced_case("unstable"),
              "vdp-wall (autonomous)": vdp_case()}
@@ -223,8 +301,12 @@ def main(argv=None):
         pw, wp, cp = timed(rp, args.repeats)
         sc, ws, cs = timed(rs, max(1, args.repeats // 2))
         acc = check(pw, sc)
+        o = pw if isinstance(pw, pwsdyn.PeriodicOrbit) else None
+        dig = (_digest(o.x0, o.period, o.multipliers, o.monodromy) if o is not None else
+               _digest(pw[0], pw[1], pw[3]))
         row = dict(label=args.label, case=name, pwsdyn_wall_s=wp, pwsdyn_cpu_s=cp, scipy_wall_s=ws,
-                   scipy_cpu_s=cs, ratio_wall=ws / wp, ratio_cpu=cs / cp, **acc)
+                   scipy_cpu_s=cs, ratio_wall=ws / wp, ratio_cpu=cs / cp, orbit_digest=dig,
+                   **acc)
         rows.append(row)
         if "orbit_err_pwsdyn" in acc:
             txt = (f"orbit err pwsdyn {acc['orbit_err_pwsdyn']:.1e} scipy "
@@ -253,6 +335,8 @@ def main(argv=None):
             r["meta"] = meta
         with open(path, "w") as fh:
             json.dump(dict(meta=meta, rows=kept + rows), fh, indent=1, default=str)
+    if args.worker:
+        print(json.dumps(rows, default=str))
     if not ok:
         print("accuracy check FAILED", file=sys.stderr)
         return 2

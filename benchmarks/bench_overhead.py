@@ -241,9 +241,13 @@ def main(argv=None) -> int:
         from bench_impact_oscillator import machine_info  # noqa: E402
 
         out = {"date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-               "machine": machine_info(), "argv": sys.argv[1:],
+               "machine": machine_info(),
+               # (no paths of this machine: the base tree is named by its role)
+               "argv": ["<base src>" if args.base is not None and a == str(args.base) else a
+                        for a in sys.argv[1:]],
                "us_per_call": best, "summary": summ,
-               "trees": {k: str(v) for k, v in trees.items()},
+               "trees": {k: ("the src given as --base" if k == "before" else
+                             "this checkout's src") for k in trees},
                "identical": status == 0, "profile": prof}
         path = HERE / "results" / "overhead.json"
         path.write_text(json.dumps(out, indent=1) + "\n")

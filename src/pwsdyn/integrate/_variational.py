@@ -19,6 +19,39 @@ from __future__ import annotations
 import numpy as np
 
 
+#: Read-only identity matrices by size (the runs of one model all need the same one).
+_EYES: dict = {}
+
+
+def _eye(n: int) -> np.ndarray:
+    e = _EYES.get(n)
+    if e is None:
+        e = np.eye(n)
+        e.flags.writeable = False
+        if len(_EYES) < 64:
+            _EYES[n] = e
+    return e
+
+
+def segments_jacobian(n: int, ev_info: np.ndarray, ev_xb: np.ndarray, ev_xa: np.ndarray,
+                      y_fin: np.ndarray) -> np.ndarray:
+    """``dx(t_end)/dx0`` of a per-segment variational run alone: the Jacobian
+    :func:`assemble_segments` returns, by the same products in the same order (so the same
+    bits), without the transfer-matrix list and without globalising ``Phi`` in the outputs
+    (which are left as the kernel wrote them). For runs whose end Jacobian is all that is
+    read (the Newton iterations of shooting)."""
+    m = len(ev_info)
+    nn = n * n
+    if not m:
+        return y_fin[n:n + nn].reshape(n, n).copy() @ _eye(n)
+    P = np.empty((m + 1, n, n))
+    P[0] = _eye(n)
+    for r in range(m):
+        P[r + 1] = (ev_xa[r, n:n + nn].reshape(n, n).copy()
+                    @ (ev_xb[r, n:n + nn].reshape(n, n).copy() @ P[r]))
+    return y_fin[n:n + nn].reshape(n, n).copy() @ P[m]
+
+
 def assemble_segments(n: int, nodes_y: np.ndarray, dense: np.ndarray, ev_info: np.ndarray,
                       ev_xb: np.ndarray, ev_xa: np.ndarray, y_fin: np.ndarray):
     """Transfer matrices of a per-segment variational run; globalise ``Phi`` in place.

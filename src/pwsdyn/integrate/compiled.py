@@ -47,7 +47,7 @@ from ._codes import (EVENT_LOG_KINDS, REGULAR, SAVE_DENSE, SAVE_EVENTS, SAVE_NOD
                      STICK, VAR_NONE, VAR_SEGMENTS, KernelResult, kernel_options)
 from ._load import kernel
 from ._start import ADMIT_BEHIND, Start, abs_max, start_state
-from ._variational import assemble_segments
+from ._variational import assemble_segments, segments_jacobian
 from .options import (DEFAULT_CHATTER_RATIO, _check_options, _exact_code, _max_step,
                       kernel_tables, resolve_method)
 from .tableaus import METHODS
@@ -416,7 +416,7 @@ _STATUS = {int(s): s for s in Status}
 
 def run_compiled(cm, x, t0, t_end, p, opts, mode0=None, dkind0=None, didx0=None, stop=None,
                  sample=None, admit=True, refuse=False, store_dense=False, model=None,
-                 checked=False) -> RunResult:
+                 checked=False, jacobian_only=False) -> RunResult:
     """One kernel run of the compiled model ``cm`` at parameter vector ``p`` with the merged
     options ``opts`` (:func:`pwsdyn.integrate.options.integrator_options`), without
     re-validating model, state or parameters.
@@ -436,8 +436,11 @@ def run_compiled(cm, x, t0, t_end, p, opts, mode0=None, dkind0=None, didx0=None,
     ``store_dense`` stores the dense output of every step as the run goes (as variational
     runs do) instead of rebuilding it from the nodes when it is read. ``model``: the model
     (default ``cm.model``; one with the same digest). ``checked``: ``opts`` passed
-    :func:`~pwsdyn.integrate.options.check_options` already. Never raises for a failed run:
-    the status says it.
+    :func:`~pwsdyn.integrate.options.check_options` already. ``jacobian_only`` (a
+    variational run): the result's ``jacobian`` only, ``transfer_matrices`` None and its
+    nodes and event states' variational parts left per segment, so no
+    :meth:`RunResult.trajectory` is to be made from it (Newton iterations read the end state,
+    the Jacobian and the events' states). Never raises for a failed run: the status says it.
     """
     if not checked:
         _check_options(opts)
@@ -507,7 +510,9 @@ def run_compiled(cm, x, t0, t_end, p, opts, mode0=None, dkind0=None, didx0=None,
     n = model.n_states
     r = RunResult()
     r.jacobian = r.transfer_matrices = None
-    if opts["variational"]:
+    if opts["variational"] and jacobian_only:
+        r.jacobian = segments_jacobian(n, raw.ev_info, raw.ev_xb, raw.ev_xa, raw.y)
+    elif opts["variational"]:
         # per-segment transfer matrices; Phi made global in nodes, dense output and events
         r.transfer_matrices, r.jacobian = assemble_segments(n, raw.nodes_y, raw.dense,
                                                             raw.ev_info, raw.ev_xb, raw.ev_xa,

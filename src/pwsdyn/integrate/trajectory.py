@@ -279,7 +279,13 @@ class EventLog(Sequence):
                     names[key] = self._state_name(self.model, k, i, m)
                 return names[key]
 
-            kinds, evn = self.kind.tolist(), self.name.tolist()
+            # the kinds and names of :attr:`kind` and :attr:`name` (the same lookups by code,
+            # made in Python: for the few events of a shooting interval the arrays cost more)
+            kinds = [EVENT_KINDS[c] for c in self.kind_code.tolist()]
+            ev = [e.name for e in self.model.events] or [""]
+            sw = [s.name for s in self.model.switches] or [""]
+            evn = [sw[r] if k in SWITCH_EVENT_KINDS else ev[r]
+                   for k, r in zip(kinds, self.ref.tolist())]
             sb, sa = self.state_before.tolist(), self.state_after.tolist()
             t, t2 = self.t.tolist(), self.t_after.tolist()
             self._records = [EventRecord(t[r], evn[r], kinds[r], self.x_before[r],

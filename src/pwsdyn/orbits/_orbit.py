@@ -349,6 +349,49 @@ class PeriodicOrbit:
         return save_dataset(self.to_dataset(), path, overwrite=overwrite)
 
 
+class DeferredTrajectory:
+    """A :class:`PeriodicOrbit`'s trajectory not made yet: ``make()`` integrates it when the
+    orbit's ``trajectory`` is first read (the dense runs of the shooting intervals, which the
+    Newton iterations and the multipliers do not need)."""
+
+    __slots__ = ("make",)
+
+    def __init__(self, make):
+        self.make = make
+
+
+class _TrajectoryField:
+    """One period as a :class:`~pwsdyn.Trajectory`, with dense output and the variational
+    solution (``transfer_matrices``); for an orbit found by shooting it is integrated when
+    first read."""
+
+    # a plain attribute, except that a ``DeferredTrajectory`` given to it is made (once)
+    # when it is read; this docstring is the attribute's on the API pages
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            return self
+        value = obj.__dict__["_trajectory"]
+        if isinstance(value, DeferredTrajectory):
+            value = obj.__dict__["_trajectory"] = value.make()
+        return value
+
+    def __set__(self, obj, value):
+        obj.__dict__["_trajectory"] = value
+
+
+def _orbit_getstate(self):
+    # a deferred trajectory holds the solver's closure: made before the orbit is pickled
+    # or deep-copied
+    self.trajectory
+    return dict(self.__dict__)
+
+
+# (set after the dataclass is made, so that its __init__ assigns through the descriptor)
+PeriodicOrbit.trajectory = _TrajectoryField()
+PeriodicOrbit.__getstate__ = _orbit_getstate
+
+
 def _fmt_complex(m, digits: int = 12) -> str:
     m = complex(m)
     if m.imag == 0:

@@ -41,13 +41,14 @@ from ..errors import ArgumentError
 from ..newton import TrialRejected, newton
 from ..integrate.compiled import (KernelState, ModelContext, check_state_name, event_states,
                                   initial_state, run_compiled, trajectory_start_state)
-from ..integrate.trajectory import DiscreteState, Trajectory
+from ..integrate.trajectory import DiscreteState, EventLog, Trajectory
 from ..model.spec import as_model
 from ..stability import floquet_multipliers
 from ._base import (MAX_ITER, MAX_NODES, MAX_PERIODS, RECURRENCE_MAX_PERIODS,
                     STABILITY_MARGIN, OrbitError, shooting_options)
 from ._base import SHOOTING_DEFAULTS as SHOOTING_DEFAULTS  # its old home, still imported
-from ._orbit import PeriodicOrbit, Recurrence, RecurrenceWarning, merge_intervals
+from ._orbit import (DeferredTrajectory, PeriodicOrbit, Recurrence, RecurrenceWarning,
+                     merge_intervals)
 from .problem import locked_orbit
 
 if TYPE_CHECKING:
@@ -64,23 +65,22 @@ class _SimulationFailed(Exception):
 
 def _trajectory(ctx: ModelContext, x0, state: KernelState, t0: float, t_end: float, opts, *,
                 admit: bool = True, refuse: bool = False) -> Trajectory:
-    """One run of the context's model from ``x0`` in ``state``, as a Trajectory (the nodes'
-    events, Jacobians and dense output are what shooting reads). ``admit=False``: the state
-    exactly as given (a Newton iterate); ``refuse``: a guess inside an impact constraint is
-    an error, as in :func:`pwsdyn.simulate`."""
+    """One run of the context's model from ``x0`` in ``state``, as a Trajectory (the guess's
+    events and dense output place the nodes). ``admit=False``: the state exactly as given (a
+    Newton iterate); ``refuse``: a guess inside an impact constraint is an error, as in
+    :func:`pwsdyn.simulate`."""
     run = run_compiled(ctx.cm, np.asarray(x0, dtype=float), float(t0), float(t_end), ctx.p,
                        opts, mode0=state.mode, dkind0=state.kind, didx0=state.index,
                        admit=admit, refuse=refuse)
     return run.trajectory(ctx.cm.model, opts, float(t0), float(t_end))
 
 
-def _signature_of(traj, end: KernelState, ctx: ModelContext) -> tuple:
-    return (tuple((e.kind, e.name, e.mode_before, e.mode_after) for e in traj.events),
-            ctx.state_name(end))
-
-
 class _Shooter:
-    """The shooting problem: nodes, their discrete states, residual and Newton matrix."""
+    """The shooting problem: nodes, their discrete states, residual and Newton matrix.
+
+    The Newton iterations read plain run results (:class:`~pwsdyn.integrate.compiled.
+    RunResult`: end state, Jacobian, event columns); a :class:`~pwsdyn.Trajectory` is made
+    only for the orbit returned, and only when its ``trajectory`` is read."""
 
     def __init__(self, ctx: ModelContext, t0: float, T: float, node_times, node_states,
                  autonomous: bool, opts: dict, phase_ref=None, phase_normal=None):
@@ -95,58 +95,103 @@ class _Shooter:
         self.phase_ref = phase_ref
         self.phase_normal = phase_normal
         self.gain = float(opts.get("sliding_gain", 0.0))
+        # the options of the Newton runs and of the orbit's dense runs: ``opts`` were checked
+        # by shooting_options, and the flags set here are valid by construction, so the runs
+        # skip the check (every interval of every iteration runs with one of the two)
+        self.run_opts = {d: dict(opts, dense=d, variational=True, throw=False)
+                         for d in (False, True)}
+        # a forced orbit's node times are fixed (an autonomous one's: see times)
+        self._ts = None if autonomous else np.append(self.tau, self.t0 + self.T)
+        if self._ts is not None:
+            self._ts.flags.writeable = False
+        self._t_of = None
+        # end state and event signature of an interval by its start state and event codes:
+        # both are functions of the codes (the names are made from them), so the event log's
+        # records and names are made once per distinct sequence, not once per run
+        self._ends: dict = {}
+        self._eye = np.eye(ctx.n)
 
     @property
     def N(self) -> int:
         return len(self.tau)
 
     def times(self, T: float) -> np.ndarray:
-        if self.autonomous:
-            return np.append(self.t0 + T * self.frac, self.t0 + T)
-        return np.append(self.tau, self.t0 + self.T)
+        """The node times and the end of the period, for the period ``T`` (read-only: an
+        autonomous problem's are kept for the last ``T`` asked, which residual, Jacobian and
+        node checks of one iterate all ask for)."""
+        if not self.autonomous:
+            return self._ts
+        if T != self._t_of:
+            ts = np.append(self.t0 + T * self.frac, self.t0 + T)
+            ts.flags.writeable = False
+            self._t_of, self._ts = T, ts
+        return self._ts
 
-    def run(self, X, T, *, dense=False):
-        """Integrate every interval; return per-interval trajectories, end states, ends."""
+    def run(self, X, T):
+        """Integrate every interval with the variational equations; return the runs
+        (:class:`~pwsdyn.integrate.compiled.RunResult`), their end states and signatures."""
         ts = self.times(T)
-        opts = dict(self.opts, dense=dense, variational=True, throw=False)
-        trajs, ends = [], []
+        ctx = self.ctx
+        cm, p, opts = ctx.cm, ctx.p, self.run_opts[False]
+        runs, ends, sig = [], [], []
         for i in range(self.N):
             st = self.states[i]
             try:
                 # the Newton iterate exactly as it is (no start rule: the node's discrete
                 # state is part of the locked signature)
-                tr = _trajectory(self.ctx, X[i], st, ts[i], ts[i + 1], opts, admit=False)
+                # (the end Jacobian only: the orbit's trajectory comes from dense runs)
+                r = run_compiled(cm, np.asarray(X[i], dtype=float), float(ts[i]),
+                                 float(ts[i + 1]), p, opts, mode0=st.mode, dkind0=st.kind,
+                                 didx0=st.index, admit=False, checked=True,
+                                 jacobian_only=True)
             except (ValueError, FloatingPointError) as exc:
                 raise _SimulationFailed(i, exc=exc) from None
-            if tr.status.failed or not np.all(np.isfinite(tr.jacobian)):
-                raise _SimulationFailed(i, traj=tr)
-            end = event_states(self.ctx, tr.events, st)[-1][1] if tr.events else st
-            trajs.append(tr)
+            if r.status.failed or not np.isfinite(r.jacobian).all():
+                raise _SimulationFailed(i, traj=self._failed(X[i], st, ts[i], ts[i + 1]))
+            end, s = self._end_of(r, st)
+            runs.append(r)
             ends.append(end)
-        return trajs, ends
+            sig.append(s)
+        return runs, ends, tuple(sig)
 
-    def residual(self, X, T, trajs):
+    def _failed(self, x, st, t0, t1) -> Trajectory:
+        """The failed run of an interval again, as a Trajectory (what the error reports)."""
+        return _trajectory(self.ctx, x, st, t0, t1, self.run_opts[False], admit=False)
+
+    def _end_of(self, r, st):
+        """``(end state, signature)`` of run ``r`` started in ``st``."""
+        info = r._raw.ev_info
+        key = (st, info.shape[0], info[:, :8].tobytes())
+        got = self._ends.get(key)
+        if got is None:
+            evs = r.events
+            end = event_states(self.ctx, evs, st)[-1][1] if len(evs) else st
+            got = self._ends[key] = (end, _signature_of(evs, end, self.ctx))
+        return got
+
+
+    def residual(self, X, T, runs):
         N, n = self.N, self.ctx.n
         r = np.empty(N * n + (1 if self.autonomous else 0))
         for i in range(N):
-            r[i * n:(i + 1) * n] = trajs[i].x_final - X[(i + 1) % N]
+            r[i * n:(i + 1) * n] = runs[i].x - X[(i + 1) % N]
         if self.autonomous:
             r[-1] = self.phase_normal @ (X[0] - self.phase_ref)
         return r
 
-    def jacobian(self, X, T, trajs, ends):
+    def jacobian(self, X, T, runs, ends):
         N, n = self.N, self.ctx.n
         m = N * n + (1 if self.autonomous else 0)
         J = np.zeros((m, m))
         ts = self.times(T)
         for i in range(N):
             rows = slice(i * n, (i + 1) * n)
-            J[rows, i * n:(i + 1) * n] += trajs[i].jacobian
+            J[rows, i * n:(i + 1) * n] += runs[i].jacobian
             k = (i + 1) % N
-            J[rows, k * n:(k + 1) * n] -= np.eye(n)
+            J[rows, k * n:(k + 1) * n] -= self._eye
             if self.autonomous:
                 # y_i = flow over (t_{i+1} - t_i) = T (frac_{i+1} - frac_i): dy_i/dT
-                f_end = self.ctx.field(ts[i + 1], trajs[i].x_final, ends[i], self.gain)
+                f_end = self.ctx.field(ts[i + 1], runs[i].x, ends[i], self.gain)
                 J[rows, -1] = (ts[i + 1] - ts[i]) / T * f_end
         if self.autonomous:
             J[-1, :n] = self.phase_normal
@@ -155,6 +200,28 @@ class _Shooter:
     @staticmethod
     def norm(r, X) -> float:
         return float(np.max(np.abs(r)) / (1.0 + np.max(np.abs(X))))
+
+    def znorm(self, r, z) -> float:
+        """:meth:`norm` of the residual at the unknowns ``z`` (the node states are its first
+        ``N n`` entries: the same maximum, without making them a list)."""
+        return float(np.abs(r).max() / (1.0 + np.abs(z[:self.N * self.ctx.n]).max()))
+
+
+def _dense_intervals(ctx: ModelContext, states, X, ts, opts) -> list:
+    """The shooting intervals from the node states ``X`` in discrete states ``states``
+    between the node times ``ts``, as dense trajectories (for the orbit returned)."""
+    out = []
+    for i, st in enumerate(states):
+        r = run_compiled(ctx.cm, np.asarray(X[i], dtype=float), float(ts[i]),
+                         float(ts[i + 1]), ctx.p, opts, mode0=st.mode, dkind0=st.kind,
+                         didx0=st.index, admit=False, checked=True)
+        out.append(r.trajectory(ctx.cm.model, opts, float(ts[i]), float(ts[i + 1])))
+    return out
+
+
+def _signature_of(events, end: KernelState, ctx: ModelContext) -> tuple:
+    return (tuple((e.kind, e.name, e.mode_before, e.mode_after) for e in events),
+            ctx.state_name(end))
 
 
 def _initial_state(ctx: ModelContext, mode) -> KernelState:
@@ -216,9 +283,15 @@ def _place_nodes(ctx, ref, st0, t0, T, nodes, max_nodes):
         return times, [st0] + [_state_at(ctx, ref, st0, t) for t in times[1:]]
     if nodes != "auto":
         raise ArgumentError(f"`nodes` must be 'auto' or a positive integer, got {nodes!r}")
-    evs = [e for e in ref.events if e.t < t0 + T]
-    states = event_states(ctx, evs, st0)
+    log = ref.events
+    times = log.t.tolist() if isinstance(log, EventLog) else [e.t for e in log]
+    if sum(t < t0 + T for t in times) < 2:
+        # no smooth segment between two events (a one-impact orbit): one node, and the
+        # log's records need not be made
+        return np.array([t0]), [st0]
+    evs = [e for e in log if e.t < t0 + T]
     cands = []
+    states = event_states(ctx, evs, st0)
     for k in range(len(evs) - 1):
         a, b = evs[k].t_after, evs[k + 1].t
         st = states[k][1]
@@ -410,11 +483,24 @@ class _Rebase(Exception):
 
 
 def _events_near_nodes(trajs, ts, T, margin=1e-4) -> bool:
-    """An event within ``margin * T`` of the start or end of its interval."""
+    """An event within ``margin * T`` of the start or end of its interval (``trajs``:
+    trajectories or run results, one per interval)."""
     for i, tr in enumerate(trajs):
-        for e in tr.events:
-            if e.t - ts[i] < margin * T or ts[i + 1] - e.t_after < margin * T:
-                return True
+        if isinstance(tr, Trajectory):
+            evs = tr.events
+            if not isinstance(evs, EventLog):
+                for e in evs:
+                    if e.t - ts[i] < margin * T or ts[i + 1] - e.t_after < margin * T:
+                        return True
+                continue
+            # (the log's time columns: its records need not be made)
+            cols = evs.t, evs.t_after
+        else:
+            cols = tr.event_t, tr.event_t_after
+        a, b = ts[i], ts[i + 1]
+        for t, t_after in zip(cols[0].tolist(), cols[1].tolist()):
+                if t - a < margin * T or b - t_after < margin * T:
+                    return True
     return False
 
 
@@ -441,19 +527,19 @@ def _newton(sh: _Shooter, X, T, *, tol, max_iter, lock_tol, history, allow_rebas
         Xc = [z[i * n:(i + 1) * n] for i in range(N)]
         return Xc, (float(z[-1]) if sh.autonomous else T_fixed)
 
-    def evaluate(Xc, Tc):
-        trajs, ends = sh.run(Xc, Tc)
-        sig = tuple(_signature_of(tr, e, ctx) for tr, e in zip(trajs, ends))
-        run.update(trajs=trajs, ends=ends, sig=sig)
+    def evaluate(Xc, Tc, z):
+        trajs, ends, sig = sh.run(Xc, Tc)
+        # (``z``: the unknowns these runs are at, so that the orbit returned reuses them)
+        run.update(trajs=trajs, ends=ends, sig=sig, z=z.copy())
         return sh.residual(Xc, Tc, trajs)
 
     def fun(z):
         Xc, Tc = unpack(z)
         if sh.autonomous and "trajs" in run and not (0.05 * sh.T < Tc < 20.0 * sh.T):
             raise TrialRejected("the period left its range", "period")
-        saved = {k: run[k] for k in ("trajs", "ends", "sig") if k in run}
+        saved = {k: run[k] for k in ("trajs", "ends", "sig", "z") if k in run}
         try:
-            r = evaluate(Xc, Tc)
+            r = evaluate(Xc, Tc, z)
         except _SimulationFailed as exc:
             run.update(saved)
             raise TrialRejected(_sim_message(sh, exc, Xc), "simulation", exc) from None
@@ -470,10 +556,9 @@ def _newton(sh: _Shooter, X, T, *, tol, max_iter, lock_tol, history, allow_rebas
     def jac_scale(J, sv):
         # relative to the blocks' scale (M_i and I): a smallest singular value below 1e-9 of
         # it is a multiplier 1 to the accuracy of the variational solution; the step is noise
-        return max(sv[0], 1.0 + max(float(np.max(np.abs(tr.jacobian))) for tr in run["trajs"]))
+        return max(sv[0], 1.0 + max(float(np.abs(tr.jacobian).max()) for tr in run["trajs"]))
 
-    def norm(r, z):
-        return sh.norm(r, unpack(z)[0])
+    norm = sh.znorm
 
     def on_accept(z, r, res):
         Xc, Tc = unpack(z)
@@ -487,7 +572,7 @@ def _newton(sh: _Shooter, X, T, *, tol, max_iter, lock_tol, history, allow_rebas
             for i in mism:
                 sh.states[(i + 1) % N] = ends[i]
             try:
-                new = evaluate(Xc, Tc)
+                new = evaluate(Xc, Tc, z)
             except _SimulationFailed as exc:
                 raise _Fail("simulation", _sim_message(sh, exc, Xc), Xc, Tc) from None
             res = norm(new, z)
@@ -526,7 +611,11 @@ def _newton(sh: _Shooter, X, T, *, tol, max_iter, lock_tol, history, allow_rebas
                 fail("equilibrium", f"Newton converged to an equilibrium (the vector field "
                      f"vanishes at x0 = {np.asarray(Xc[0]).tolist()}), not to a periodic "
                      f"orbit: the guess is not near one", Xc, Tc)
-        return _build_orbit(sh, Xc, Tc, history, converged=True, trajs_sig=run["sig"])
+        # the last runs are at the converged unknowns (Newton stops right after evaluating
+        # them): the orbit is made from them, not integrated again
+        same = "z" in run and np.array_equal(run["z"], out.x)
+        return _build_orbit(sh, Xc, Tc, history, converged=True,
+                            runs=(run["trajs"], run["ends"]) if same else None)
     res = history[-1] if history else float("nan")
     it = out.iterations
     if out.reason == "simulation":
@@ -582,13 +671,24 @@ def _sim_message(sh, exc: _SimulationFailed, X) -> str:
     return f"shooting interval {exc.interval} could not be integrated: {exc.exc}"
 
 
-def _build_orbit(sh: _Shooter, X, T, history, *, converged, trajs_sig=None) -> PeriodicOrbit:
-    """The orbit at the iterate ``(X, T)``: one dense run per interval, merged."""
+def _build_orbit(sh: _Shooter, X, T, history, *, converged, runs=None) -> PeriodicOrbit:
+    """The orbit at the iterate ``(X, T)``, from the runs of its intervals there (``runs``:
+    ``(results, end states)`` of :meth:`_Shooter.run` at ``(X, T)``, or None to make them).
+    Its ``trajectory`` (the intervals' dense runs, merged) is integrated when first read: the
+    same runs with dense output, so the same steps, events and Jacobians."""
     ctx = sh.ctx
-    trajs, ends = sh.run(X, T, dense=True)
+    if runs is None:
+        runs = sh.run(X, T)[:2]
+    runs = runs[0]
     ts = sh.times(T)
-    traj = merge_intervals(trajs, t0=ts[0], t_end=ts[-1])
-    M = traj.jacobian
+    n = ctx.n
+    # the monodromy as merge_intervals makes the trajectory's Jacobian: the product of the
+    # intervals' Jacobians, from the identity
+    M = sh._eye
+    events: list = []
+    for r in runs:
+        M = r.jacobian @ M
+        events += list(r.events)
     gain = sh.gain
     st0 = sh.states[0]
     x0 = np.asarray(X[0], dtype=float).copy()
@@ -603,12 +703,21 @@ def _build_orbit(sh: _Shooter, X, T, history, *, converged, trajs_sig=None) -> P
     else:
         mult = floquet_multipliers(M)
     # largest mismatch at the junctions of the intervals (the last one closes the period)
-    closure = max(float(np.max(np.abs(trajs[i].x_final - X[(i + 1) % len(trajs)])))
-                  for i in range(len(trajs)))
+    closure = max(float(np.max(np.abs(runs[i].x - X[(i + 1) % len(runs)])))
+                  for i in range(len(runs)))
+    # the dense runs, when the trajectory is read: the nodes' discrete states as they are
+    # now, copies of the unknowns and node times
+    states, Xd, tsd = list(sh.states), [np.array(x, dtype=float) for x in X], ts.copy()
+    opts = sh.run_opts[True]
+
+    def trajectory():
+        return merge_intervals(_dense_intervals(ctx, states, Xd, tsd, opts), t0=tsd[0],
+                               t_end=tsd[-1])
+
     return PeriodicOrbit(
         model=ctx.model, params=dict(ctx.params), t0=float(ts[0]), x0=x0,
-        state0=ctx.state_name(st0), period=float(T), events=list(traj.events), trajectory=traj,
-        monodromy=M, multipliers=mult,
+        state0=ctx.state_name(st0), period=float(T), events=events,
+        trajectory=DeferredTrajectory(trajectory), monodromy=M, multipliers=mult,
         stable=bool(np.all(np.abs(mult) < 1.0 - STABILITY_MARGIN)),
         history=list(history), converged=converged, autonomous=sh.autonomous,
         trivial_multiplier=trivial, poincare_jacobian=pj,
@@ -639,10 +748,12 @@ def orbit_at(model, x0, *, params=None, period, t0=0.0, mode=None, tol: float = 
     sh = _Shooter(ctx, t0, period, np.array([float(t0)]), [st0], autonomous, opts, x0.copy(),
                   normal)
     try:
-        trajs, ends = sh.run([x0], float(period))
+        trajs, ends, _ = sh.run([x0], float(period))
     except _SimulationFailed as exc:
         raise OrbitError("simulation", _sim_message(sh, exc, [x0])) from None
-    sh.states[0] = trajectory_start_state(ctx, trajs[0])
+    t1 = float(t0) + float(period)
+    sh.states[0] = trajectory_start_state(
+        ctx, _trajectory(ctx, x0, sh.states[0], float(t0), t1, sh.run_opts[False], admit=False))
     res = sh.norm(sh.residual([x0], float(period), trajs), [x0])
     return _build_orbit(sh, [x0], float(period), [res], converged=res <= tol)
 
