@@ -1215,12 +1215,26 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                     ev, p, wref[w], old_idx, old_mode, nm, t, y, n, stab, buf, wk)
             elif old_kind == SLIDE_MULTI:
                 status, dkind, didx, mode, log_kind, log_ref = _act_multi_intersection(
-                    ev, p, widx[w], new_sign, wref[w], old_idx, old_mode, nm, t, y, n, stab,
-                    slide_c, buf, fbuf, wk)
+                    ev, p, widx[w], new_sign, wref[w], old_idx, old_mode, nm, t, y, n, etab,
+                    stab, slide_c, buf, fbuf, wk)
             else:
                 status, dkind, didx, mode, log_kind, log_ref = _act_intersection(
                     ev, p, widx[w], new_sign, wref[w], old_kind, old_idx, old_mode, nm, t, y, n,
                     etab, stab, slide_c, buf, fbuf, wk)
+            if act == ACT_INTERSECTION and status == ST_SUCCESS and log_kind < 0:
+                # the sliding motion touched the surface tangentially (a graze): no event; it
+                # goes on in its state, guarded on its own side of the surface, to a depth of
+                # the touch's integration error across it
+                last_type = wtype[w]
+                last_idx = widx[w]
+                last_mode = wmode[w]
+                last_sign = -new_sign
+                ev(W_H, widx[w], t, y, p, buf)
+                last_depth = 4.0 * abs(buf[0])
+                last_t = t
+                ikind[n_nodes - 2] = IV_STEP if save_all else IV_JUMP
+                restart = True
+                continue
             if act != ACT_INTERSECTION and act != ACT_EXIT_MULTI:
                 log_ref = wref[w]
 
