@@ -558,7 +558,31 @@ def _after_reset(ev, p, j, log_kind, chatter_tail, dkind, didx, mode, nm, t, y, 
         dkind = STICK
         didx = j
         _project_stick(ev, p, k, mode, nm, t, y, n, hdx, w2, buf)
+    elif (log_kind == K_IMPACT and (dkind == SLIDE or dkind == SLIDE_MULTI)
+            and _stays_in_contact(ev, p, k, mode, nm, t, y, n, buf, fbuf, hdx)):
+        # the impact leaves the state in contact while it slides on a switching surface: no
+        # discrete state holds both constraints (:func:`_stick_meets_slide`)
+        dkind = -1
     return dkind, didx, mode, contact_stick
+
+
+@_hot
+def _stick_meets_slide(act, old_kind, dkind):
+    """Whether the action just taken would trade one constraint for another that should
+    hold with it: sticking on an impact surface (``STICK``) for Filippov sliding
+    (``SLIDE``, ``SLIDE_MULTI``) at the arrival on a switching surface, or sliding for
+    sticking at an impact (a complete chattering sequence, or an impact that leaves the state
+    in contact: :func:`_after_reset` returns ``dkind`` -1). A contact that sticks while a
+    switching surface is slid on (a block held against a wall by the belt's friction while
+    another block sticks to the belt) has no discrete state in the kernel: the run ends
+    there with ``ST_INTERSECTION``, in the state before the event (the kernel's loop; the
+    message names both surfaces)."""
+    if dkind < 0:
+        return True
+    slide_new = dkind == SLIDE or dkind == SLIDE_MULTI
+    slide_old = old_kind == SLIDE or old_kind == SLIDE_MULTI
+    return ((act == ACT_SWITCH and old_kind == STICK and slide_new)
+            or (act == ACT_EVENT and slide_old and dkind == STICK))
 
 
 @_hot
