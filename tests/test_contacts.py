@@ -550,3 +550,76 @@ def test_orbit_with_a_codimension_two_segment_and_its_multipliers():
     assert abs(mult[-1].real) > 1.5 and abs(mult[-1].imag) < 1e-12   # unstable, flip
     assert fd[-1] == pytest.approx(mult[-1], rel=1e-6)
     assert max(abs(v) for v in fd[:-1]) < 1e-6 and max(abs(v) for v in mult[:-1]) < 1e-6
+
+
+# ======================================================================================
+# undamped Coulomb friction: tangential returns to the belt speed
+# ======================================================================================
+
+def coulomb_periodic(t, k, F, x0, v0, V=BELT):
+    """``x'' + k x = -F sign(v - V)`` (m = 1) from a slip above the belt (``v0 > V``) or a
+    stick (``v0 = V``, ``|k x0| < F``), for all ``t``. After the release at ``k x = F`` the
+    block slips below the belt about ``F / k``: ``x = F/k + (V/w) sin(w (t - t_r))``,
+    ``v = V cos(w (t - t_r))``. That motion comes back to ``v = V`` every period ``2 pi / w``
+    exactly at ``x = F / k``, tangentially (``v' = -w^2 (x - F/k) = 0``): the stick
+    condition holds there with equality and sticking would end at once (``x`` grows at
+    ``V``), so the harmonic motion goes on -- undamped Coulomb slip is periodic after the
+    first release."""
+    t = np.asarray(t, float)
+    w = math.sqrt(k)
+    if v0 > V:
+        ta, tr, _, xa = coulomb_oscillator(x0, v0, k, F, V)
+        x1, v1 = _harmonic(t, 0.0, x0, v0, -F / k, w)
+    else:
+        ta, tr, xa = 0.0, (F / k - x0) / V, x0
+        x1, v1 = x0 + V * t, np.full_like(t, V)
+    x3, v3 = _harmonic(t, tr, F / k, V, F / k, w)
+    x = np.where(t < ta, x1, np.where(t < tr, xa + V * (t - ta), x3))
+    v = np.where(t < ta, v1, np.where(t < tr, V, v3))
+    return x, v
+
+
+#: (k, F, x0, v0) of two contacts that slip, then stick on [0.518, 4.193] (A) and
+#: [0.788, 4.372] (B)
+TANGENT_A = (1.0, 1.0, 0.0, 0.8)
+TANGENT_B = (0.5, 0.4, -0.2, 0.5)
+
+
+@needs_multi
+@pytest.mark.parametrize("k, offset, with_b", [
+    (9.0, 0.02, False), (16.0, 0.03, False), (36.0, 0.02, False),
+    (25.0, 0.02, True), (36.0, 0.05, True), (9.0, 0.02, True)])
+@pytest.mark.parametrize("exact", [False, True])
+def test_tangential_returns_to_the_belt_speed_go_on(k, offset, with_b, exact):
+    """A contact C (k, F = 1) that starts stuck ``offset / V`` before its release and then
+    slips back to the belt speed tangentially every ``2 pi / sqrt(k)`` (undamped Coulomb
+    friction), next to A (and B), which stick for a while: C's returns happen while the others
+    slip, while A sticks (sliding on one surface) and while A and B stick (on their
+    intersection). Every run goes on to t = 14 (before the kernel took a tangential return
+    while sliding for an arrival at the intersection, and these runs -- chosen among those
+    where it did, by the sign of the integration error at the touch -- ended with
+    ``SURFACE_INTERSECTION`` at a return) and each block follows its own closed form
+    :func:`coulomb_periodic` to 1e-8 (the tolerance of the other acceptance tests; measured
+    below 5e-11), on the Runge-Kutta path and with ``exact=True``."""
+    cases = [TANGENT_A] + ([TANGENT_B] if with_b else []) + [(k, 1.0, 1.0 / k - offset, BELT)]
+    x0 = [c for kk, F, x, v in cases for c in (x, v)]
+    T = 14.0
+    traj = pwsdyn.simulate(_uncoupled_model(cases), x0, T, rtol=1e-12, atol=1e-12,
+                           exact=exact, throw=False)
+    assert traj.status == pwsdyn.Status.SUCCESS, traj.message
+    ts = np.linspace(0.0, T, 1401)
+    got = traj(ts)
+    for i, case in enumerate(cases):
+        np.testing.assert_allclose(got[:, 2 * i:2 * i + 2].T,
+                                   np.array(coulomb_periodic(ts, *case)), rtol=0, atol=1e-8)
+
+
+def test_one_coulomb_oscillator_through_its_tangential_returns():
+    """One undamped Coulomb oscillator through three tangential returns to the belt speed,
+    against :func:`coulomb_periodic`, to 1e-8."""
+    k, F, x, v = TANGENT_A
+    T = 20.0
+    traj = pwsdyn.simulate(_uncoupled_model([TANGENT_A]), [x, v], T, rtol=1e-12, atol=1e-12)
+    ts = np.linspace(0.0, T, 801)
+    np.testing.assert_allclose(traj(ts).T, np.array(coulomb_periodic(ts, k, F, x, v)), rtol=0,
+                               atol=1e-8)

@@ -9,6 +9,9 @@ differences of the flow map.
 
 from __future__ import annotations
 
+import itertools
+import re
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -16,7 +19,7 @@ from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
 import pwsdyn
-from pwsdyn.errors import Status
+from pwsdyn.errors import SolveError, Status
 from pwsdyn.integrate.trajectory import DiscreteState
 from pwsdyn.io import load_trajectory
 from pwsdyn.stability import event_saltations
@@ -212,6 +215,123 @@ def test_non_attracting_intersection_ends_the_run():
     assert tr.status == Status.SURFACE_INTERSECTION
     assert tr.t_final == pytest.approx(1.0, abs=1e-12)
     assert "not attracting" in tr.message and "[0, 1]^k" in tr.message
+
+
+# ======================================================================================
+# where and why a run ends at an intersection: the message
+# ======================================================================================
+
+def _intersection_message(model, x0, t_end):
+    """The run's message (``throw=False``) and the :class:`SolveError` text (``throw=True``),
+    which are the same; the run must end with ``SURFACE_INTERSECTION``."""
+    tr = pwsdyn.simulate(model, x0, (0.0, t_end), throw=False)
+    assert tr.status == Status.SURFACE_INTERSECTION, tr.message
+    with pytest.raises(SolveError) as info:
+        pwsdyn.simulate(model, x0, (0.0, t_end))
+    assert str(info.value) == tr.message
+    return tr, tr.message
+
+
+def _says_where(msg, t, state, values):
+    """The message names the time (to 1e-12), the discrete state and the state."""
+    found = re.search(r"Stopped at t=([-0-9.e+]+) in mode '([^']+)' with state \(([^)]*)\)",
+                      msg)
+    assert found, msg
+    assert float(found.group(1)) == pytest.approx(t, abs=1e-12)
+    assert found.group(2) == state
+    got = dict(kv.split("=") for kv in found.group(3).split(", "))
+    assert {k: float(v) for k, v in got.items()} == pytest.approx(values, abs=1e-12)
+
+
+def test_message_of_a_non_attracting_intersection_names_surface_and_weights():
+    """The corner model above: sliding on y = 0 reaches x = 0 at t = 1, at the origin. The
+    bilinear weights there (tests/test_filippov.py): u_x = 0, u_y = -3/2, i.e. lambda =
+    (1 - u)/2 = (1/2, 5/4); the message names the surface reached, the intersection, the
+    weights and the one outside [0, 1]."""
+    m = {"name": "corner", "states": ["x", "y"],
+         "modes": {"m": {"x": "-sign(x)", "y": "sign(y)*(0.5 - 1.5*sign(x)) + 0.75"}}}
+    tr, msg = _intersection_message(m, [1.0, 0.125], 3.0)
+    _says_where(msg, 1.0, "slide:y", {"x": 0.0, "y": 0.0})
+    assert "reached surface 'x', on the intersection x&y" in msg
+    assert "lambda[x] = 0.5, lambda[y] = 1.25" in msg
+    assert "the weight of y lies outside [0, 1]" in msg and "not attracting" in msg
+
+
+def test_message_when_the_rule_has_no_weights():
+    """x' = -sign(x) - sign(y), y' = 1 - 2 sign(x) sign(y) from (2, 1/2): y = 0 at t = 1/2
+    (y' = -1, x' = -2: x = 1), then sliding on y = 0 (y' = -1 above, 3 below) with
+    u_y = 1/2 and x' = -1 - u_y = -3/2, so x = 0 at t = 1/2 + 2/3 = 7/6. Beyond x = 0
+    (u_x = -1) sliding on y has u_y = -1/2 and x' = 3/2: both sides press into x = 0. On
+    the intersection the tangency conditions -u_x - u_y = 0 and 1 - 2 u_x u_y = 0 give
+    1 + 2 u_x^2 = 0: no real weights."""
+    m = {"name": "no-weights", "states": ["x", "y"],
+         "modes": {"m": {"x": "-sign(x) - sign(y)", "y": "1 - 2*sign(x)*sign(y)"}}}
+    tr, msg = _intersection_message(m, [2.0, 0.5], 3.0)
+    _says_where(msg, 7.0 / 6.0, "slide:y", {"x": 0.0, "y": 0.0})
+    assert "reached surface 'x', on the intersection x&y" in msg
+    assert "has no weights" in msg and "no solution" in msg
+
+
+def test_message_when_a_corner_mode_is_missing():
+    """Four modes written out with their switches, one missing (C | D on y would close the
+    square; x: A | B and C | D, y: A | C only): sliding on y = 0 from t = 1/2 (A: y' = -1,
+    C: y' = 1) reaches x = 0 at t = 2 (x' = -1 in A and C), where the corner below both
+    surfaces cannot be reached from B across y."""
+    m = {"name": "no-corner", "states": ["x", "y"],
+         "modes": {"A": {"x": "-1", "y": "-1"}, "B": {"x": "1", "y": "-1"},
+                   "C": {"x": "-1", "y": "1"}, "D": {"x": "1", "y": "1"}},
+         "switches": [{"name": "sx", "surface": "x", "above": "A", "below": "B"},
+                      {"name": "sy", "surface": "y", "above": "A", "below": "C"},
+                      {"name": "sx2", "surface": "x", "above": "C", "below": "D"}],
+         "initial_mode": "A"}
+    tr, msg = _intersection_message(m, [2.0, 0.5], 5.0)
+    _says_where(msg, 2.0, "slide:sy", {"x": 0.0, "y": 0.0})
+    assert "reached surface 'sx', on the intersection sx&sy" in msg
+    assert "lacks a corner mode: no switch on surface 'sy' joins mode 'B'" in msg
+
+
+def test_message_when_more_surfaces_meet_than_the_rule_takes():
+    """Four relays x_i' = -i sign(x_i) from 1 (x_i = 0 at t = 1/i: sliding on all four from
+    t = 1) written as 16 modes with their switches, and a fifth surface x5 = 0 (x5' = -1 from
+    2) across which lies one more mode: at t = 2 five surfaces would meet, one more than
+    ``MULTI_MAX``."""
+    def name(s):
+        return "m" + "".join("p" if v > 0 else "n" for v in s)
+    modes, switches = {}, []
+    for s in itertools.product((1, -1), repeat=4):
+        modes[name(s)] = {**{f"x{i + 1}": f"{-(i + 1) * s[i]}" for i in range(4)}, "x5": "-1"}
+        for i in range(4):
+            if s[i] > 0:
+                b = list(s)
+                b[i] = -1
+                switches.append({"name": f"s{i + 1}{name(s)}", "surface": f"x{i + 1}",
+                                 "above": name(s), "below": name(b)})
+    modes["beyond"] = {**{f"x{i + 1}": "0" for i in range(4)}, "x5": "1"}
+    switches.append({"name": "s5", "surface": "x5", "above": "mpppp", "below": "beyond"})
+    m = {"name": "five", "states": ["x1", "x2", "x3", "x4", "x5"], "modes": modes,
+         "switches": switches, "initial_mode": "mpppp"}
+    tr, msg = _intersection_message(m, [1.0, 1.0, 1.0, 1.0, 2.0], 5.0)
+    four = "&".join(f"s{i}mpppp" for i in range(1, 5))
+    _says_where(msg, 2.0, f"slide_multi:{four}", {f"x{i}": 0.0 for i in range(1, 6)})
+    assert f"reached surface 's5', on the intersection {four}&s5: 5 surfaces, more than the 4"\
+        in msg
+
+
+def test_weights_found_where_newton_from_the_centre_is_singular():
+    """x' = -sign(x) sign(y), y' = 1/2 - sign(y), z' = sign(x) + 2 sign(y) from (2, 1/2, 0):
+    y = 0 at t = 1 (x = 1, z = 3); sliding on y = 0 with u_y = 1/2: x' = -1/2, z' = 2, so
+    x = 0 at t = 3 (z = 7); beyond x = 0 the sliding field is x' = +1/2: both press. On the
+    intersection -u_x u_y = 0 and 1/2 - u_y = 0: u = (0, 1/2), lambda = (1/2, 1/4), inside
+    the square, and z' = u_x + 2 u_y = 1, z(5) = 9. At the centre lambda = (1/2, 1/2) the
+    first condition's gradient (-u_y, -u_x) vanishes: Newton starts elsewhere."""
+    m = {"name": "centre-singular", "states": ["x", "y", "z"],
+         "modes": {"m": {"x": "-sign(x)*sign(y)", "y": "0.5 - sign(y)",
+                         "z": "sign(x) + 2*sign(y)"}}}
+    tr = pwsdyn.simulate(m, [2.0, 0.5, 0.0], (0.0, 5.0), **TIGHT)
+    assert tr.status == Status.SUCCESS, tr.message
+    assert [str(e.mode_after) for e in tr.events] == ["slide:y", "slide_multi:x&y"]
+    np.testing.assert_allclose([e.t for e in tr.events], [1.0, 3.0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(tr.x_final, [0.0, 0.0, 9.0], rtol=0, atol=1e-12)
 
 
 # ======================================================================================

@@ -244,3 +244,20 @@ def test_admissibility_sees_a_weight_past_one(on_signature):
     assert not adm.admissible
     assert any("'w1' on the intersection (its weight must stay <= 1)" in v
                for v in adm.violations)
+
+
+def test_switching_past_a_weight_touch_inside_the_intersection_gives_the_reason(on_signature):
+    """``on_dib='switch'`` at an adding-sliding monitor of the intersection segment
+    (``AS/<surface>:<side>/<i>``: a weight reaching 0 or 1 inside it, a contact that releases
+    and sticks again) has no new signature to build: the switch returns why (the branch then
+    ends there with ``SWITCH_FAILED`` and that text). On this orbit the weights are linear in
+    time along the segment (module docstring: ``S_i`` grows as ``k_i V t`` while both stick),
+    so no such touch occurs on its branch; the reason is checked at the monitor's key."""
+    from pwsdyn.continuation.dib import past_graze
+
+    prob, u = OrbitProblem.from_orbit(on_signature)
+    i = [f.kind for f in prob.fields].index("slide_multi")
+    why = past_graze(prob, f"AS/w1:below/{i}", u, 2.0)
+    assert isinstance(why, str)
+    assert why.startswith("no orbit past the AS: a weight of segment")
+    assert "reaches the edge of [0, 1] inside it" in why

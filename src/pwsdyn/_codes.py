@@ -63,6 +63,14 @@ STATUSES = ("success", "terminal", "max_steps", "max_events", "step_too_small", 
 (ST_SUCCESS, ST_TERMINAL, ST_MAX_STEPS, ST_MAX_EVENTS, ST_STEP_TOO_SMALL, ST_NONFINITE,
  ST_INTERSECTION, ST_ZENO) = range(len(STATUSES))
 
+#: Why sliding cannot start on an intersection (the run then ends with ``ST_INTERSECTION``):
+#: it can (the weights of the multilinear rule lie in ``[0, 1]^k``); more surfaces than
+#: ``MULTI_MAX``; a corner mode missing (no switch joins a corner's variant across one of the
+#: surfaces); no weights (the rule's Newton iteration met a singular matrix or ran away);
+#: weights outside ``[0, 1]^k`` (the intersection does not attract the motion).
+INTERSECTION_CAUSES = ("attracting", "too_many", "no_corner", "no_weights", "not_attracting")
+IX_ATTRACTING, IX_TOO_MANY, IX_NO_CORNER, IX_NO_WEIGHTS, IX_NOT_ATTRACTING = range(5)
+
 #: Kinds of switching surfaces (``stab`` column 3): Filippov (cross or slide) or continuous
 #: (only a derivative jumps: always cross); sliding methods (column 4).
 SWITCH_KINDS = ("filippov", "continuous")

@@ -359,6 +359,13 @@ def split_sliding(op, u, lam, seg: int, side: str):
 
     m = op.model
     fk = op.fields[seg]
+    if fk.kind == "slide_multi":
+        # the weight of one surface touches 0 or 1 inside the segment: past it that contact
+        # releases and sticks again while the others stick on (a slide_end, a segment
+        # sliding on the rest, a slide_start), a signature not built here
+        return (f"a weight of segment {seg}'s sliding on an intersection reaches the edge of "
+                f"[0, 1] inside it (a contact releases and sticks again there); splitting "
+                f"such a segment is not supported")
     if fk.kind != "slide" or len(op.bounds) != len(op.signature):
         return "only a sliding segment between single events is split"
     sw = m.switches[fk.index]

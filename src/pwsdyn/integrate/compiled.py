@@ -45,6 +45,7 @@ from ..model.spec import as_model
 from ._codes import (EVENT_LOG_KINDS, REGULAR, SAVE_DENSE, SAVE_EVENTS, SAVE_NODES, SLIDE,
                      SLIDE_MULTI, STATS,
                      STICK, VAR_NONE, VAR_SEGMENTS, KernelResult, kernel_options)
+from ._intersection import intersection_detail
 from ._load import kernel
 from ._start import ADMIT_BEHIND, Start, abs_max, start_state
 from ._variational import assemble_segments, segments_jacobian
@@ -249,6 +250,9 @@ class RunResult:
 
     @property
     def message(self) -> str:
+        if self.status == Status.SURFACE_INTERSECTION:
+            # where it stopped and why sliding could not go on (the surface reached)
+            return str(self.solve_error(self._model))
         return self.status.message
 
     @property
@@ -292,8 +296,10 @@ class RunResult:
         """The :class:`~pwsdyn.errors.SolveError` of a failed run."""
         raw = self._raw
         n = model.n_states
+        detail = (intersection_detail(self, model)
+                  if self.status == Status.SURFACE_INTERSECTION else "")
         return SolveError(self.status, float(raw.t), dict(zip(model.states, raw.y[:n])),
-                          _state_name(model, *raw.state), result=result)
+                          _state_name(model, *raw.state), result=result, detail=detail)
 
 
 def _node_states(model, nodes_s) -> np.ndarray:
@@ -374,7 +380,7 @@ def run_trajectory(res, model, opts, t0, t_end, copy=None) -> Trajectory:
     tr = Trajectory.__new__(Trajectory)
     d = tr.__dict__
     d.update(t=raw.nodes_t, x=raw.nodes_y[:, :n].copy(), status=res.status,
-             message=res.status.message, t0=t0, t_end=t_end, jacobian=res.jacobian,
+             message=res.message, t0=t0, t_end=t_end, jacobian=res.jacobian,
              transfer_matrices=res.transfer_matrices,
              final_discrete_state=tuple(raw.state.tolist()),
              samples=None if res.samples_t is None else (res.samples_t, res.samples_x),

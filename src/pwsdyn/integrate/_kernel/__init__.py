@@ -42,11 +42,14 @@ sliding according to the signs of ``h_t + h_x f`` of the two modes (thesis eq. 2
 switches of kind ``SW_CONTINUOUS`` (kinks of ``Abs``/``Max``/``Min``) always cross. Sliding
 ends (``slide_end``) where ``hdot`` of the mode above turns positive (``alpha = 0``) or that of
 the mode below turns negative (``alpha = 1``), located by Newton on that ``hdot``. Reaching
-another switching surface while sliding crosses it if the sliding motion continues on its far
-side; if the sliding fields on both sides point into it the motion slides on the intersection
+another switching surface while sliding is no event where the sliding motion only touches it
+(its own rate on that surface points back: a tangential return, e.g. of a contact that slips
+back to its stick speed exactly at its static bound while another sticks); otherwise it
+crosses the surface if the sliding motion continues on its far side; if the sliding fields on both sides point into it the motion slides on the intersection
 (``slide_start``, ``SLIDE_MULTI``) where the multilinear weights lie in ``[0, 1]^k`` (an
 attracting intersection), and the run ends with ``ST_INTERSECTION`` where they do not (or
-more than ``MULTI_MAX`` surfaces would meet). Sliding on an intersection ends on surface
+more than ``MULTI_MAX`` surfaces would meet; :func:`intersection_cause` tells the message
+which surface was reached and why). Sliding on an intersection ends on surface
 ``i`` (``slide_end``) where ``lambda_i`` reaches 0 (the motion leaves to the side above) or
 1 (below); the other surfaces keep sliding as far as their own weights allow (on the rest of
 the intersection, on one surface, or none: a released contact may make another slip at
@@ -163,10 +166,10 @@ see :mod:`pwsdyn.integrate._variational`).
 
 from __future__ import annotations
 
-from .actions import chatter_saltation
+from .actions import chatter_saltation, intersection_cause
 from .fields import state_field
 from .run import dense_coefficients, run_kernel
 from .watch import GRAZING_RTOL
 
-__all__ = ["GRAZING_RTOL", "chatter_saltation", "dense_coefficients", "run_kernel",
-           "state_field"]
+__all__ = ["GRAZING_RTOL", "chatter_saltation", "dense_coefficients", "intersection_cause",
+           "run_kernel", "state_field"]

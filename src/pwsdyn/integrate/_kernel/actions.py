@@ -8,15 +8,16 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ...model.codegen import W_F, W_G, W_GX, W_GT, W_HD, W_HDT, W_HDX, W_HT, W_HX
-from .._codes import (ACT_EVENT, ACT_INTERSECTION, ACT_SWITCH, K_CHATTER, K_CROSSING, K_IMPACT,
-                      K_RELEASE, K_SLIDE_END, K_SLIDE_START, MULTI_MAX, REGULAR, SLIDE,
+from ...model.codegen import W_F, W_G, W_GX, W_GT, W_H, W_HD, W_HDT, W_HDX, W_HT, W_HX
+from .._codes import (ACT_EVENT, ACT_INTERSECTION, ACT_SWITCH, IX_ATTRACTING, IX_NO_CORNER,
+                      IX_NO_WEIGHTS, IX_NOT_ATTRACTING, IX_TOO_MANY, K_CHATTER, K_CROSSING,
+                      K_IMPACT, K_RELEASE, K_SLIDE_END, K_SLIDE_START, MULTI_MAX, REGULAR, SLIDE,
                       SLIDE_MULTI, STICK, ST_INTERSECTION, ST_SUCCESS, SW_FILIPPOV)
 from ._base import EVENT_TABLE_TYPE, SWITCH_TABLE_TYPE, _FD_STEP, _dot, _hot, _hot_inline
-from .fields import (_field, _find_switch, _impact_direction, _multi_count, _multi_field,
-                     _multi_offsets, _multi_reference, _multi_surface, _on_surfaces, _partner,
-                     _project_multi, _project_surface, _resolve, _settle_multi, _solve_lambda,
-                     multi_work_size)
+from .fields import (_field, _find_switch, _impact_direction, _lambda_core, _multi_corner,
+                     _multi_count, _multi_field, _multi_offsets, _multi_reference,
+                     _multi_set_corners, _multi_surface, _on_surfaces, _partner, _project_multi,
+                     _project_surface, _resolve, _settle_multi, _solve_lambda, multi_work_size)
 from .watch import _free_normal_acc, _grazing, _project_stick, _stays_in_contact, _surface_rate
 
 @njit(cache=True)
@@ -557,7 +558,31 @@ def _after_reset(ev, p, j, log_kind, chatter_tail, dkind, didx, mode, nm, t, y, 
         dkind = STICK
         didx = j
         _project_stick(ev, p, k, mode, nm, t, y, n, hdx, w2, buf)
+    elif (log_kind == K_IMPACT and (dkind == SLIDE or dkind == SLIDE_MULTI)
+            and _stays_in_contact(ev, p, k, mode, nm, t, y, n, buf, fbuf, hdx)):
+        # the impact leaves the state in contact while it slides on a switching surface: no
+        # discrete state holds both constraints (:func:`_stick_meets_slide`)
+        dkind = -1
     return dkind, didx, mode, contact_stick
+
+
+@_hot
+def _stick_meets_slide(act, old_kind, dkind):
+    """Whether the action just taken would trade one constraint for another that should
+    hold with it: sticking on an impact surface (``STICK``) for Filippov sliding
+    (``SLIDE``, ``SLIDE_MULTI``) at the arrival on a switching surface, or sliding for
+    sticking at an impact (a complete chattering sequence, or an impact that leaves the state
+    in contact: :func:`_after_reset` returns ``dkind`` -1). A contact that sticks while a
+    switching surface is slid on (a block held against a wall by the belt's friction while
+    another block sticks to the belt) has no discrete state in the kernel: the run ends
+    there with ``ST_INTERSECTION``, in the state before the event (the kernel's loop; the
+    message names both surfaces)."""
+    if dkind < 0:
+        return True
+    slide_new = dkind == SLIDE or dkind == SLIDE_MULTI
+    slide_old = old_kind == SLIDE or old_kind == SLIDE_MULTI
+    return ((act == ACT_SWITCH and old_kind == STICK and slide_new)
+            or (act == ACT_EVENT and slide_old and dkind == STICK))
 
 
 @_hot
@@ -640,11 +665,20 @@ def _act_intersection(ev, p, k2, new_sign, log_ref, old_kind, old_idx, old_mode,
     """Sliding on switch ``old_idx`` reached surface ``k2`` of another switch. Across ``k2``
     the sliding pair (a, b) becomes (a2, b2): if the flow slides on the first surface there
     too and its sliding field carries the state away from k2, it crosses k2 while sliding; if
-    both pairs leave the first surface to one side, the sliding ends; if the sliding field on
-    the far side points back into k2 the motion would slide on the intersection of the two
-    surfaces, which is not supported (``ST_INTERSECTION``). Returns ``(status, dkind, didx,
-    mode, log_kind, log_ref)``."""
+    both pairs leave the first surface to one side, the sliding ends; otherwise the motion
+    slides on the intersection of the two surfaces where the multilinear weights allow it
+    (:func:`_enter_multi`), and the run ends with ``ST_INTERSECTION`` where they do not.
+
+    First, a tangential return (:func:`_returns_tangentially`): where the sliding motion
+    itself does not move across ``k2`` in the direction of the crossing, it only touches the
+    surface (a graze, located a little across it by the integration error) and stays on its
+    side: no event, returned as ``ST_SUCCESS`` with log kind -1 (an undamped Coulomb
+    oscillator slips back to the belt speed exactly at its static bound, tangentially, while
+    another contact sticks). Returns ``(status, dkind, didx, mode, log_kind, log_ref)``."""
     w1, w2, gx, hdx, jac, xt, ft = wk
+    if _returns_tangentially(ev, p, k2, new_sign, old_kind, old_idx, old_mode, nm, t, y, n,
+                             etab, stab, slide_c, buf, fbuf, wk):
+        return ST_SUCCESS, old_kind, old_idx, old_mode, -1, log_ref
     dkind = old_kind
     didx = old_idx
     mode = old_mode
@@ -688,29 +722,61 @@ def _act_intersection(ev, p, k2, new_sign, log_ref, old_kind, old_idx, old_mode,
 
 
 @_hot
-def _enter_multi(ev, p, mask, m, k2, nm, t, y, n, stab, buf, wk, dkind, didx, mode, log_ref):
-    """Sliding that reaches surface ``k2`` starts sliding on the intersection of the surfaces
-    of ``mask`` (``k2`` among them; ``m`` a mode of one of the corners) where the multilinear
-    weights solve the tangency conditions inside ``[0, 1]^k`` (the fields of all corners
-    pressing the state into the intersection): ``slide_start`` on the switch of ``k2`` at the
-    reference corner. Otherwise the intersection is not attracting, or the rule has no
-    solution, and the run ends with ``ST_INTERSECTION`` in the old state. Returns
-    ``(status, dkind, didx, mode, log_kind, log_ref)``."""
+def _returns_tangentially(ev, p, k, new_sign, old_kind, old_idx, old_mode, nm, t, y, n, etab,
+                          stab, slide_c, buf, fbuf, wk):
+    """Whether a sliding motion (on a switch or an intersection) that reached surface ``k``
+    crossing it with sign ``new_sign`` (the side of ``k`` it was found on) only touches it:
+    the rate ``h_t + h_x f`` of ``k`` along the motion's own field does not point to that
+    side. A crossing located by the sign of ``h`` has that rate's sign up to the integration
+    error of ``h``; the opposite sign (or zero) is a tangency -- the motion grazes ``k`` --
+    which that error moved across the surface (the same rule as a regular motion's graze in
+    :func:`_act_switch`)."""
     w1, w2, gx, hdx, jac, xt, ft = wk
+    _field(ev, p, old_kind, old_idx, old_mode, nm, t, y, n, fbuf, etab, stab, slide_c, w1, w2,
+           gx, hdx)
+    rate = _surface_rate(ev, p, old_kind, k, old_mode, nm, t, y, fbuf, n, buf, hdx)
+    return rate * new_sign <= 0.0
+
+
+@_hot
+def _multi_entry(ev, p, mask, m, k2, nm, t, y, n, stab, w1, work):
+    """Whether sliding can start on the intersection of the surfaces of ``mask`` (``k2``, the
+    surface just reached, among them; ``m`` a mode of one of its corners): the weights of the
+    multilinear rule, solved into ``work`` (:func:`_solve_lambda`), must lie in ``[0, 1]^k``
+    (the fields of all corners press the state into the intersection). Returns ``(cause,
+    ref, k)``: ``cause`` ``IX_ATTRACTING`` where it can start, otherwise why not (the
+    ``IX_*`` codes: too many surfaces, a corner mode missing, no weights, weights outside the
+    cube); ``ref`` the reference corner, ``k`` the number of surfaces (0 where unknown)."""
     if _multi_count(mask) > MULTI_MAX or k2 >= 63:
-        return ST_INTERSECTION, dkind, didx, mode, -1, log_ref
+        return IX_TOO_MANY, -1, 0
     ref = _multi_reference(stab, mask, m)
-    if ref < 0:
-        return ST_INTERSECTION, dkind, didx, mode, -1, log_ref
-    k = _solve_lambda(ev, p, mask, ref, nm, t, y, n, stab, w1, gx)
+    if ref < 0 or not _multi_set_corners(stab, mask, ref, n, work):
+        return IX_NO_CORNER, ref, 0
+    k = _lambda_core(ev, p, mask, t, y, n, w1, work)
     if k < 0:
-        return ST_INTERSECTION, dkind, didx, mode, -1, log_ref
+        return IX_NO_WEIGHTS, ref, 0
     o_lam = _multi_offsets(n)[4]
     tol = 64.0 * 2.220446049250313e-16
     for i in range(k):
-        lam = gx[o_lam + i]
+        lam = work[o_lam + i]
         if not (-tol <= lam <= 1.0 + tol):
-            return ST_INTERSECTION, dkind, didx, mode, -1, log_ref
+            return IX_NOT_ATTRACTING, ref, k
+    return IX_ATTRACTING, ref, k
+
+
+@_hot
+def _enter_multi(ev, p, mask, m, k2, nm, t, y, n, stab, buf, wk, dkind, didx, mode, log_ref):
+    """Sliding that reaches surface ``k2`` starts sliding on the intersection of the surfaces
+    of ``mask`` (``k2`` among them; ``m`` a mode of one of the corners) where the multilinear
+    weights solve the tangency conditions inside ``[0, 1]^k`` (:func:`_multi_entry`):
+    ``slide_start`` on the switch of ``k2`` at the reference corner. Otherwise the
+    intersection is not attracting, or the rule has no solution, and the run ends with
+    ``ST_INTERSECTION`` in the old state (:func:`intersection_cause` tells why, for the
+    message). Returns ``(status, dkind, didx, mode, log_kind, log_ref)``."""
+    w1, w2, gx, hdx, jac, xt, ft = wk
+    cause, ref, k = _multi_entry(ev, p, mask, m, k2, nm, t, y, n, stab, w1, gx)
+    if cause != IX_ATTRACTING:
+        return ST_INTERSECTION, dkind, didx, mode, -1, log_ref
     _project_multi(ev, p, mask, t, y, n, hdx, buf)
     s2 = _find_switch(stab, k2, ref, _partner(stab, k2, ref))
     return ST_SUCCESS, SLIDE_MULTI, mask, ref, K_SLIDE_START, s2
@@ -718,14 +784,19 @@ def _enter_multi(ev, p, mask, m, k2, nm, t, y, n, stab, buf, wk, dkind, didx, mo
 
 @_hot
 def _act_multi_intersection(ev, p, k3, new_sign, log_ref, old_idx, old_mode, nm, t, y, n,
-                            stab, slide_c, buf, fbuf, wk):
+                            etab, stab, slide_c, buf, fbuf, wk):
     """Sliding on the intersection of the surfaces of ``old_idx`` reached surface ``k3``:
-    it crosses ``k3`` where the multilinear field of the corners beyond it is defined (weights
-    in ``[0, 1]^k``) and carries the state away from ``k3``; otherwise it slides on the
-    intersection with ``k3`` too (:func:`_enter_multi`), or the run ends with
-    ``ST_INTERSECTION``. Returns ``(status, dkind, didx, mode, log_kind, log_ref)``."""
+    a tangential return (:func:`_returns_tangentially`) is no event (``ST_SUCCESS`` with log
+    kind -1, as in :func:`_act_intersection`); otherwise it crosses ``k3`` where the
+    multilinear field of the corners beyond it is defined (weights in ``[0, 1]^k``) and
+    carries the state away from ``k3``; otherwise it slides on the intersection with ``k3``
+    too (:func:`_enter_multi`), or the run ends with ``ST_INTERSECTION``. Returns
+    ``(status, dkind, didx, mode, log_kind, log_ref)``."""
     w1, w2, gx, hdx, jac, xt, ft = wk
     mask = old_idx
+    if _returns_tangentially(ev, p, k3, new_sign, SLIDE_MULTI, mask, old_mode, nm, t, y, n,
+                             etab, stab, slide_c, buf, fbuf, wk):
+        return ST_SUCCESS, SLIDE_MULTI, mask, old_mode, -1, log_ref
     ref2 = _partner(stab, k3, old_mode)
     if ref2 >= 0:
         k = _solve_lambda(ev, p, mask, ref2, nm, t, y, n, stab, w1, gx)
@@ -826,3 +897,124 @@ def _apply_saltation(y, S, Phi, n, seg_var):
             for m in range(n):
                 acc += S[i, m] * Phi[m, c]
             y[n + i * n + c] = acc
+
+
+# --------------------------------------------------------------------------------------
+# why a run ended at an intersection (for its message; compiled on first use)
+# --------------------------------------------------------------------------------------
+
+def _intersection_cause(ev, p, dkind, didx, mode, nm, t, x, stab, out):
+    """Why the sliding motion in the discrete state ``(dkind, didx, mode)`` (``SLIDE`` or
+    ``SLIDE_MULTI``) at ``(t, x)`` -- where a run ended with ``ST_INTERSECTION`` -- cannot
+    slide on the intersection with the surface it reached, by the test the kernel applied
+    (:func:`_multi_entry`, on the surfaces :func:`_act_intersection` and
+    :func:`_act_multi_intersection` pass it).
+
+    The surface reached is not in the kernel's result: it is the surface of a switch that
+    bounds a mode of the sliding motion, is not slid on, and lies nearest to ``(t, x)`` in
+    ``|h| / |h_x|`` (the kernel ends the run on the located crossing, within the location
+    error of it). Writes ``out[0]`` that surface (-1: none), ``out[1]`` the cause
+    (``IX_*``), ``out[2]`` the number ``k`` of surfaces and ``out[3:3 + k]`` their weights
+    where they were solved (``IX_NOT_ATTRACTING``), or ``out[3]``, ``out[4]`` the surface and
+    the mode from which no switch leads across it (``IX_NO_CORNER``). Returns the cause (-1
+    where no surface was found)."""
+    n = x.shape[0]
+    w1 = np.zeros(n)
+    work = np.zeros(max(n * n, multi_work_size(n)))
+    hdx = np.zeros(n)
+    buf = np.zeros(max(n, 2))
+    if dkind == SLIDE:
+        mask0 = 1 << stab[didx].surface
+        m = stab[didx].above
+    else:
+        mask0 = didx
+        m = mode
+    k0 = _multi_count(mask0)
+    best = np.inf
+    k2 = -1
+    for s in range(stab.shape[0]):
+        ks = stab[s].surface
+        if ks >= 63 or (mask0 >> ks) & 1:
+            continue
+        adjacent = False
+        for c in range(1 << k0):
+            mc = _multi_corner(stab, mask0, m, c) if dkind == SLIDE_MULTI else (
+                stab[didx].above if c == 0 else stab[didx].below)
+            if mc >= 0 and (stab[s].above == mc or stab[s].below == mc):
+                adjacent = True
+        if not adjacent:
+            continue
+        ev(W_H, ks, t, x, p, buf)
+        hv = abs(buf[0])
+        ev(W_HX, ks, t, x, p, hdx)
+        g = np.sqrt(_dot(hdx, hdx, n))
+        dist = hv / g if g > 0.0 else hv
+        if dist < best:
+            best = dist
+            k2 = ks
+    out[0] = k2
+    if k2 < 0:
+        return -1
+    mask = mask0 | (1 << k2)
+    cause, ref, k = _multi_entry(ev, p, mask, m, k2, nm, t, x, n, stab, w1, work)
+    out[1] = cause
+    out[2] = k
+    if cause == IX_NOT_ATTRACTING:
+        o_lam = _multi_offsets(n)[4]
+        for i in range(k):
+            out[3 + i] = work[o_lam + i]
+    elif cause == IX_NO_CORNER:
+        kk = _multi_count(mask)
+        out[2] = kk
+        # the walk of _multi_reference (to the corner above all surfaces), then that of
+        # _multi_corner (from it across the surfaces of each corner): the first step that
+        # finds no switch
+        for c in range(1 if ref < 0 else 1 << kk):
+            mm = m if ref < 0 else ref
+            for i in range(kk):
+                if ref >= 0 and not (c >> i) & 1:
+                    continue
+                ks = _multi_surface(mask, i)
+                nxt = -1
+                for s in range(stab.shape[0]):
+                    if stab[s].surface == ks:
+                        if stab[s].above == mm:
+                            nxt = stab[s].below if ref >= 0 else mm
+                            break
+                        if stab[s].below == mm:
+                            nxt = stab[s].above
+                            break
+                if nxt < 0:
+                    out[3] = ks
+                    out[4] = mm
+                    return cause
+                mm = nxt
+    return cause
+
+
+def _intersection_cause_signature():
+    from numba import types as nt
+
+    from ...model.codegen import EVALUATE_TYPE
+    f1 = nt.float64[::1]
+    return nt.int64(EVALUATE_TYPE, f1, nt.int64, nt.int64, nt.int64, nt.int64, nt.float64, f1,
+                    SWITCH_TABLE_TYPE, f1)
+
+
+_INTERSECTION_CAUSE = None
+
+
+def intersection_cause(*args):
+    """:func:`_intersection_cause`, compiled on first use (then loaded from numba's cache):
+    only a run that ends at an intersection needs it."""
+    global _INTERSECTION_CAUSE
+    if _INTERSECTION_CAUSE is None:
+        import warnings
+
+        from numba.core.errors import NumbaExperimentalFeatureWarning
+        with warnings.catch_warnings():
+            # the first-class function type of the model's `evaluate` (as in the kernel)
+            warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
+            _INTERSECTION_CAUSE = njit(_intersection_cause_signature(),
+                                       cache=True)(_intersection_cause)
+    return _INTERSECTION_CAUSE(*args)

@@ -481,11 +481,12 @@ def _solve_lambda(ev, p, mask, ref, nm, t, x, n, stab, w1, work):
     ``a_ic = h_i,t + h_i,x f_c`` (the weights sum to one), by Newton's method with the exact
     Jacobian of the multilinear form, ``dg_i/dlambda_j = sum_c dW_c/dlambda_j a_ic``, from the
     centre ``lambda = 1/2`` (the same start at every call: the field is a function of
-    ``(t, x)`` alone, so a step taken again gives the same numbers), at most 30 iterations.
+    ``(t, x)`` alone, so a step taken again gives the same numbers), at most 30 iterations;
+    where that fails, from the further fixed starts of :func:`_lambda_core`.
     For a field affine in the signs of uncoupled contacts the system is triangular in each
     ``lambda_i`` and one or two iterations are exact. Returns ``k`` (the number of surfaces),
-    or -1 where a corner mode is missing or the Newton matrix is singular (the rule has no
-    solution there)."""
+    or -1 where a corner mode is missing or Newton fails from every start (the rule has no
+    solution there, e.g. tangency conditions with complex roots only)."""
     if not _multi_set_corners(stab, mask, ref, n, work):
         return -1
     return _lambda_core(ev, p, mask, t, x, n, w1, work)
@@ -528,8 +529,25 @@ def _lambda_core(ev, p, mask, t, x, n, w1, work):
             for q in range(n):
                 acc += work[o_hx + i * n + q] * w1[q]
             work[o_a + i * nc + c] = acc
-    for i in range(k):
-        work[o_lam + i] = 0.5
+    # from the centre; where Newton fails from there (a singular matrix: a condition whose
+    # gradient vanishes at lambda = 1/2, as for x' = -sign(x) sign(y), or an iteration that
+    # runs away or does not settle), from the points lambda_i = 1/4 or 3/4, in a fixed order
+    # (the weights stay a function of (t, x) alone)
+    for start in range(1 + nc):
+        for i in range(k):
+            work[o_lam + i] = 0.5 if start == 0 else (0.75 if ((start - 1) >> i) & 1 else 0.25)
+        if _lambda_newton(work, k, nc, o_a, o_lam, o_g, o_jac):
+            return k
+    return -1
+
+
+@_hot
+def _lambda_newton(work, k, nc, o_a, o_lam, o_g, o_jac):
+    """Newton's method for the weights of :func:`_lambda_core` from the ``lambda`` in
+    ``work``, at most 30 iterations. True where it converged (a step below 4 eps, or after
+    the 30 iterations a residual ``max_i |g_i|`` within sqrt(eps) of the scale of the
+    ``a_ic``: steps that stall at round-off of an ill-conditioned matrix); False where the
+    matrix was singular, the iteration ran away or did not converge."""
     for it in range(30):
         for i in range(k):
             g = 0.0
@@ -543,16 +561,24 @@ def _lambda_core(ev, p, mask, t, x, n, w1, work):
                     d += sgn * _multi_weight(c, work, o_lam, k, j) * work[o_a + i * nc + c]
                 work[o_jac + i * k + j] = d
         if not _small_solve(work, o_jac, work, o_g, k):
-            return -1
+            return False
         step = 0.0
         for i in range(k):
             work[o_lam + i] += work[o_g + i]
             step = max(step, abs(work[o_g + i]))
         if not step <= 1e30:
-            return -1
+            return False
         if step <= 4.0 * _EPS:
-            break
-    return k
+            return True
+    res = 0.0
+    scale = 0.0
+    for i in range(k):
+        g = 0.0
+        for c in range(nc):
+            g += _multi_weight(c, work, o_lam, k, -1) * work[o_a + i * nc + c]
+            scale = max(scale, abs(work[o_a + i * nc + c]))
+        res = max(res, abs(g))
+    return res <= 1.4901161193847656e-08 * scale
 
 
 @_hot

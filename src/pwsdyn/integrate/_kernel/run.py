@@ -11,7 +11,8 @@ from ...model.codegen import W_F, W_GUARD, W_H, W_HD, W_HHD
 from .._codes import (ACT_EVENT, ACT_EXIT_ABOVE, ACT_EXIT_BELOW, ACT_EXIT_MULTI, ACT_INTERSECTION,
                       ACT_RELEASE, ACT_SWITCH, EV_IMPACT, IV_CHATTER, IV_JUMP,
                       IV_STEP, K_CHATTER, K_STICK, K_TRANSITION, REGULAR, SAVE_DENSE, SAVE_EVENTS,
-                      SLIDE, SLIDE_MULTI, STICK, ST_MAX_EVENTS, ST_MAX_STEPS, ST_NONFINITE,
+                      SLIDE, SLIDE_MULTI, STICK, ST_INTERSECTION, ST_MAX_EVENTS, ST_MAX_STEPS,
+                      ST_NONFINITE,
                       ST_STEP_TOO_SMALL, ST_SUCCESS, ST_TERMINAL, ST_ZENO, SW_CONTINUOUS,
                       VAR_NONE, VAR_SEGMENTS,
                       WF_HDDOT, WF_HDOT, WF_LAMBDA, WF_SURFACE)
@@ -27,7 +28,7 @@ from .watch import (_crosses, _graze_samples, _hdot_rate, _hermite_extrema, _loc
                     _merge_samples, _surface_rate, _watch_pair, _watch_slope, _watch_value)
 from .actions import (_act_impact, _act_intersection, _act_multi_exit, _act_multi_intersection,
                       _act_release, _act_slide_exit, _act_switch, _act_transition,
-                      _action_saltation, _after_reset, _apply_saltation)
+                      _action_saltation, _after_reset, _apply_saltation, _stick_meets_slide)
 
 # --------------------------------------------------------------------------------------
 # dense output on demand
@@ -1223,12 +1224,36 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                     ev, p, wref[w], old_idx, old_mode, nm, t, y, n, stab, buf, wk)
             elif old_kind == SLIDE_MULTI:
                 status, dkind, didx, mode, log_kind, log_ref = _act_multi_intersection(
-                    ev, p, widx[w], new_sign, wref[w], old_idx, old_mode, nm, t, y, n, stab,
-                    slide_c, buf, fbuf, wk)
+                    ev, p, widx[w], new_sign, wref[w], old_idx, old_mode, nm, t, y, n, etab,
+                    stab, slide_c, buf, fbuf, wk)
             else:
                 status, dkind, didx, mode, log_kind, log_ref = _act_intersection(
                     ev, p, widx[w], new_sign, wref[w], old_kind, old_idx, old_mode, nm, t, y, n,
                     etab, stab, slide_c, buf, fbuf, wk)
+            if act == ACT_INTERSECTION and status == ST_SUCCESS and log_kind < 0:
+                # the sliding motion touched the surface tangentially (a graze): no event; it
+                # goes on in its state, guarded on its own side of the surface, to a depth of
+                # the touch's integration error across it
+                last_type = wtype[w]
+                last_idx = widx[w]
+                last_mode = wmode[w]
+                last_sign = -new_sign
+                ev(W_H, widx[w], t, y, p, buf)
+                last_depth = 4.0 * abs(buf[0])
+                last_t = t
+                ikind[n_nodes - 2] = IV_STEP if save_all else IV_JUMP
+                restart = True
+                continue
+            if _stick_meets_slide(act, old_kind, dkind):
+                # sticking on a contact and sliding on a switching surface at once: no discrete
+                # state holds both constraints; the run ends at the event, before it
+                status = ST_INTERSECTION
+                dkind = old_kind
+                didx = old_idx
+                mode = old_mode
+                for i in range(nY):
+                    y[i] = xs[i]
+                break
             if act != ACT_INTERSECTION and act != ACT_EXIT_MULTI:
                 log_ref = wref[w]
 
