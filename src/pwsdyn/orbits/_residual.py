@@ -792,19 +792,11 @@ class _OrbitProblemBase:
         pv = self._pv
         F = np.zeros(N)
         J = np.zeros((N, Nw))
-        Dp = np.zeros((q, Nw))
-        Dp[:, N:] = np.eye(q)
-
-        def Dz_of(i):
-            D = np.zeros((na, Nw))
-            c = self._xcol(i)
-            D[:n, c:c + n] = np.eye(n)
-            D[n:] = Dp
-            return D
+        Dz_all = self._dz_templates()
 
         if not self.m:
             T = self.period_value(p) if self.forced else Ts[0]
-            return self._evaluate_smooth(u, p, t0, xs[0], T, opts, Dz_of(0), jacobian)
+            return self._evaluate_smooth(u, p, t0, xs[0], T, opts, Dz_all[0].copy(), jacobian)
         t = t0
         Dt = np.zeros(Nw)
         if self.forced:
@@ -828,16 +820,18 @@ class _OrbitProblemBase:
             F[r0:r0 + n] = xs[k] - X[:n]
             F[r0 + n] = c
             if jacobian:
-                Dz = Dz_of(i)
+                # (outer products as broadcast products, numpy.outer's own operation; the
+                # problem's identity block, not a new one per segment)
+                Dz = Dz_all[i].copy()
                 Dte = Dt.copy()
                 Dte[self._Tcol(i)] += 1.0
-                Dy = Phi @ Dz + np.outer(f_end, Dte) - np.outer(Phi @ f_start, Dt)
+                Dy = Phi @ Dz + f_end[:, None] * Dte - (Phi @ f_start)[:, None] * Dt
                 Dtau = tau_t * Dte + tau_y @ Dy
-                DX = np.outer(X_t, Dte) + X_y @ Dy
+                DX = X_t[:, None] * Dte + X_y @ Dy
                 J[r0 + n] = ct * Dte + cz @ Dy
                 J[r0:r0 + n] = -DX[:n]
                 c1 = self._xcol(k)
-                J[r0:r0 + n, c1:c1 + n] += np.eye(n)
+                J[r0:r0 + n, c1:c1 + n] += self._eye_n
                 s.Dt, s.Dz, s.Dte, s.Dy, s.Dtau, s.DX = Dt, Dz, Dte, Dy, Dtau, DX
                 Dt = Dtau
             segs.append(s)
@@ -857,6 +851,26 @@ class _OrbitProblemBase:
         return ProblemEvaluation(np.asarray(u, dtype=float).copy(), p, F,
                                  J[:, :N] if jacobian else None,
                                  J[:, N:] if jacobian else None, period, segs, Dper)
+
+    def _dz_templates(self) -> list:
+        """``Dz`` of each segment's start over ``w = (u, p)`` (the identity on its start
+        state's columns of ``u`` and on the parameter columns), made once per problem; an
+        evaluation copies them (its segments keep theirs)."""
+        got = self.__dict__.get("_dz_cache")
+        if got is None:
+            n, q, na = self.n, self.q, self.sys.naug
+            N = self.size
+            Nw = N + q
+            got = []
+            for i in range(max(self.m, 1)):
+                D = np.zeros((na, Nw))
+                c = self._xcol(i)
+                D[:n, c:c + n] = np.eye(n)
+                D[n:, N:] = np.eye(q)
+                got.append(D)
+            self.__dict__["_dz_cache"] = got
+            self.__dict__["_eye_n"] = np.eye(n)
+        return got
 
     def _evaluate_smooth(self, u, p, t0, x0, T, opts, Dz, jacobian):
         """No events: single shooting over the period (autonomous: with a phase condition)."""
