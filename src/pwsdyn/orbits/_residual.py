@@ -655,8 +655,20 @@ class _OrbitProblemBase:
             cache[key] = [self._flow(i, s.t, s.z, s.T,
                                      self._shooting_opts(np.asarray(p, dtype=float),
                                                          dense=True),
-                                     store_dense=True)[2], None]
+                                     store_dense=True)[2], None, {}]
         return cache[key]
+
+    def _surface_samples(self, i, s, p, k, ctx) -> np.ndarray:
+        """Surface ``k`` (``ctx.h_rows``, ``ctx`` the model's evaluations at ``p``) at the
+        samples of :meth:`_dense_samples`, evaluated once for the admissibility check and the
+        monitors of a point (both read it on the same samples). Read it, do not write into
+        it."""
+        entry = self._dense_entry(i, s, p)
+        got = entry[2].get(k)
+        if got is None:
+            _, ts, Y = self._dense_samples(i, s, p)
+            got = entry[2][k] = ctx.h_rows(k, ts, Y)
+        return got
 
     def _dense_samples(self, i, s, p):
         """``(run, ts, Y)``: the run of :meth:`_dense_segment`, the sample times inside it
