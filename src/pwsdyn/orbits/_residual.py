@@ -581,14 +581,26 @@ class _OrbitProblemBase:
     def _period_at(self, p):
         """``(period, its gradient over p)`` at ``p``, kept for the last few ``p``: a
         continuation step asks for them at each Newton iterate and check at one ``p``."""
-        key = self._p(p).tobytes()
-        cache = self.__dict__.setdefault("_period_cache", {})
+        p = self._p(p)
+        key = p.tobytes()
+        cache = self.__dict__.get("_period_cache")
+        if cache is None:
+            cache = self.__dict__["_period_cache"] = {}
         got = cache.get(key)
         if got is None:
             if len(cache) > 16:
                 cache.clear()
-            d = self.param_dict(p)
-            args = [d[k] for k in self.model.parameters]
+            # the model's parameter vector: the problem's values at p (param_dict's values
+            # in model order, without its dict)
+            slots = self.__dict__.get("_p_slots")
+            if slots is None:
+                names = list(self.model.parameters)
+                slots = self.__dict__["_p_slots"] = (
+                    [float(self.params[k]) for k in names],
+                    [names.index(k) for k in self.parameters])
+            args = list(slots[0])
+            for j, v in zip(slots[1], p.tolist()):
+                args[j] = v
             value = self.periods * self.model.forcing_period_at(args)
             grad = (self.periods * np.array([float(g(*args)) for g in self._Tf_p])
                     if self.forced else None)
