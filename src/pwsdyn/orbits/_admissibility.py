@@ -184,7 +184,6 @@ def _at_boundary(prob, i, s, ctx):
     st = prob.state_names[i]
     scale = 1.0 + float(np.max(np.abs(y)))
     out = []
-    fk = prob.fields[i]
     if b.kind in ("impact", "transition", "chatter"):
         e = m.events[b.ref]
         rate, hx = boundary_normal_velocity(prob, i, s, ctx)

@@ -809,7 +809,6 @@ class _OrbitProblemBase:
         p = self._p(p)
         t0, xs, Ts = self.unpack(u)
         n, q, sysm = self.n, self.q, self.sys
-        na = sysm.naug
         N = self.size
         Nw = N + q
         opts = self._shooting_opts(p)
