@@ -554,14 +554,16 @@ class _OrbitProblemBase:
         """The model's point evaluations at ``p`` (:func:`~pwsdyn.orbits.surfaces.model_context`),
         kept for the last ``p``: the admissibility check and the monitors of a point ask for
         them at one ``p``."""
-        params = self.param_dict(p)
-        key = tuple(params.items())
+        p = self._p(p)
+        # (keyed by p's bytes: the other parameters are the problem's own)
+        key = p.tobytes()
         got = self.__dict__.get("_context_cache")
         if got is None or got[2] != self.sliding:
-            got = (key, model_context(self.model, params, self.sliding), self.sliding)
+            got = (key, model_context(self.model, self.param_dict(p), self.sliding),
+                   self.sliding)
         elif got[0] != key:
             # the compiled model and its tables as they were, other parameter values
-            got = (key, got[1].with_params(params), self.sliding)
+            got = (key, got[1].with_params(self.param_dict(p)), self.sliding)
         self.__dict__["_context_cache"] = got
         return got[1]
 
