@@ -658,9 +658,16 @@ class _OrbitProblemBase:
         return self._dense_entry(i, s, p)[0]
 
     def _dense_entry(self, i, s, p) -> list:
-        key = (i, float(s.t), np.asarray(s.z).tobytes(), float(s.T),
-               np.asarray(p, dtype=float).tobytes())
-        cache = self.__dict__.setdefault("_dense_cache", {})
+        pb = np.asarray(p, dtype=float).tobytes()
+        # the entry of this segment object at this p, kept on it: the checks and monitors of
+        # a point ask for it ~5 times
+        mine = s.__dict__.get("_dense_entry")
+        if mine is not None and mine[0] == i and mine[1] == pb and mine[2] is self:
+            return mine[3]
+        key = (i, float(s.t), np.asarray(s.z).tobytes(), float(s.T), pb)
+        cache = self.__dict__.get("_dense_cache")
+        if cache is None:
+            cache = self.__dict__["_dense_cache"] = {}
         if key not in cache:
             if len(cache) > 4 * max(self.m, 1):
                 cache.clear()
@@ -670,6 +677,7 @@ class _OrbitProblemBase:
                                      self._shooting_opts(np.asarray(p, dtype=float),
                                                          dense=True),
                                      store_dense=True)[2], None, {}]
+        s.__dict__["_dense_entry"] = (i, pb, self, cache[key])
         return cache[key]
 
     def _surface_samples(self, i, s, p, k, ctx) -> np.ndarray:
