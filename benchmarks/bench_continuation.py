@@ -51,7 +51,8 @@ compares their branches bit for bit (points, multipliers, test functions, specia
 
 ``--save`` writes ``results/continuation.json``, keeping the rows of other labels (so that a
 run of the code before a change and one after sit side by side, each with its own scipy
-baseline, ratios compared).
+baseline, ratios compared); the trees of ``--base`` are named there by their commit, not by
+their paths on this machine.
 """
 
 from __future__ import annotations
@@ -251,8 +252,29 @@ def compare_trees(base: Path, args) -> dict:
             runs[k].append(json.loads(out.stdout.strip().splitlines()[-1]))
     return {k: dict(cpu_s=min(w["cpu_s"] for w in v), wall_s=min(w["wall_s"] for w in v),
                     points=v[-1]["points"], digest=v[-1]["digest"], src=str(trees[k]),
-                    imported=v[-1]["pwsdyn"])
+                    imported=v[-1]["pwsdyn"], revision=_revision(trees[k]))
             for k, v in runs.items()}
+
+
+def _revision(src: Path) -> str:
+    """The commit of the checkout holding ``src`` (``+`` where its files differ from it), the
+    name a saved row gives a tree instead of its path on this machine."""
+    def git(*a):
+        return subprocess.run(["git", "-C", str(src), *a], capture_output=True, text=True,
+                              check=False)
+    head = git("rev-parse", "--short", "HEAD")
+    if head.returncode:
+        return "unknown"
+    dirty = git("status", "--porcelain", "--untracked-files=no", "--", ".").stdout.strip()
+    return head.stdout.strip() + ("+" if dirty else "")
+
+
+def _without_paths(row: dict) -> dict:
+    """A saved row without this machine's paths (a tree is named by its revision)."""
+    for tree in row.get("trees", {}).values():
+        tree.pop("src", None)
+        tree.pop("imported", None)
+    return row
 
 
 def main(argv=None):
@@ -331,7 +353,8 @@ def main(argv=None):
               f"scipy):")
         for k, w in trees.items():
             print(f"  {k:<7} {1e3 * w['cpu_s'] / w['points']:>7.3f}  "
-                  f"{cs / len(sc) / (w['cpu_s'] / w['points']):>6.1f}x   ({w['imported']})")
+                  f"{cs / len(sc) / (w['cpu_s'] / w['points']):>6.1f}x   ({w['revision']}, "
+                  f"{w['imported']})")
         print(f"  after / before {a['cpu_s'] / b['cpu_s']:.3f}; branches identical bit for "
               f"bit: {'yes' if row['identical'] else 'NO'}")
     print(f"a point's cost (CPU ms, with timers: {sum(per.values()):.3f} per point; calls per "
@@ -352,8 +375,9 @@ def main(argv=None):
         old = json.loads(path.read_text()) if path.exists() else {}
         rows = [r for r in old.get("rows", []) if r.get("label", "") not in ("", args.label)]
         row["meta"] = meta
+        rows = [_without_paths(r) for r in rows + [row]]
         with open(path, "w") as fh:
-            json.dump(dict(meta=meta, rows=rows + [row]), fh, indent=1, default=str)
+            json.dump(dict(meta=meta, rows=rows), fh, indent=1, default=str)
     ok = err_pw < 1e-8 and mult_pw < 1e-6 and err_sc < 1e-6 and mult_sc < 1e-4
     if trees is not None and not row["identical"]:
         print("before and after computed different branches", file=sys.stderr)

@@ -12,7 +12,8 @@ import numpy as np
 from ._base import ADMISSIBILITY_RTOL
 from ._sampling import lowest_point
 from .surfaces import (ScalarFunction, guard_holds, model_context, normal_acceleration,
-                       normal_velocity, state_field, surface)
+                       normal_velocity, state_field)
+from .surfaces import surface as _surface
 
 
 @dataclass(frozen=True)
@@ -83,6 +84,12 @@ def _interior(prob, i, s, ctx, p):
     fk = prob.fields[i]
     m = prob.model
     checks = []   # ("side", label, fn, sign): sign * fn >= -band; ("event", label, fn, j)
+    surfaces_of = {}  # id of a check's function -> its surface, where it is one
+
+    def surface(ctx, k):
+        fn = _surface(ctx, k)
+        surfaces_of[id(fn)] = k
+        return fn
     if fk.kind in ("mode", "stick"):
         mode = fk.index if fk.kind == "mode" else fk.mode
         for j, e in enumerate(m.events):
@@ -139,7 +146,9 @@ def _interior(prob, i, s, ctx, p):
                                j))
     out = []
     for what, label, fn, rule in checks:
-        vals = fn.rows(ts, Y)
+        # a surface's values on the samples: shared with the monitors of the point
+        k = surfaces_of.get(id(fn))
+        vals = fn.rows(ts, Y) if k is None else prob._surface_samples(i, s, p, k, ctx)
         band = ADMISSIBILITY_RTOL * scale * fn.gscale
         if what == "side":
             worst = lowest_point(fn, tr, ts, vals, rule, n, limit=-band)
@@ -175,12 +184,9 @@ def _at_boundary(prob, i, s, ctx):
     st = prob.state_names[i]
     scale = 1.0 + float(np.max(np.abs(y)))
     out = []
-    fk = prob.fields[i]
-    f_in = state_field(ctx, fk, te, y)
     if b.kind in ("impact", "transition", "chatter"):
         e = m.events[b.ref]
-        hx = ctx.h_x(b.surface, te, y)
-        rate = ctx.h_t(b.surface, te, y) + hx @ f_in
+        rate, hx = boundary_normal_velocity(prob, i, s, ctx)
         band = ADMISSIBILITY_RTOL * scale * max(1.0, float(np.max(np.abs(hx))))
         d = -1 if b.kind == "chatter" else e.direction
         if d * rate < -band:
@@ -225,6 +231,22 @@ def _at_boundary(prob, i, s, ctx):
                            f"point to opposite sides (h_t + h_x f = {ha:.3e} above, "
                            f"{hb:.3e} below): the orbit should slide or cannot reach it")
     return out
+
+
+def boundary_normal_velocity(prob, i, s, ctx):
+    """``(h_t + h_x f, h_x)`` at the event ending segment ``i`` (``s``, of an evaluation at
+    the parameter values of ``ctx``): the normal velocity of the segment's field on the
+    boundary's surface and the surface's gradient there, computed once for the admissibility
+    check and the monitors of a point (kept on ``s``)."""
+    got = s.__dict__.get("_normal_velocity")
+    if got is None or got[0] is not ctx:
+        b = prob.bounds[i]
+        te, y = s.te, s.y[:prob.n]
+        f_in = state_field(ctx, prob.fields[i], te, y)
+        hx = ctx.h_x(b.surface, te, y)
+        got = (ctx, ctx.h_t(b.surface, te, y) + hx @ f_in, hx)
+        s.__dict__["_normal_velocity"] = got
+    return got[1], got[2]
 
 
 def _weight(prob, i, j, p) -> ScalarFunction:

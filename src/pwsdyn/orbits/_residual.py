@@ -554,14 +554,16 @@ class _OrbitProblemBase:
         """The model's point evaluations at ``p`` (:func:`~pwsdyn.orbits.surfaces.model_context`),
         kept for the last ``p``: the admissibility check and the monitors of a point ask for
         them at one ``p``."""
-        params = self.param_dict(p)
-        key = tuple(params.items())
+        p = self._p(p)
+        # (keyed by p's bytes: the other parameters are the problem's own)
+        key = p.tobytes()
         got = self.__dict__.get("_context_cache")
         if got is None or got[2] != self.sliding:
-            got = (key, model_context(self.model, params, self.sliding), self.sliding)
+            got = (key, model_context(self.model, self.param_dict(p), self.sliding),
+                   self.sliding)
         elif got[0] != key:
             # the compiled model and its tables as they were, other parameter values
-            got = (key, got[1].with_params(params), self.sliding)
+            got = (key, got[1].with_params(self.param_dict(p)), self.sliding)
         self.__dict__["_context_cache"] = got
         return got[1]
 
@@ -581,14 +583,26 @@ class _OrbitProblemBase:
     def _period_at(self, p):
         """``(period, its gradient over p)`` at ``p``, kept for the last few ``p``: a
         continuation step asks for them at each Newton iterate and check at one ``p``."""
-        key = self._p(p).tobytes()
-        cache = self.__dict__.setdefault("_period_cache", {})
+        p = self._p(p)
+        key = p.tobytes()
+        cache = self.__dict__.get("_period_cache")
+        if cache is None:
+            cache = self.__dict__["_period_cache"] = {}
         got = cache.get(key)
         if got is None:
             if len(cache) > 16:
                 cache.clear()
-            d = self.param_dict(p)
-            args = [d[k] for k in self.model.parameters]
+            # the model's parameter vector: the problem's values at p (param_dict's values
+            # in model order, without its dict)
+            slots = self.__dict__.get("_p_slots")
+            if slots is None:
+                names = list(self.model.parameters)
+                slots = self.__dict__["_p_slots"] = (
+                    [float(self.params[k]) for k in names],
+                    [names.index(k) for k in self.parameters])
+            args = list(slots[0])
+            for j, v in zip(slots[1], p.tolist()):
+                args[j] = v
             value = self.periods * self.model.forcing_period_at(args)
             grad = (self.periods * np.array([float(g(*args)) for g in self._Tf_p])
                     if self.forced else None)
@@ -644,9 +658,16 @@ class _OrbitProblemBase:
         return self._dense_entry(i, s, p)[0]
 
     def _dense_entry(self, i, s, p) -> list:
-        key = (i, float(s.t), np.asarray(s.z).tobytes(), float(s.T),
-               np.asarray(p, dtype=float).tobytes())
-        cache = self.__dict__.setdefault("_dense_cache", {})
+        pb = np.asarray(p, dtype=float).tobytes()
+        # the entry of this segment object at this p, kept on it: the checks and monitors of
+        # a point ask for it ~5 times
+        mine = s.__dict__.get("_dense_entry")
+        if mine is not None and mine[0] == i and mine[1] == pb and mine[2] is self:
+            return mine[3]
+        key = (i, float(s.t), np.asarray(s.z).tobytes(), float(s.T), pb)
+        cache = self.__dict__.get("_dense_cache")
+        if cache is None:
+            cache = self.__dict__["_dense_cache"] = {}
         if key not in cache:
             if len(cache) > 4 * max(self.m, 1):
                 cache.clear()
@@ -655,8 +676,21 @@ class _OrbitProblemBase:
             cache[key] = [self._flow(i, s.t, s.z, s.T,
                                      self._shooting_opts(np.asarray(p, dtype=float),
                                                          dense=True),
-                                     store_dense=True)[2], None]
+                                     store_dense=True)[2], None, {}]
+        s.__dict__["_dense_entry"] = (i, pb, self, cache[key])
         return cache[key]
+
+    def _surface_samples(self, i, s, p, k, ctx) -> np.ndarray:
+        """Surface ``k`` (``ctx.h_rows``, ``ctx`` the model's evaluations at ``p``) at the
+        samples of :meth:`_dense_samples`, evaluated once for the admissibility check and the
+        monitors of a point (both read it on the same samples). Read it, do not write into
+        it."""
+        entry = self._dense_entry(i, s, p)
+        got = entry[2].get(k)
+        if got is None:
+            _, ts, Y = self._dense_samples(i, s, p)
+            got = entry[2][k] = ctx.h_rows(k, ts, Y)
+        return got
 
     def _dense_samples(self, i, s, p):
         """``(run, ts, Y)``: the run of :meth:`_dense_segment`, the sample times inside it
@@ -785,26 +819,17 @@ class _OrbitProblemBase:
         p = self._p(p)
         t0, xs, Ts = self.unpack(u)
         n, q, sysm = self.n, self.q, self.sys
-        na = sysm.naug
         N = self.size
         Nw = N + q
         opts = self._shooting_opts(p)
         pv = self._pv
         F = np.zeros(N)
         J = np.zeros((N, Nw))
-        Dp = np.zeros((q, Nw))
-        Dp[:, N:] = np.eye(q)
-
-        def Dz_of(i):
-            D = np.zeros((na, Nw))
-            c = self._xcol(i)
-            D[:n, c:c + n] = np.eye(n)
-            D[n:] = Dp
-            return D
+        Dz_all = self._dz_templates()
 
         if not self.m:
             T = self.period_value(p) if self.forced else Ts[0]
-            return self._evaluate_smooth(u, p, t0, xs[0], T, opts, Dz_of(0), jacobian)
+            return self._evaluate_smooth(u, p, t0, xs[0], T, opts, Dz_all[0].copy(), jacobian)
         t = t0
         Dt = np.zeros(Nw)
         if self.forced:
@@ -828,16 +853,18 @@ class _OrbitProblemBase:
             F[r0:r0 + n] = xs[k] - X[:n]
             F[r0 + n] = c
             if jacobian:
-                Dz = Dz_of(i)
+                # (outer products as broadcast products, numpy.outer's own operation; the
+                # problem's identity block, not a new one per segment)
+                Dz = Dz_all[i].copy()
                 Dte = Dt.copy()
                 Dte[self._Tcol(i)] += 1.0
-                Dy = Phi @ Dz + np.outer(f_end, Dte) - np.outer(Phi @ f_start, Dt)
+                Dy = Phi @ Dz + f_end[:, None] * Dte - (Phi @ f_start)[:, None] * Dt
                 Dtau = tau_t * Dte + tau_y @ Dy
-                DX = np.outer(X_t, Dte) + X_y @ Dy
+                DX = X_t[:, None] * Dte + X_y @ Dy
                 J[r0 + n] = ct * Dte + cz @ Dy
                 J[r0:r0 + n] = -DX[:n]
                 c1 = self._xcol(k)
-                J[r0:r0 + n, c1:c1 + n] += np.eye(n)
+                J[r0:r0 + n, c1:c1 + n] += self._eye_n
                 s.Dt, s.Dz, s.Dte, s.Dy, s.Dtau, s.DX = Dt, Dz, Dte, Dy, Dtau, DX
                 Dt = Dtau
             segs.append(s)
@@ -857,6 +884,26 @@ class _OrbitProblemBase:
         return ProblemEvaluation(np.asarray(u, dtype=float).copy(), p, F,
                                  J[:, :N] if jacobian else None,
                                  J[:, N:] if jacobian else None, period, segs, Dper)
+
+    def _dz_templates(self) -> list:
+        """``Dz`` of each segment's start over ``w = (u, p)`` (the identity on its start
+        state's columns of ``u`` and on the parameter columns), made once per problem; an
+        evaluation copies them (its segments keep theirs)."""
+        got = self.__dict__.get("_dz_cache")
+        if got is None:
+            n, q, na = self.n, self.q, self.sys.naug
+            N = self.size
+            Nw = N + q
+            got = []
+            for i in range(max(self.m, 1)):
+                D = np.zeros((na, Nw))
+                c = self._xcol(i)
+                D[:n, c:c + n] = np.eye(n)
+                D[n:, N:] = np.eye(q)
+                got.append(D)
+            self.__dict__["_dz_cache"] = got
+            self.__dict__["_eye_n"] = np.eye(n)
+        return got
 
     def _evaluate_smooth(self, u, p, t0, x0, T, opts, Dz, jacobian):
         """No events: single shooting over the period (autonomous: with a phase condition)."""

@@ -8,14 +8,21 @@ import numpy as np
 #: Dense-output samples per step in the admissibility checks and the search of a condition.
 SAMPLES = 8
 
+# the fractions of a step that are sampled, made once (keyed by SAMPLES, a module setting)
+_THETA: dict = {}
+
 
 def sample_times(tr) -> np.ndarray:
     """Nodes of a run and ``SAMPLES - 1`` points inside each step."""
     t = np.asarray(tr.t, dtype=float)
     if len(t) < 2:
         return t
-    th = np.arange(SAMPLES) / SAMPLES
-    inner = np.append((t[:-1, None] + np.diff(t)[:, None] * th[None, :]).reshape(-1), t[-1])
+    th = _THETA.get(SAMPLES)
+    if th is None:
+        th = _THETA[SAMPLES] = np.arange(SAMPLES) / SAMPLES
+    # (numpy.append and numpy.diff's own operations, without their wrappers)
+    inner = np.concatenate(((t[:-1, None] + (t[1:] - t[:-1])[:, None] * th[None, :]
+                             ).reshape(-1), t[-1:]))
     # sorted and distinct already unless a step is of no length (a jump's two nodes) or of
     # round-off size: numpy.unique (a sort) only then, with the same result
     if bool((inner[1:] > inner[:-1]).all()):
@@ -61,8 +68,8 @@ def _refine_min(val, a, b, xatol):
 
 def _parabola_min(t3, g3, a, b) -> float:
     """Minimum over ``[a, b]`` of the parabola through three samples ``(t3, g3)``."""
-    t0, t1, t2 = (float(v) for v in t3)
-    g0, g1, g2 = (float(v) for v in g3)
+    t0, t1, t2 = t3.tolist()
+    g0, g1, g2 = g3.tolist()
     d1 = (g1 - g0) / (t1 - t0)
     d2 = (g2 - g1) / (t2 - t1)
     c = (d2 - d1) / (t2 - t0)                      # p(t) = g1 + m (t - t1) + c (t - t1)^2

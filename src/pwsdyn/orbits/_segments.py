@@ -167,20 +167,31 @@ class SegmentSystem:
 
     def scalar(self, i, t, z, pv, grad: bool = True):
         """Value, gradient over the extended state and time derivative of scalar ``i``."""
-        v = float(self._eval(W_H, i, t, z, pv, 1)[0])
+        # (the three evaluations in a row into the one buffer, the scalars read from it
+        # without a copy: an orbit evaluation asks for a few of these per segment)
+        ev, out, na = self.evaluate, self._buf, self.naug
+        i, t = int(i), float(t)
+        ev(W_H, i, t, z, pv, out)
+        v = float(out[0])
         if not grad:
             return v
-        return v, self._eval(W_HX, i, t, z, pv, self.naug), float(self._eval(W_HT, i, t, z, pv,
-                                                                              1)[0])
+        ev(W_HX, i, t, z, pv, out)
+        g = out[:na].copy()
+        ev(W_HT, i, t, z, pv, out)
+        return v, g, float(out[0])
 
     def vector(self, i, t, z, pv, jac: bool = True):
         """Value, Jacobian over the extended state and time derivative of vector ``i``."""
-        v = self._eval(W_G, i, t, z, pv, self.naug)
+        ev, out, na = self.evaluate, self._buf, self.naug
+        i, t = int(i), float(t)
+        ev(W_G, i, t, z, pv, out)
+        v = out[:na].copy()
         if not jac:
             return v
-        return (v, self._eval(W_GX, i, t, z, pv, self.naug * self.naug).reshape(self.naug,
-                                                                               self.naug),
-                self._eval(W_GT, i, t, z, pv, self.naug))
+        ev(W_GX, i, t, z, pv, out)
+        J = out[:na * na].reshape(na, na).copy()
+        ev(W_GT, i, t, z, pv, out)
+        return v, J, out[:na].copy()
 
     # ---- symbolic construction (only when the compiled module is not cached) ---------------
     def _source(self) -> str:

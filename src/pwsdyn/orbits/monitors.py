@@ -18,9 +18,10 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ._admissibility import boundary_normal_velocity
 from ._sampling import interior_minimum
 from .surfaces import (model_context, normal_acceleration, normal_velocity,
-                       sliding_boundary_rate, state_field, surface)
+                       sliding_boundary_rate, surface)
 
 #: Kinds of the monitors of :func:`~pwsdyn.orbits.monitors.dib_monitors` (discontinuity-induced
 #: bifurcations of an orbit): grazing, grazing-, switching-, crossing- and adding-sliding,
@@ -167,7 +168,8 @@ def dib_monitors(prob, u, p=None, evaluation=None) -> dict:
                 continue
             for name, k, sign, other in _bounding_surfaces(prob, fk.index):
                 fn = surface(ctx, k)
-                vals = sign * fn.rows(ts, Y)
+                # (the values on the samples the admissibility check read too)
+                vals = sign * prob._surface_samples(i, s, p, k, ctx)
                 found = interior_minimum(lambda tt: sign * fn(tt, tr(tt)[:n]), ts, vals)
                 if found is None:
                     continue
@@ -211,8 +213,7 @@ def dib_monitors(prob, u, p=None, evaluation=None) -> dict:
                 _put(out, MonitorKey(kind, sw.name, i, "boundary"), value, te, y)
         if b.kind == "impact":
             e = m.events[b.ref]
-            f_in = state_field(ctx, fk, te, y)
-            rate = ctx.h_t(b.surface, te, y) + ctx.h_x(b.surface, te, y) @ f_in
+            rate = boundary_normal_velocity(prob, i, s, ctx)[0]
             _put(out, MonitorKey("GR", e.name, i, "boundary"), -rate, te, y)
         elif b.kind == "slide_start" and fk.kind == "mode":
             # switching-sliding: the point where the orbit reaches the surface leaves the
