@@ -9,7 +9,6 @@ text that goes into HTML is escaped (model, mode and event names are the user's 
 from __future__ import annotations
 
 import html
-import math
 
 import numpy as np
 

@@ -259,7 +259,7 @@ def check_time_unit(model, p, period, phase: float, n_periods: int, *, pidx=None
                 raise ArgumentError(
                     f"the forcing period {model.forcing_period} of model {model.name!r} must be "
                     f"a positive finite number, got {got}{at}"
-                    + (f": remove that value from `values` (or give `period`)"
+                    + (": remove that value from `values` (or give `period`)"
                        if v is not None else ": check `params` (or give `period`)"))
         name = "values" if (v is not None and period is None) else "period"
         t_start = phase * T

@@ -179,7 +179,7 @@ def _kink_graze(point):
     mon = point.monitor
     prob = point.problem.orbit_problem
     u, p = point.point.u, np.array([point.value])
-    m, n = prob.model, prob.n
+    m = prob.model
     i = mon.segment
     b = prob.bounds[i] if i < len(prob.bounds) else None
     impacts = [e for e in m.events if e.kind == "impact"

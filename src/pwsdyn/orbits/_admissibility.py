@@ -11,8 +11,8 @@ import numpy as np
 
 from ._base import ADMISSIBILITY_RTOL
 from ._sampling import lowest_point
-from .surfaces import (ScalarFunction, guard_holds, model_context, normal_acceleration,
-                       normal_velocity, state_field)
+from .surfaces import (ScalarFunction, guard_holds, normal_acceleration, normal_velocity,
+                       state_field)
 from .surfaces import surface as _surface
 
 

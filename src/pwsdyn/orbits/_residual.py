@@ -733,14 +733,14 @@ class _OrbitProblemBase:
 
     def _map(self, b: _Boundary, te, y, sysm):
         """``(tau, X, tau_t, tau_y, X_t, X_y)`` of boundary ``b`` at the event point."""
-        n, na = self.n, sysm.naug
+        na = sysm.naug
         pv = self._pv
         if b.kind in ("impact", "transition"):
             g, gz, gt = sysm.vector(sysm.vector_index(("reset", b.ref)), te, y, pv)
             return te, g, 1.0, np.zeros(na), gt, gz
         if b.kind != "chatter":
             return te, y.copy(), 1.0, np.zeros(na), np.zeros(na), np.eye(na)
-        j, mode, k = b.ref, b.mode, b.surface
+        j, mode = b.ref, b.mode
         Zv, Zz, Zt = sysm.vector(sysm.vector_index(("chat_z", j, mode)), te, y, pv)
         d, dz, dt = sysm.scalar(sysm.scalar_index(("chat_dt", j, mode)), te, y, pv)
         tau = te + d

@@ -205,7 +205,6 @@ class SegmentSystem:
     def _cases(self) -> dict:
         m = self.model
         t = m.t
-        X = sp.Matrix(m.state_symbols)
         Z = sp.Matrix(list(m.state_symbols) + [sp.Symbol(k, real=True) for k in self.free])
         n, q = self.n, self.q
         S = _Symbolic(m, self.sliding)

@@ -681,7 +681,6 @@ def _build_orbit(sh: _Shooter, X, T, history, *, converged, runs=None) -> Period
         runs = sh.run(X, T)[:2]
     runs = runs[0]
     ts = sh.times(T)
-    n = ctx.n
     # the monodromy as merge_intervals makes the trajectory's Jacobian: the product of the
     # intervals' Jacobians, from the identity
     M = sh._eye
@@ -734,7 +733,7 @@ def orbit_at(model, x0, *, params=None, period, t0=0.0, mode=None, tol: float = 
         options.pop(key, None)
     opts = shooting_options(options, "PeriodicOrbit.from_trajectory()")
     model = as_model(model, kind="flow", caller="PeriodicOrbit.from_trajectory()")
-    p = model.parameter_vector(params)
+    model.parameter_vector(params)      # unknown or non-finite values refused here
     x0 = V.state_vector(model, x0)
     period = V.positive("period", period)
     t0 = V.number("t0", t0)

@@ -20,8 +20,7 @@ import numpy as np
 
 from ._admissibility import boundary_normal_velocity
 from ._sampling import interior_minimum
-from .surfaces import (model_context, normal_acceleration, normal_velocity,
-                       sliding_boundary_rate, surface)
+from .surfaces import normal_acceleration, normal_velocity, sliding_boundary_rate, surface
 
 #: Kinds of the monitors of :func:`~pwsdyn.orbits.monitors.dib_monitors` (discontinuity-induced
 #: bifurcations of an orbit): grazing, grazing-, switching-, crossing- and adding-sliding,
