@@ -561,7 +561,7 @@ def main(argv=None):
     if args.tolerance_scan:
         res["tolerance_scan"] = tolerance_scan(max(args.periods // 5, 50), args.repeats)
     if args.base:
-        res["before_after"] = {"base": args.base, "rounds": args.rounds,
+        res["before_after"] = {"base": "the src given as --base", "rounds": args.rounds,
                                "paths": before_after(args.base, args.periods // 2,
                                                      args.repeats, args.rounds)}
     res["machine"]["loadavg_end"] = Path("/proc/loadavg").read_text().split()[:3]

@@ -146,6 +146,12 @@ def run_row(case, path_opts, depth, phases, models):
     return hits, worst, false_events, unit
 
 
+def _tree() -> str:
+    """Which pwsdyn ran, without this machine's paths: this checkout's ``src`` or another."""
+    here = (HERE.parent / "src" / "pwsdyn").resolve()
+    return "this checkout's src" if Path(pwsdyn.__file__).resolve().parent == here else "another tree"
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--phases", type=int, default=16, help="phases per depth (16)")
@@ -191,7 +197,7 @@ def main(argv=None):
     meta = dict(date=datetime.now(timezone.utc).isoformat(timespec="seconds"),
                 machine=platform.machine(), python=platform.python_version(),
                 numpy=np.__version__, pwsdyn=pwsdyn.__version__,
-                pwsdyn_path=str(Path(pwsdyn.__file__).parent), rtol=DEFAULTS["rtol"],
+                pwsdyn_tree=_tree(), rtol=DEFAULTS["rtol"],
                 atol=DEFAULTS["atol"], phases=args.phases)
     if args.save:
         (HERE / "results").mkdir(exist_ok=True)

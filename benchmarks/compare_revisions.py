@@ -484,6 +484,12 @@ def _loadavg():
         return ""
 
 
+def _saved_spec(spec: str) -> str:
+    """A revision as the saved results name it: a git revision as given, a checkout directory
+    by its role (its commit is saved next to it), never by this machine's path."""
+    return "a checkout directory (uncommitted changes included)" if Path(spec).is_dir() else spec
+
+
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ["--worker"]:
@@ -525,10 +531,12 @@ def main(argv=None):
     revs = []
     result = {"date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
               "machine": machine_info(), "loadavg_start": _loadavg(),
-              "settings": {k: v for k, v in vars(args).items() if k != "save"}}
+              "settings": {k: _saved_spec(v) if k in ("before", "after") else v
+                           for k, v in vars(args).items() if k != "save"}}
     try:
         revs = [Revision("before", args.before, tmp), Revision("after", args.after, tmp)]
-        result["revisions"] = {r.label: {"spec": r.spec, "commit": r.commit} for r in revs}
+        result["revisions"] = {r.label: {"spec": _saved_spec(r.spec), "commit": r.commit}
+                               for r in revs}
         for r in revs:
             print(f"{r.label}: {r.spec} = {r.commit}")
         print(f"load average {result['loadavg_start']}", flush=True)
