@@ -12,8 +12,7 @@ import numpy as np
 from ._base import ADMISSIBILITY_RTOL
 from ._sampling import lowest_point
 from .surfaces import (ScalarFunction, guard_holds, normal_acceleration, normal_velocity,
-                       state_field)
-from .surfaces import surface as _surface
+                       state_field, surface)
 
 
 @dataclass(frozen=True)
@@ -84,12 +83,6 @@ def _interior(prob, i, s, ctx, p):
     fk = prob.fields[i]
     m = prob.model
     checks = []   # ("side", label, fn, sign): sign * fn >= -band; ("event", label, fn, j)
-    surfaces_of = {}  # id of a check's function -> its surface, where it is one
-
-    def surface(ctx, k):
-        fn = _surface(ctx, k)
-        surfaces_of[id(fn)] = k
-        return fn
     if fk.kind in ("mode", "stick"):
         mode = fk.index if fk.kind == "mode" else fk.mode
         for j, e in enumerate(m.events):
@@ -147,8 +140,8 @@ def _interior(prob, i, s, ctx, p):
     out = []
     for what, label, fn, rule in checks:
         # a surface's values on the samples: shared with the monitors of the point
-        k = surfaces_of.get(id(fn))
-        vals = fn.rows(ts, Y) if k is None else prob._surface_samples(i, s, p, k, ctx)
+        vals = (fn.rows(ts, Y) if fn.surface is None
+                else prob._surface_samples(i, s, p, fn.surface, ctx))
         band = ADMISSIBILITY_RTOL * scale * fn.gscale
         if what == "side":
             worst = lowest_point(fn, tr, ts, vals, rule, n, limit=-band)

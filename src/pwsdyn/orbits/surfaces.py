@@ -29,12 +29,15 @@ def model_context(model, params: dict, sliding: str = "convex") -> ModelContext:
 
 class ScalarFunction:
     """A scalar function of ``(t, x)`` with the size of its gradient (for its zero band), and
-    optionally a compiled evaluation at many points (:meth:`rows`)."""
+    optionally a compiled evaluation at many points (:meth:`rows`). ``surface``: the model's
+    surface index where the function is that surface's ``h`` (None otherwise), so that its
+    values on an orbit's samples can be shared by the checks and monitors that read them."""
 
-    def __init__(self, fn, gscale=1.0, rows=None):
+    def __init__(self, fn, gscale=1.0, rows=None, surface=None):
         self.fn = fn
         self.gscale = gscale
         self._rows = rows
+        self.surface = surface
 
     def __call__(self, t, x):
         return self.fn(t, x)
@@ -50,7 +53,7 @@ def surface(ctx, k: int) -> ScalarFunction:
     """Surface ``k``: ``h_k(t, x)``."""
     def fn(t, x):
         return ctx.h(k, t, x)
-    return ScalarFunction(fn, rows=lambda ts, X: ctx.h_rows(k, ts, X))
+    return ScalarFunction(fn, rows=lambda ts, X: ctx.h_rows(k, ts, X), surface=k)
 
 
 def normal_velocity(ctx, k: int, mode: int) -> ScalarFunction:
