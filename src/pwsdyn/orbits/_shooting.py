@@ -169,7 +169,6 @@ class _Shooter:
             got = self._ends[key] = (end, _signature_of(evs, end, self.ctx))
         return got
 
-
     def residual(self, X, T, runs):
         N, n = self.N, self.ctx.n
         r = np.empty(N * n + (1 if self.autonomous else 0))
@@ -486,21 +485,17 @@ def _events_near_nodes(trajs, ts, T, margin=1e-4) -> bool:
     """An event within ``margin * T`` of the start or end of its interval (``trajs``:
     trajectories or run results, one per interval)."""
     for i, tr in enumerate(trajs):
-        if isinstance(tr, Trajectory):
-            evs = tr.events
-            if not isinstance(evs, EventLog):
-                for e in evs:
-                    if e.t - ts[i] < margin * T or ts[i + 1] - e.t_after < margin * T:
-                        return True
-                continue
+        if not isinstance(tr, Trajectory):
+            times = zip(tr.event_t.tolist(), tr.event_t_after.tolist())
+        elif isinstance(tr.events, EventLog):
             # (the log's time columns: its records need not be made)
-            cols = evs.t, evs.t_after
+            times = zip(tr.events.t.tolist(), tr.events.t_after.tolist())
         else:
-            cols = tr.event_t, tr.event_t_after
+            times = ((e.t, e.t_after) for e in tr.events)
         a, b = ts[i], ts[i + 1]
-        for t, t_after in zip(cols[0].tolist(), cols[1].tolist()):
-                if t - a < margin * T or b - t_after < margin * T:
-                    return True
+        for t, t_after in times:
+            if t - a < margin * T or b - t_after < margin * T:
+                return True
     return False
 
 
