@@ -110,3 +110,24 @@ def _dot(a, b, n):
 @_hot
 def _ulp(t):
     return max(abs(t), 1.0) * _EPS
+
+
+def compiled_on_first_use(fn, signature, **options):
+    """``fn`` compiled with the numba signature ``signature()`` (its types made only then) at
+    its first call, and from then on (in later processes: loaded from numba's cache): an
+    entry point that most runs never call costs them nothing. Numba's warning that the
+    model's first-class function type is experimental is not shown, as for the kernel."""
+    compiled = None
+
+    def call(*args):
+        nonlocal compiled
+        if compiled is None:
+            import warnings
+
+            from numba.core.errors import NumbaExperimentalFeatureWarning
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
+                compiled = njit(signature(), cache=True, **options)(fn)
+        return compiled(*args)
+
+    return call

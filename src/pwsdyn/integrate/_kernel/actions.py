@@ -13,7 +13,8 @@ from .._codes import (ACT_EVENT, ACT_INTERSECTION, ACT_SWITCH, IX_ATTRACTING, IX
                       IX_NO_WEIGHTS, IX_NOT_ATTRACTING, IX_TOO_MANY, K_CHATTER, K_CROSSING,
                       K_IMPACT, K_RELEASE, K_SLIDE_END, K_SLIDE_START, MULTI_MAX, REGULAR, SLIDE,
                       SLIDE_MULTI, STICK, ST_INTERSECTION, ST_SUCCESS, SW_FILIPPOV)
-from ._base import EVENT_TABLE_TYPE, SWITCH_TABLE_TYPE, _FD_STEP, _dot, _hot, _hot_inline
+from ._base import (EVENT_TABLE_TYPE, SWITCH_TABLE_TYPE, _FD_STEP, _dot, _hot, _hot_inline,
+                    compiled_on_first_use)
 from .fields import (_field, _find_switch, _impact_direction, _lambda_core, _multi_corner,
                      _multi_count, _multi_field, _multi_offsets, _multi_reference,
                      _multi_set_corners, _multi_surface, _on_surfaces, _partner, _project_multi,
@@ -1001,20 +1002,6 @@ def _intersection_cause_signature():
                     SWITCH_TABLE_TYPE, f1)
 
 
-_INTERSECTION_CAUSE = None
-
-
-def intersection_cause(*args):
-    """:func:`_intersection_cause`, compiled on first use (then loaded from numba's cache):
-    only a run that ends at an intersection needs it."""
-    global _INTERSECTION_CAUSE
-    if _INTERSECTION_CAUSE is None:
-        import warnings
-
-        from numba.core.errors import NumbaExperimentalFeatureWarning
-        with warnings.catch_warnings():
-            # the first-class function type of the model's `evaluate` (as in the kernel)
-            warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
-            _INTERSECTION_CAUSE = njit(_intersection_cause_signature(),
-                                       cache=True)(_intersection_cause)
-    return _INTERSECTION_CAUSE(*args)
+#: :func:`_intersection_cause`, compiled on first use: only a run that ends at an
+#: intersection needs it.
+intersection_cause = compiled_on_first_use(_intersection_cause, _intersection_cause_signature)

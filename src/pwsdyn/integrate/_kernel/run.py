@@ -18,7 +18,7 @@ from .._codes import (ACT_EVENT, ACT_EXIT_ABOVE, ACT_EXIT_BELOW, ACT_EXIT_MULTI,
                       WF_HDDOT, WF_HDOT, WF_LAMBDA, WF_SURFACE)
 from ._base import (EVENT_TABLE_TYPE, OPTIONS_TYPE, SWITCH_TABLE_TYPE, _COINCIDENT_ULPS, _EPS,
                     _EXACT_TERMS, _MAXW, _grow1, _grow2, _grow3,
-                    _log_event, _ulp)
+                    _log_event, _ulp, compiled_on_first_use)
 from .fields import (_field, _multi_corner, _multi_count, _multi_set_corners, _multi_surface,
                      _project_multi, _project_surface, _rate_band, _resolve, _rhs,
                      _start_on_surface, multi_work_size)
@@ -108,23 +108,10 @@ def _dense_coefficients_signature():
                                  f1, i1, nt.int64)
 
 
-_DENSE_COEFFICIENTS = None
-
-
-def dense_coefficients(*args):
-    """:func:`_dense_coefficients`, compiled on first use (then loaded from numba's cache):
-    runs that never evaluate their dense output do not wait for it."""
-    global _DENSE_COEFFICIENTS
-    if _DENSE_COEFFICIENTS is None:
-        import warnings
-
-        from numba.core.errors import NumbaExperimentalFeatureWarning
-        with warnings.catch_warnings():
-            # the first-class function type of the model's `evaluate` (as in the kernel)
-            warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
-            _DENSE_COEFFICIENTS = njit(_dense_coefficients_signature(), cache=True,
-                                       nogil=True)(_dense_coefficients)
-    return _DENSE_COEFFICIENTS(*args)
+#: :func:`_dense_coefficients`, compiled on first use: runs that never evaluate their dense
+#: output do not wait for it.
+dense_coefficients = compiled_on_first_use(_dense_coefficients, _dense_coefficients_signature,
+                                           nogil=True)
 
 
 # --------------------------------------------------------------------------------------
