@@ -260,14 +260,17 @@ class EventLog(Sequence):
     def name(self) -> np.ndarray:
         if self._records is not None and self._state_name is None:
             return np.array([e.name for e in self._records], dtype=object)
-        ev = np.array([e.name for e in self.model.events] or [""], dtype=object)
-        sw = np.array([s.name for s in self.model.switches] or [""], dtype=object)
-        # (compared by broadcasting: numpy.isin costs more than the rest for a short log,
-        # and shooting reads the names of every run's log)
-        codes = np.array([EVENT_KINDS.index(k) for k in SWITCH_EVENT_KINDS])
-        on_switch = (np.asarray(self.kind_code)[:, None] == codes).any(axis=1)
-        return np.where(on_switch, sw[np.where(on_switch, self.ref, 0)],
-                        ev[np.where(on_switch, 0, self.ref)])
+        return np.array(self._coded_names()[1], dtype=object)
+
+    def _coded_names(self) -> tuple:
+        """``(kinds, names)`` of the events, looked up from their codes (lists: for the few
+        events of a shooting interval arrays cost more than the lookups): a switch's name for
+        the kinds on a switching surface, an event's otherwise."""
+        kinds = [EVENT_KINDS[c] for c in self.kind_code.tolist()]
+        ev = [e.name for e in self.model.events] or [""]
+        sw = [s.name for s in self.model.switches] or [""]
+        return kinds, [sw[r] if k in SWITCH_EVENT_KINDS else ev[r]
+                       for k, r in zip(kinds, self.ref.tolist())]
 
     def _materialize(self) -> list:
         if self._records is None:
@@ -279,13 +282,7 @@ class EventLog(Sequence):
                     names[key] = self._state_name(self.model, k, i, m)
                 return names[key]
 
-            # the kinds and names of :attr:`kind` and :attr:`name` (the same lookups by code,
-            # made in Python: for the few events of a shooting interval the arrays cost more)
-            kinds = [EVENT_KINDS[c] for c in self.kind_code.tolist()]
-            ev = [e.name for e in self.model.events] or [""]
-            sw = [s.name for s in self.model.switches] or [""]
-            evn = [sw[r] if k in SWITCH_EVENT_KINDS else ev[r]
-                   for k, r in zip(kinds, self.ref.tolist())]
+            kinds, evn = self._coded_names()
             sb, sa = self.state_before.tolist(), self.state_after.tolist()
             t, t2 = self.t.tolist(), self.t_after.tolist()
             self._records = [EventRecord(t[r], evn[r], kinds[r], self.x_before[r],
