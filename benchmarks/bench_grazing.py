@@ -149,7 +149,8 @@ def run_row(case, path_opts, depth, phases, models):
 def _tree() -> str:
     """Which pwsdyn ran, without this machine's paths: this checkout's ``src`` or another."""
     here = (HERE.parent / "src" / "pwsdyn").resolve()
-    return "this checkout's src" if Path(pwsdyn.__file__).resolve().parent == here else "another tree"
+    ran = Path(pwsdyn.__file__).resolve().parent
+    return "this checkout's src" if ran == here else "another tree"
 
 
 def main(argv=None):

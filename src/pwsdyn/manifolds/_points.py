@@ -158,6 +158,7 @@ def multiplier_variables(mult) -> dict:
                                 {"long_name": "imaginary part of the saddle's multiplier",
                                  "units": "1"})}
 
+
 def _newton(sec, x, tol: float, max_iter: int, no_image: str):
     """Newton's method on ``F^k(x) - x`` with the section's Jacobian ``D F^k`` (a map's pieces,
     or a flow's monodromy with its saltation matrices): ``(x, residuals, converged, reason)``,

@@ -26,9 +26,9 @@ def plot_crisis(crisis: Crisis, path: str | Path | None = None, *, attractor=Non
                 overwrite: bool = False, ax: Axes | None = None) -> Figure:
     """A crisis of :func:`pwsdyn.locate_crisis` or :func:`pwsdyn.locate_tangency` at its
     located value: the attractor's points ``attractor`` (an ``(m, n)`` array, for example
-    ``pwsdyn.model.iterate`` at ``crisis.value``; optional), the stable
-    manifold of the boundary saddle and the unstable manifold that touches it (planar maps),
-    the saddles and the contact point; a one-state map is drawn along its axis. ``path`` and ``overwrite`` as
+    ``pwsdyn.model.iterate`` at ``crisis.value``; optional), the stable manifold of the
+    boundary saddle and the unstable manifold that touches it (planar maps), the saddles and
+    the contact point; a one-state map is drawn along its axis. ``path`` and ``overwrite`` as
     for :func:`plot_bifurcation`; ``ax``: draw into this Axes of your own figure (and return
     that figure)."""
     if not hasattr(crisis, "saddle") or not hasattr(crisis, "value"):
