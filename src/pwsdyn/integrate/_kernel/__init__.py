@@ -45,7 +45,8 @@ the mode below turns negative (``alpha = 1``), located by Newton on that ``hdot`
 another switching surface while sliding is no event where the sliding motion only touches it
 (its own rate on that surface points back: a tangential return, e.g. of a contact that slips
 back to its stick speed exactly at its static bound while another sticks); otherwise it
-crosses the surface if the sliding motion continues on its far side; if the sliding fields on both sides point into it the motion slides on the intersection
+crosses the surface if the sliding motion continues on its far side; if the sliding fields
+on both sides point into it the motion slides on the intersection
 (``slide_start``, ``SLIDE_MULTI``) where the multilinear weights lie in ``[0, 1]^k`` (an
 attracting intersection), and the run ends with ``ST_INTERSECTION`` where they do not (or
 more than ``MULTI_MAX`` surfaces would meet; :func:`intersection_cause` tells the message
@@ -73,8 +74,8 @@ it is deeper than the dense output's error. The earliest crossing is bracketed a
 on the dense output to a few ulps -- by the Illinois method, or on an exact step (whose dense
 output is the exact flow, with derivative ``h f``) for a surface of a regular mode by
 safeguarded Newton with ``h`` and ``hdot`` from the model (``_locate_exact``) where the
-crossing is resolved above round-off (near a graze Illinois keeps it) -- then the step is re-taken exactly
-to that time ("landing step") and the time is polished with Newton steps on ``h`` (or
+crossing is resolved above round-off (near a graze Illinois keeps it) -- then the step is
+re-taken exactly to that time ("landing step") and the time is polished with Newton steps on ``h`` (or
 ``hdot`` for a sliding exit) so the event state comes from the integrator itself, not from
 the interpolant.
 A surface that depends on ``t`` explicitly (a moving constraint) must also be resolved by the
