@@ -37,6 +37,8 @@ What carries over to simulation, checked by ``tests/test_orbit_problem.py``:
 
 from __future__ import annotations
 
+import dataclasses
+
 import sympy as sp
 
 from ..errors import ArgumentError
@@ -90,6 +92,7 @@ def with_parameters_as_states(model, names) -> Model:
     switches = tuple(Switch(s.name, s.surface, s.above, s.below, s.kind,
                             None if s.family is None else tuple(s.family) + zeros)
                      for s in model.switches)
+    families = tuple(dataclasses.replace(f, rhs=tuple(f.rhs) + zeros) for f in model.families)
     fp = model.forcing_period
     if fp is not None and any(sp.sympify(fp).has(s) for s in syms):
         fp = None
@@ -99,6 +102,7 @@ def with_parameters_as_states(model, names) -> Model:
     return Model(name=name, states=tuple(model.states) + tuple(names),
                  parameters={k: v for k, v in model.parameters.items() if k not in names},
                  modes=modes, surfaces=model.surfaces, events=events, switches=switches,
+                 families=families,
                  description=model.description, reference=model.reference,
                  definitions=dict(model.definitions), forcing_period=fp,
                  initial_mode=model.initial_mode, origin=model.origin, spec={})

@@ -38,7 +38,7 @@ from ..errors import ModelError
 from .affine import affine_structure
 from .cache import cache_dir as cache_dir, load_module
 from ._printer import NumbaPrinter, unprintable
-from .discontinuities import U_SYMBOL
+from .discontinuities import U_SYMBOL, side_symbol
 from .spec import Model, check_identifiers
 
 # quantity selectors (the ``which`` argument); the kernel uses the same numbers
@@ -70,7 +70,7 @@ EVALUATE_SIGNATURE = types.void(types.int64, types.int64, types.float64, types.f
                                 types.float64[::1], types.float64[::1])
 EVALUATE_TYPE = types.FunctionType(EVALUATE_SIGNATURE)
 
-_CODEGEN_VERSION = "8"
+_CODEGEN_VERSION = "9"
 
 #: Largest generated module (characters) handed to the compiler -- numba's time grows faster
 #: than the source (40,000 characters, sixteen split modes, compile in about 7 s; the largest
@@ -87,9 +87,41 @@ def without_dirac_deltas(e):
 
 @dataclass
 class Derivatives:
-    """All symbolic quantities of a model, flattened per ``(which, idx)`` case."""
+    """All symbolic quantities of a model, flattened per ``(which, idx)`` case (``idx`` an
+    index, or a :class:`FamilyRange` of indices that share one expression in the sides)."""
 
     cases: dict  # (which, idx) -> list of expressions (flat)
+
+
+@dataclass(frozen=True)
+class FamilyRange:
+    """The indices ``lo..hi`` of one case body written in the side variables of a
+    :class:`~pwsdyn.model.elements.SignFamily` with ``k`` surfaces, each index decoding its
+    sides from ``idx - lo``: the variant ``c = idx - lo`` (``kind="variant"``: modes, and
+    normal velocities of one surface), or the ``r``-th Filippov switch on the family's
+    surface ``j`` (``kind="switch"``: its variant above is ``c`` = ``r`` with a zero bit
+    inserted at position ``k - 1 - j``, and side ``j`` is Utkin's ``u``)."""
+
+    lo: int
+    hi: int
+    k: int
+    kind: str = "variant"
+    j: int = -1
+
+    def __index__(self) -> int:  # sorts with the plain indices
+        return self.lo
+
+    def prologue(self, used) -> list:
+        """The lines decoding the side variables in ``used`` (names) from ``idx``."""
+        lines = [f"            _v = idx - {self.lo}"]
+        if self.kind == "switch":
+            b = self.k - 1 - self.j
+            lines.append(f"            _v = ((_v >> {b}) << {b + 1}) | (_v & {(1 << b) - 1})")
+        for q in range(self.k):
+            if q != self.j and f"side_{q}" in used:
+                lines.append(f"            side_{q} = -1.0 if (_v >> {self.k - 1 - q}) & 1 "
+                             "else 1.0")
+        return lines
 
 
 def derivatives(model: Model) -> Derivatives:
@@ -98,12 +130,22 @@ def derivatives(model: Model) -> Derivatives:
     X = sp.Matrix(model.state_symbols)
     n = model.n_states
     cases = {}
-    for i, mode in enumerate(model.modes):
-        f = sp.Matrix(mode.rhs)
+    nm = len(model.modes)
+    # the variants of a sign family are one field of their sides, differentiated and compiled
+    # once (the per-variant fields stay in model.modes, for everything else that reads them)
+    fields = []          # (index or FamilyRange of modes, field)
+    in_family = set()
+    for fam in model.families:
+        in_family.update(range(fam.first, fam.first + fam.size))
+        fields.append((FamilyRange(fam.first, fam.first + fam.size - 1, len(fam.surfaces)),
+                       sp.Matrix(fam.rhs)))
+    fields += [(i, sp.Matrix(mode.rhs)) for i, mode in enumerate(model.modes)
+               if i not in in_family]
+    fields.sort(key=lambda c: int(c[0].__index__()))
+    for i, f in fields:
         cases[(W_F, i)] = list(f)
         cases[(W_FX, i)] = [without_dirac_deltas(e) for e in f.jacobian(X)]
         cases[(W_FT, i)] = [without_dirac_deltas(e) for e in f.diff(t)]
-    nm = len(model.modes)
     for k, surf in enumerate(model.surfaces):
         h = surf.expr
         hx = sp.Matrix([h]).jacobian(X)
@@ -111,15 +153,32 @@ def derivatives(model: Model) -> Derivatives:
         cases[(W_H, k)] = [h]
         cases[(W_HX, k)] = [without_dirac_deltas(e) for e in hx]
         cases[(W_HT, k)] = [without_dirac_deltas(ht)]
-        for i, mode in enumerate(model.modes):
-            f = sp.Matrix(mode.rhs)
+        for i, f in fields:
+            at = (k * nm + i if isinstance(i, int)
+                  else dataclasses.replace(i, lo=k * nm + i.lo, hi=k * nm + i.hi))
             hd = without_dirac_deltas(ht + (hx * f)[0])
-            cases[(W_HD, k * nm + i)] = [hd]
-            cases[(W_HDX, k * nm + i)] = [without_dirac_deltas(e)
-                                          for e in sp.Matrix([hd]).jacobian(X)]
-            cases[(W_HDT, k * nm + i)] = [without_dirac_deltas(sp.diff(hd, t))]
-            cases[(W_HHD, k * nm + i)] = [h, hd]
+            cases[(W_HD, at)] = [hd]
+            cases[(W_HDX, at)] = [without_dirac_deltas(e) for e in sp.Matrix([hd]).jacobian(X)]
+            cases[(W_HDT, at)] = [without_dirac_deltas(sp.diff(hd, t))]
+            cases[(W_HHD, at)] = [h, hd]
+    in_family = set()
+    for fam in model.families:
+        k = len(fam.surfaces)
+        for j, s0 in enumerate(fam.switches):
+            if s0 < 0:
+                continue
+            half = fam.size // 2
+            in_family.update(range(s0, s0 + half))
+            at = FamilyRange(s0, s0 + half - 1, k, "switch", j)
+            fu = sp.Matrix(fam.rhs).xreplace({side_symbol(j): U_SYMBOL})
+            h = model.surfaces[fam.surfaces[j]].expr
+            hdu = sp.diff(h, t) + (sp.Matrix([h]).jacobian(X) * fu)[0]
+            cases[(W_FU, at)] = list(fu)
+            cases[(W_HDU, at)] = [without_dirac_deltas(hdu)]
+            cases[(W_HDUD, at)] = [without_dirac_deltas(sp.diff(hdu, U_SYMBOL))]
     for s, sw in enumerate(model.switches):
+        if s in in_family:
+            continue
         # family f(t, x, u) of Utkin's equivalent control; affine (the convex combination,
         # thesis eq. 2.7 with alpha = (1 - u)/2) for switches written as two explicit modes
         if sw.family is not None:
@@ -241,12 +300,20 @@ def emit_evaluate(cases: dict, states, parameters) -> str:
         # variants of a mode split at several sign() terms repeat most of their derivatives
         # (the normal velocity of a friction contact depends on its own side only), and
         # numba's compile time grows with the text. The arithmetic is the same either way.
+        # A family's range of cases is one body already, its sides decoded from idx.
         bodies: dict = {}
-        for idx, exprs in sorted(by_which[which], key=lambda c: c[0]):
+        for idx, exprs in sorted(by_which[which], key=lambda c: int(c[0].__index__())):
             body = _case_body(pr, which, [sp.sympify(e).xreplace(rename) for e in exprs])
-            bodies.setdefault(body, []).append(idx)
-        for body, idxs in sorted(bodies.items(), key=lambda kv: kv[1][0]):
-            lines.append(f"        if {_idx_test(idxs)}:")
+            if isinstance(idx, FamilyRange):
+                used = {str(q) for e in exprs for q in sp.sympify(e).free_symbols}
+                bodies[idx] = (tuple(idx.prologue(used)) + body, [idx])
+                continue
+            bodies.setdefault(body, (body, []))[1].append(idx)
+        for body, idxs in sorted(bodies.values(), key=lambda b: int(b[1][0].__index__())):
+            if isinstance(idxs[0], FamilyRange):
+                lines.append(f"        if {idxs[0].lo} <= idx <= {idxs[0].hi}:")
+            else:
+                lines.append(f"        if {_idx_test(idxs)}:")
             lines.extend(body)
     lines.append("    return")
     return "\n".join(lines) + "\n"

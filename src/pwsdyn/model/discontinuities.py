@@ -42,10 +42,17 @@ import itertools
 import sympy as sp
 
 from ..errors import ModelError
-from .elements import Mode, Surface, Switch
+from .elements import Mode, SignFamily, Surface, Switch
 
 #: The scalar switching variable of Utkin's equivalent control in a switch's family f(t, x, u).
 U_SYMBOL = sp.Symbol("u_switch", real=True)
+
+
+
+def side_symbol(j: int) -> sp.Symbol:
+    """The side variable ``side_j`` of a :class:`~pwsdyn.model.elements.SignFamily`'s field."""
+    return sp.Symbol(f"side_{j}", real=True)
+
 
 #: Kinds of switch.
 FILIPPOV, CONTINUOUS = "filippov", "continuous"
@@ -202,6 +209,70 @@ def _value(atom, s, sg):
     return type(atom)(pick, *rest)
 
 
+def _family_rhs(rhs, registry: _Registry, found: list, jumps: set):
+    """The field of all the variants of ``rhs`` in the side variables of the surfaces
+    ``found`` (:class:`~pwsdyn.model.elements.SignFamily`), or ``None`` where it is not one
+    field of that form: a term nested in another's argument (its surface then depends on a
+    side), a ``Max``/``Min`` of more than two arguments, or one on a surface where the field
+    also jumps (Utkin's family of that surface takes the kink's mean there, not its sides).
+
+    The terms on side ``sg = +-1`` become what :func:`_value` gives on that side, written so
+    that each variant's arithmetic is exact: ``sign -> sg``, ``Heaviside -> (1 + sg)/2``,
+    ``Abs(s) -> s sg`` (exact multiplications by +-1, 0 or 1), ``Max``/``Min`` -> the argument
+    the side picks (a ``Piecewise``, not the mean plus half the difference, which would lose
+    the smaller argument to cancellation)."""
+    sides = {k: side_symbol(j) for j, k in enumerate(found)}
+    out = []
+    for expr in rhs:
+        for _ in range(10_000):
+            atoms = _innermost([expr])
+            if not atoms:
+                break
+            rep = {}
+            for atom in atoms:
+                s = _surface_of(atom)
+                if s.free_symbols & set(sides.values()):
+                    return None
+                k, orient = registry.find(s)
+                if k not in sides:  # pragma: no cover - found covers every surface
+                    return None
+                sg = orient * sides[k]
+                if isinstance(atom, (sp.Max, sp.Min)):
+                    if len(atom.args) != 2 or k in jumps:
+                        return None
+                    a1, a2 = atom.args
+                    big, small = (a1, a2) if isinstance(atom, sp.Max) else (a2, a1)
+                    rep[atom] = sp.Piecewise((big, sg > 0), (small, True))
+                else:
+                    rep[atom] = _value(atom, s, sg)
+            expr = expr.xreplace(rep)
+        else:  # pragma: no cover
+            return None
+        if _side_masks_a_term(expr, set(sides.values())):
+            return None
+        out.append(expr)
+    return tuple(out)
+
+
+def _side_masks_a_term(expr, sides: set) -> bool:
+    """Whether a product in ``expr`` has a factor in the sides that is zero on some side
+    (``(1 + side)/2`` of a ``Heaviside``) next to factors that are not a polynomial: the
+    variant on that side drops the product, the family would compute ``0 * g`` and give NaN
+    where ``g`` is not finite (``Heaviside(x)*sqrt(x)`` at ``x < 0``)."""
+    for node in sp.preorder_traversal(expr):
+        if not isinstance(node, sp.Mul):
+            continue
+        for f in node.args:
+            fs = f.free_symbols & sides
+            # the other factors finite wherever the states are (a polynomial): nothing to mask
+            if not fs or sp.Mul(*(g for g in node.args if g is not f)).is_polynomial():
+                continue
+            for pattern in itertools.product((1, -1), repeat=len(fs)):
+                if f.xreplace(dict(zip(sorted(fs, key=str), pattern))) == 0:
+                    return True
+    return False
+
+
 def _surfaces_of_mode(rhs, registry: _Registry) -> tuple[list, set]:
     """All surfaces met in any variant of ``rhs`` (in order of discovery) and those of them
     on which a jump (sign/Heaviside) is met."""
@@ -282,12 +353,14 @@ def expand_discontinuities(modes, surfaces, events, switches, initial_mode, defi
 
     Returns
     -------
-    modes, events, switches, initial_mode
+    modes, events, switches, initial_mode, families
         The model with the variants in place of the split modes: events active in a split
         mode are active in all its variants, an event or explicit switch that targets it
         targets its first variant (the simulator then picks the variant on the right side of
         each surface), explicit switches are repeated for each pair of compatible variants, and
-        new switches join the variants.
+        new switches join the variants. ``families`` holds a
+        :class:`~pwsdyn.model.elements.SignFamily` for each split mode whose variants are
+        one field of their sides.
 
     Raises
     ------
@@ -296,12 +369,13 @@ def expand_discontinuities(modes, surfaces, events, switches, initial_mode, defi
         would give more than ``MAX_SPLIT_MODES`` modes.
     """
     if not any(has_discontinuities(e) for m in modes for e in m.rhs):
-        return list(modes), list(events), list(switches), initial_mode
+        return list(modes), list(events), list(switches), initial_mode, []
     registry = _Registry(surfaces, definitions, tuple(variables))
     new_modes: list = []
     variants: list[list[int]] = []      # original mode -> new mode indices
     conds: list[dict] = []              # new mode -> {surface: side}
     new_switches: list = []
+    families: list = []                 # switch indices relative to new_switches for now
     for m in modes:
         if not any(has_discontinuities(e) for e in m.rhs):
             variants.append([len(new_modes)])
@@ -339,9 +413,14 @@ def expand_discontinuities(modes, surfaces, events, switches, initial_mode, defi
             new_modes.append(Mode(f"{m.name}[{label}]", tuple(rhs)))
             conds.append(sides)
         variants.append(list(range(first, len(new_modes))))
-        # switches between variants that differ in the side of one surface
-        for pattern, above in index.items():
-            for j, k in enumerate(found):
+        # switches between variants that differ in the side of one surface: surface by
+        # surface, each in the order of the variant above it (so that a family's switches on
+        # one surface are a run of indices the generated code decodes)
+        fam_rhs = _family_rhs(m.rhs, registry, found, jumps)
+        fam_switches = []
+        for j, k in enumerate(found):
+            fam_switches.append(len(new_switches) if k in jumps else -1)
+            for pattern, above in index.items():
                 if pattern[j] != 1:
                     continue
                 other = pattern[:j] + (-1,) + pattern[j + 1:]
@@ -360,6 +439,8 @@ def expand_discontinuities(modes, surfaces, events, switches, initial_mode, defi
                     family = tuple(fam) if fam is not None else None
                 new_switches.append(Switch(registry.label(k), k, above, below, kind=kind,
                                            family=family))
+        if fam_rhs is not None:
+            families.append(SignFamily(first, tuple(found), fam_rhs, tuple(fam_switches)))
 
     def compatible(a, b):
         ca, cb = conds[a], conds[b]
@@ -372,7 +453,11 @@ def expand_discontinuities(modes, surfaces, events, switches, initial_mode, defi
                 if compatible(a, b):
                     out_switches.append(Switch(sw.name, sw.surface, a, b, kind=sw.kind,
                                                family=None))
+    offset = len(out_switches)
     out_switches.extend(new_switches)
+    families = [SignFamily(f.first, f.surfaces, f.rhs,
+                           tuple(-1 if q < 0 else q + offset for q in f.switches))
+                for f in families]
 
     out_events = []
     for ev in events:
@@ -380,4 +465,4 @@ def expand_discontinuities(modes, surfaces, events, switches, initial_mode, defi
         target = None if ev.target is None else variants[ev.target][0]
         out_events.append(type(ev)(ev.name, ev.kind, ev.surface, ev.direction, emodes, ev.guard,
                                    ev.reset, target, ev.terminal))
-    return new_modes, out_events, out_switches, variants[initial_mode][0]
+    return new_modes, out_events, out_switches, variants[initial_mode][0], families

@@ -84,3 +84,39 @@ class Switch:
     below: int
     kind: str = "filippov"
     family: tuple | None = None
+
+
+@dataclass(frozen=True)
+class SignFamily:
+    """The ``2**k`` variants of a mode split at ``k`` surfaces, as one field of their sides.
+
+    The loader splits a mode with discontinuous terms into one variant per combination of
+    sides (:mod:`pwsdyn.model.discontinuities`); where every term sits directly on a surface
+    (no term nested in another's argument) the variants are also one field ``rhs`` in the
+    side variables ``side_j`` (``+1`` above ``surfaces[j]``, ``-1`` below). The code generator
+    then compiles that one field, and its derivatives, for all the variants, and decodes the
+    sides from the variant's index, instead of ``2**k`` copies.
+
+    Attributes
+    ----------
+    first : int
+        Index of the first variant (above every surface). Variant ``first + c`` lies below
+        ``surfaces[j]`` where bit ``k - 1 - j`` of ``c`` is set.
+    surfaces : tuple[int, ...]
+        Model surface of each side variable.
+    rhs : tuple
+        The field in the states, parameters, time and the side variables.
+    switches : tuple[int, ...]
+        Per surface, the index of the first of its ``2**(k-1)`` Filippov switches (ordered by
+        the variant above them), or -1 where the surface is a kink (continuous switches).
+    """
+
+    first: int
+    surfaces: tuple
+    rhs: tuple
+    switches: tuple
+
+    @property
+    def size(self) -> int:
+        """The number of variants, ``2**k``."""
+        return 1 << len(self.surfaces)

@@ -65,6 +65,9 @@ class Model(SymbolicSystem):
     surfaces: tuple
     events: tuple
     switches: tuple = ()
+    #: :class:`~pwsdyn.model.elements.SignFamily` of each split mode whose variants are one
+    #: field of their sides (compiled once for all of them)
+    families: tuple = ()
     description: str = ""
     reference: str = ""
     definitions: dict = field(default_factory=dict)
@@ -160,6 +163,8 @@ class Model(SymbolicSystem):
         for s in self.switches:
             parts.append(f"switch {s.name} {s.surface} {s.above} {s.below} {s.kind} "
                          f"{sp.srepr(s.family)}")
+        for f in self.families:
+            parts.append(f"family {f.first} {f.surfaces} {f.switches} {sp.srepr(f.rhs)}")
         return hashlib.sha256("\n".join(parts).encode()).hexdigest()
 
     def __repr__(self):
@@ -653,7 +658,7 @@ def model_from_dict(data: dict, origin: str = "<dict>", text: str | None = None)
     from .discontinuities import expand_discontinuities
 
     try:
-        modes, events, switches, init = expand_discontinuities(
+        modes, events, switches, init, families = expand_discontinuities(
             modes, surfaces, events, switches, init, definitions,
             variables=tuple(names[s] for s in states) + (t,))
     except ModelError as exc:
@@ -680,7 +685,7 @@ def model_from_dict(data: dict, origin: str = "<dict>", text: str | None = None)
     parameters = default_parameters(parameters, data.get("defaults"))
     return Model(name=name, states=tuple(states), parameters=parameters, modes=tuple(modes),
                  surfaces=tuple(surfaces), events=tuple(events), switches=tuple(switches),
-                 description=desc, reference=ref, definitions=definitions, forcing_period=fp,
+                 families=tuple(families), description=desc, reference=ref, definitions=definitions, forcing_period=fp,
                  initial_mode=init, origin=origin, spec=data,
                  units=units, descriptions=descriptions, text=text or "")
 
