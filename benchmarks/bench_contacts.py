@@ -1,23 +1,23 @@
-"""Benchmark: Burridge-Knopoff chains of n = 1..4 blocks (one friction contact per block).
+"""Benchmark: Burridge-Knopoff chains of n = 1..6 blocks (one friction contact per block).
 
 Model: ``pwsdyn.burridge_knopoff(n)`` (m = kp = 1, kc = 1, V = 0.2, Fs = 1, 1.1, ..., Fd =
 Fs/2, delta = 3), from rest, 1000 time units, ``rtol = atol = 1e-10``. For each n:
 
 * compile time: ``pwsdyn.compile_model`` of the chain in a fresh process with an empty model
-  cache (SymPy derivatives, code generation and numba compilation of the 2**n split modes);
+  cache (SymPy derivatives, code generation and numba compilation of the sign family of the
+  2**n variants);
 * the run: events per second of CPU time, CPU time per accepted step, and both as ratios to
-  the 1-block chain. A run that stops (the kernel refusing a state it does not support, such
-  as several contacts sticking at once) is reported with its status and the time it reached.
+  the 1-block chain. A run that stops (the kernel refusing a state it does not support) is
+  reported with its status and the time it reached.
 
-The loader splits a mode written with ``sign()`` into 2**n variants (at most
-``MAX_SPLIT_MODES`` = 16) whose generated code must fit ``MAX_SOURCE_CHARS`` (100 000
-characters; 77 247 for n = 4, 208 784 for n = 5), so n <= 4 here
+The variants are listed one by one (at most ``MAX_FAMILY_MODES`` = 64) and the kernel slides
+on intersections of at most ``MULTI_MAX`` = 6 surfaces, so n <= 6 here
 (``pwsdyn.model.chains.MAX_BLOCKS``).
 Timings are reported, never asserted.
 
 Run::
 
-    python benchmarks/bench_contacts.py [--blocks 1 2 3 4] [--t-end 1000] [--repeats 3] [--save]
+    python benchmarks/bench_contacts.py [--blocks 1 2 3 4 5 6] [--t-end 1000] [--repeats 3] [--save]
 """
 
 from __future__ import annotations
@@ -85,7 +85,7 @@ def run_chain(n: int, t_end: float, repeats: int) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--blocks", type=int, nargs="+", default=[1, 2, 3, 4])
+    ap.add_argument("--blocks", type=int, nargs="+", default=[1, 2, 3, 4, 5, 6])
     ap.add_argument("--t-end", type=float, default=1000.0)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--no-compile", action="store_true", help="skip the compile timings")

@@ -428,6 +428,35 @@ def test_burridge_knopoff_field_is_the_chain():
     np.testing.assert_allclose(got, expected, rtol=1e-14, atol=1e-14)
 
 
+@needs_multi
+@pytest.mark.parametrize("delta", [0.0, 3.0])
+def test_stick_forces_from_the_sign_family_are_the_corner_sum(delta):
+    """While several contacts of a chain stick the kernel solves their stick forces from the
+    chain's sign family (Newton on the sides); the same chain with its family removed sums
+    the 2**k corner fields with multilinear weights (Dieci & Lopez). Coupled (kc = 1), with
+    Coulomb (delta = 0: the family is affine in the sides) and velocity-weakening friction
+    (delta = 3: affine on the surfaces only), the two runs agree: the same events to 1e-9 in
+    time and the states to 1e-8, through intervals where two and three contacts stick."""
+    import dataclasses
+    chain = pwsdyn.burridge_knopoff(3, kc=1.0, delta=delta)
+    assert chain.families and chain.families[0].multilinear
+    corners = dataclasses.replace(chain, families=())
+    x0 = [0.3, -0.1, -0.2, 0.4, 0.1, 0.0]
+    runs = [pwsdyn.simulate(m, x0, 30.0, rtol=1e-12, atol=1e-12) for m in (chain, corners)]
+    for r in runs:
+        assert r.success, r.message
+    a, b = runs
+    from pwsdyn.integrate.trajectory import DiscreteState
+    stuck = {len(DiscreteState.parse(str(q)).surfaces) for q in a.state
+             if DiscreteState.parse(str(q)).kind == "slide_multi"}
+    assert {2, 3} <= stuck, stuck
+    assert [e.kind for e in a.events] == [e.kind for e in b.events]
+    np.testing.assert_allclose([e.t for e in a.events], [e.t for e in b.events], rtol=0,
+                               atol=1e-9)
+    ts = np.linspace(0.0, 30.0, 3001)
+    np.testing.assert_allclose(a(ts), b(ts), rtol=0, atol=1e-8)
+
+
 def test_burridge_knopoff_one_block_is_the_stick_slip_oscillator():
     """n = 1 with no dynamic friction floor is the zoo's stick-slip oscillator: the same run
     (the expressions differ in form only: rounding)."""
@@ -440,50 +469,55 @@ def test_burridge_knopoff_one_block_is_the_stick_slip_oscillator():
     np.testing.assert_allclose(a(ts), b(ts), rtol=0, atol=1e-8)
 
 
-#: four blocks with no coupling (kc = 0) and Coulomb friction (delta = 0): each is the
-#: oscillator x'' + x = -Fs sign(v - V); (Fs, x0, v0) chosen so that all four stick at once
-#: on [0.518, 2.784] (the closed form's arrival and release times)
-CHAIN4 = [(1.0, 0.0, 0.8), (0.8, 0.2, 0.5), (1.2, 0.1, 0.7), (0.9, -0.1, 0.6)]
+#: blocks with no coupling (kc = 0) and Coulomb friction (delta = 0): each is the
+#: oscillator x'' + x = -Fs sign(v - V); (Fs, x0, v0) chosen so that all of them (the first
+#: four, or all six) stick at once on [0.518, 2.784] (the closed form's arrival and release
+#: times)
+CHAIN6 = [(1.0, 0.0, 0.8), (0.8, 0.2, 0.5), (1.2, 0.1, 0.7), (0.9, -0.1, 0.6),
+          (1.1, 0.0, 0.7), (0.85, 0.05, 0.55)]
 
 
 @needs_multi
-def test_four_block_chain_follows_each_closed_form_while_all_stick():
-    """The longest chain the builder makes (4 contacts, 16 modes, sliding on the
-    intersection of all four surfaces): uncoupled, each block follows its own Coulomb
-    oscillator's closed form to 1e-8 through the interval where all four stick at once,
-    and each block's arrival and release are events at their closed-form times (1e-9)."""
+@pytest.mark.parametrize("n", [4, 6])
+def test_block_chain_follows_each_closed_form_while_all_stick(n):
+    """Chains of 4 blocks (16 modes) and of the longest the builder makes (6 contacts, 64
+    modes, sliding on the intersection of all six surfaces, the stick forces solved from the
+    chain's sign family): uncoupled, each block follows its own Coulomb oscillator's closed
+    form to 1e-8 through the interval where all of them stick at once, and each block's
+    arrival and release are events at their closed-form times (1e-9)."""
     from pwsdyn.model.chains import MAX_BLOCKS
-    assert MAX_BLOCKS >= len(CHAIN4)
-    phases = [coulomb_oscillator(x0, v0, 1.0, F, BELT) for F, x0, v0 in CHAIN4]
-    assert max(ta for ta, *_ in phases) < min(tr for _, tr, *_ in phases)   # all four stick
+    assert MAX_BLOCKS == len(CHAIN6)
+    blocks = CHAIN6[:n]
+    phases = [coulomb_oscillator(x0, v0, 1.0, F, BELT) for F, x0, v0 in blocks]
+    assert max(ta for ta, *_ in phases) < min(tr for _, tr, *_ in phases)   # all stick
     end = min(tg for *_, tg, _ in phases) - 0.05
-    chain = pwsdyn.burridge_knopoff(4, kc=0.0, kp=1.0, m=1.0, V=BELT, delta=0.0,
-                                    Fs=[F for F, _, _ in CHAIN4])
-    x0 = [c for _, x, v in CHAIN4 for c in (x, v)]
+    chain = pwsdyn.burridge_knopoff(n, kc=0.0, kp=1.0, m=1.0, V=BELT, delta=0.0,
+                                    Fs=[F for F, _, _ in blocks])
+    x0 = [c for _, x, v in blocks for c in (x, v)]
     traj = pwsdyn.simulate(chain, x0, end, rtol=1e-12, atol=1e-12)
     assert traj.success, traj.message
     ts = np.linspace(0.0, end, 2000)
     got = traj(ts)
-    for i, (F, x, v) in enumerate(CHAIN4):
+    for i, (F, x, v) in enumerate(blocks):
         np.testing.assert_allclose(got[:, 2 * i:2 * i + 2].T,
                                    np.array(coulomb_state(ts, x, v, 1.0, F, BELT)),
                                    rtol=0, atol=1e-8)
     times = np.array([e.t for e in traj.events])
     for ta, tr, *_ in phases:
         assert np.abs(times - ta).min() < 1e-9 and np.abs(times - tr).min() < 1e-9
-    # the run was on the intersection of all four surfaces while they all stuck
+    # the run was on the intersection of all the surfaces while they all stuck
     mid = 0.5 * (max(ta for ta, *_ in phases) + min(tr for _, tr, *_ in phases))
     k = int(np.searchsorted(traj.t, mid)) - 1
     from pwsdyn.integrate.trajectory import DiscreteState
     state = DiscreteState.parse(str(traj.state[k]))
-    assert state.kind == "slide_multi" and len(state.surfaces) == 4, state
+    assert state.kind == "slide_multi" and len(state.surfaces) == n, state
 
 
 def test_burridge_knopoff_refuses_what_it_cannot_build():
     from pwsdyn.model.chains import MAX_BLOCKS
     from pwsdyn.model.codegen import MAX_SOURCE_CHARS, _generate_body
-    assert 2 ** MAX_BLOCKS <= pwsdyn.model.discontinuities.MAX_SPLIT_MODES
-    # the longest chain it builds fits the code generator (the next one would not)
+    assert 2 ** MAX_BLOCKS <= pwsdyn.model.discontinuities.MAX_FAMILY_MODES
+    # the longest chain it builds fits the code generator
     assert len(_generate_body(pwsdyn.burridge_knopoff(MAX_BLOCKS))) <= MAX_SOURCE_CHARS
     for n in (0, MAX_BLOCKS + 1, 2.0, True):
         with pytest.raises(pwsdyn.ArgumentError, match="n must be an integer"):

@@ -9,7 +9,6 @@ differences of the flow map.
 
 from __future__ import annotations
 
-import itertools
 import re
 
 import numpy as np
@@ -19,6 +18,7 @@ from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
 import pwsdyn
+from pwsdyn import _codes
 from pwsdyn.errors import SolveError, Status
 from pwsdyn.integrate.trajectory import DiscreteState
 from pwsdyn.io import load_trajectory
@@ -290,31 +290,22 @@ def test_message_when_a_corner_mode_is_missing():
     assert "lacks a corner mode: no switch on surface 'sy' joins mode 'B'" in msg
 
 
-def test_message_when_more_surfaces_meet_than_the_rule_takes():
-    """Four relays x_i' = -i sign(x_i) from 1 (x_i = 0 at t = 1/i: sliding on all four from
-    t = 1) written as 16 modes with their switches, and a fifth surface x5 = 0 (x5' = -1 from
-    2) across which lies one more mode: at t = 2 five surfaces would meet, one more than
-    ``MULTI_MAX``."""
-    def name(s):
-        return "m" + "".join("p" if v > 0 else "n" for v in s)
-    modes, switches = {}, []
-    for s in itertools.product((1, -1), repeat=4):
-        modes[name(s)] = {**{f"x{i + 1}": f"{-(i + 1) * s[i]}" for i in range(4)}, "x5": "-1"}
-        for i in range(4):
-            if s[i] > 0:
-                b = list(s)
-                b[i] = -1
-                switches.append({"name": f"s{i + 1}{name(s)}", "surface": f"x{i + 1}",
-                                 "above": name(s), "below": name(b)})
-    modes["beyond"] = {**{f"x{i + 1}": "0" for i in range(4)}, "x5": "1"}
-    switches.append({"name": "s5", "surface": "x5", "above": "mpppp", "below": "beyond"})
-    m = {"name": "five", "states": ["x1", "x2", "x3", "x4", "x5"], "modes": modes,
-         "switches": switches, "initial_mode": "mpppp"}
-    tr, msg = _intersection_message(m, [1.0, 1.0, 1.0, 1.0, 2.0], 5.0)
-    four = "&".join(f"s{i}mpppp" for i in range(1, 5))
-    _says_where(msg, 2.0, f"slide_multi:{four}", {f"x{i}": 0.0 for i in range(1, 6)})
-    assert f"reached surface 's5', on the intersection {four}&s5: 5 surfaces, more than the 4"\
-        in msg
+def test_message_when_more_surfaces_meet_than_the_rule_takes(monkeypatch):
+    """K = ``MULTI_MAX`` relays x_i' = -i sign(x_i) from 1 (x_i = 0 at t = 1/i: sliding on all
+    K from t = 1) and one more, x_{K+1}' = -sign(x_{K+1}) from 2: at t = 2 K + 1 surfaces
+    would meet, one more than ``MULTI_MAX`` (one sign family of 2**(K+1) variants, over the
+    loader's bound, which is raised here)."""
+    from pwsdyn.model import discontinuities
+    K = _codes.MULTI_MAX
+    monkeypatch.setattr(discontinuities, "MAX_FAMILY_MODES", 2 ** (K + 1))
+    m = {"name": "one-too-many", "states": [f"x{i + 1}" for i in range(K + 1)],
+         "modes": {"relays": {**{f"x{i + 1}": f"-{i + 1}*sign(x{i + 1})" for i in range(K)},
+                              f"x{K + 1}": f"-sign(x{K + 1})"}}}
+    tr, msg = _intersection_message(m, [1.0] * K + [2.0], 5.0)
+    all_k = "&".join(f"x{i}" for i in range(1, K + 1))
+    _says_where(msg, 2.0, f"slide_multi:{all_k}", {f"x{i}": 0.0 for i in range(1, K + 2)})
+    assert (f"reached surface 'x{K + 1}', on the intersection {all_k}&x{K + 1}: {K + 1} "
+            f"surfaces, more than the {K}") in msg
 
 
 def test_weights_found_where_newton_from_the_centre_is_singular():

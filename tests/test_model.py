@@ -686,18 +686,25 @@ def test_generated_cases_with_the_same_expressions_share_one_body():
     assert sizes[-1] < 100_000 and sizes == sorted(sizes)
 
 
-@pytest.mark.parametrize("case", ["chain", "mixed"])
+@pytest.mark.parametrize("case", ["chain", "relays", "mixed"])
 def test_sign_family_is_every_variant(case):
     """The variants of a mode split at its sign() terms are compiled as one field of their
     sides (decoded from the variant's index): every variant's field, Jacobian, normal
     velocities and Utkin family, evaluated by the compiled code, against SymPy's own
-    per-variant expressions (lambdified, differentiated independently). Only rounding may
-    differ: 1e-13 relative. ``mixed`` has a Max kink, a Heaviside factor that never masks
+    per-variant expressions (lambdified, differentiated independently), and their affine
+    matrices (exact propagation) against each variant's own. Only rounding may differ:
+    1e-13 relative. ``mixed`` has a Max kink, a Heaviside factor that never masks
     a non-finite term, an Abs and two sign terms on one surface."""
     from pwsdyn.model.codegen import W_FU, W_HDU, W_HDUD, compile_model
     from pwsdyn.model.discontinuities import U_SYMBOL
     if case == "chain":
         m = pwsdyn.burridge_knopoff(3, Fs=[1.0, 1.3, 0.8], Fd=[0.5, 0.7, 0.4])
+    elif case == "relays":
+        # affine variants: their exact-propagation matrices come from the family's too
+        m = pwsdyn.load_model({
+            "name": "family-relays", "states": ["x", "y", "z"], "parameters": {"a": 0.7},
+            "modes": {"m": {"x": "y - sign(x)", "y": "-a*x - 2*sign(y) + sin(3*t)",
+                            "z": "x + Abs(y) - Heaviside(z)"}}})
     else:
         m = pwsdyn.load_model({
             "name": "family-mixed", "states": ["x", "v", "y"],
@@ -710,9 +717,11 @@ def test_sign_family_is_every_variant(case):
     assert fam.size == len(m.modes)
     cm = compile_model(m)
     src = cm.source_path.read_text()
-    # one body per quantity for all the variants: field, Jacobian, f_t, and the normal
-    # velocity of the first surface with its gradient, rate and (h, hdot) pair
-    assert src.count(f"if {fam.first} <= idx <= {fam.first + fam.size - 1}:") == 3 + 4
+    # one body per quantity for all the variants (field, Jacobian, f_t, the normal velocity
+    # of each surface with its gradient, rate and (h, hdot) pair, ...), none per variant
+    assert src.count("            _v = idx - ") >= 3 + 4 * len(m.surfaces)
+    fields = src.split("    if which == 0:\n")[1].split("    if which == 1:")[0]
+    assert fields.count("        if ") == 1, fields
     X = sp.Matrix(m.state_symbols)
     syms = [m.t, *m.state_symbols, *[sp.Symbol(q, real=True) for q in m.parameters]]
     rng = np.random.default_rng(7)
@@ -730,6 +739,22 @@ def test_sign_family_is_every_variant(case):
         want = np.asarray(want, float).ravel()
         np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-13 * (1 + np.abs(want).max()))
 
+    # the affine matrices (exact propagation) of every variant, against the variant's own
+    from pwsdyn.model.affine import affine_structure
+    from pwsdyn.model.codegen import W_AFFINE
+    aff = affine_structure(m)
+    p0 = m.parameter_vector(None)
+    nz = int(ev(W_AFFINE, -1, 0.0, np.zeros(n), p0, 1)[0])
+    assert nz == (aff.dimension if aff.any else 0)
+    out = np.zeros(max(n * n, nz * nz) + 1)
+    subs = dict(zip(m.parameter_symbols, p0))
+    for i, M in enumerate(aff.matrices):
+        got = ev(W_AFFINE, i, 0.0, np.zeros(n), p0, 1 + nz * nz)
+        if M is None:
+            assert got[0] == 0.0, i
+        else:
+            assert got[0] == 1.0, i
+            close(got[1:], np.array(M.xreplace(subs), dtype=float))
     for _ in range(5):
         t, x, p = _random_point(m, rng)
         vals = [t, *x, *p]

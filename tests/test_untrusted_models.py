@@ -400,9 +400,18 @@ def test_long_sums_and_products_are_built_in_linear_time_and_big_ones_refused():
 
 
 def test_splitting_into_too_many_modes_is_refused_with_the_count():
-    terms = " + ".join(f"sign(x - {i})" for i in range(6))
-    with pytest.raises(ModelError, match="at least 64 modes; at most 16"):
+    # a sign family (one field of its sides) may have 64 variants, not 128
+    terms = " + ".join(f"sign(x - {i})" for i in range(7))
+    with pytest.raises(ModelError, match="at least 128 modes; at most 64"):
         pwsdyn.load_model({"name": "many", "states": ["x"], "modes": {"m": {"x": terms}}})
+    six = " + ".join(f"sign(x - {i})" for i in range(6))
+    assert len(pwsdyn.load_model({"name": "six", "states": ["x"],
+                                  "modes": {"m": {"x": six}}}).modes) == 64
+    # nested terms are no family: each variant is its own field, 16 at most
+    nested = " + ".join(f"Max({i}*y, Min({i + 1}*y, x))" for i in range(1, 4))
+    with pytest.raises(ModelError, match="at least 32 modes; at most 16"):
+        pwsdyn.load_model({"name": "nested", "states": ["x", "y"],
+                           "modes": {"m": {"x": nested, "y": "1"}}})
 
 
 _HANG_SCRIPT = textwrap.dedent("""

@@ -19,16 +19,18 @@ a block sticks to the belt while the spring force on it stays within its static 
 contact by contact, several at once on the intersection of their surfaces.
 
 The loader splits a mode written with ``sign()`` into one variant per combination of sides,
-:math:`2^n` for ``n`` contacts, and allows at most ``MAX_SPLIT_MODES`` (16) of them
-(:mod:`pwsdyn.model.discontinuities`); each variant gets its own field and Jacobians, and
-the cases they share (the normal velocity of a contact depends on its own side only) are
-generated once. The code still grows about threefold per block (3.4, 10.3, 28.2, 77.2 and
-208.8 thousand characters for 1 to 5 blocks), and the 5-block chain would exceed both the
-16 modes and the code generator's limit of 100 000 characters (``MAX_SOURCE_CHARS`` of
-:mod:`pwsdyn.model.codegen`): chains of up to ``MAX_BLOCKS`` = 4 blocks, all four able to
-stick at once (``MULTI_MAX`` = 4 surfaces of the kernel's sliding on intersections). Compile
-times are measured in ``benchmarks/bench_contacts.py``. Longer chains need the signs as a
-vector argument of one field instead of :math:`2^n` product variants.
+:math:`2^n` for ``n`` contacts, and records them as one sign family
+(:class:`~pwsdyn.model.elements.SignFamily`): the generated code is one field of the sides,
+decoded from the variant's index (3.3, 6.9, 11.3, 16.5 thousand characters for 1 to 4
+blocks; before, one body per variant: 3.4, 10.3, 28.2, 77.2). While several contacts stick
+the kernel solves their stick forces from that field (the sides of the stuck contacts by
+Newton's method) instead of summing the :math:`2^k` corner fields. What bounds the chain
+is that the variants are still listed one by one (names, switches, tables of the kernel):
+at most ``MAX_FAMILY_MODES`` (64) of them (:mod:`pwsdyn.model.discontinuities`), and the
+kernel slides on intersections of at most ``MULTI_MAX`` (6) surfaces, so chains of up to
+``MAX_BLOCKS`` = 6 blocks, all six able to stick at once. Compile times and the cost per
+contact are measured in ``benchmarks/bench_contacts.py``. Chains of 10 or 20 blocks need the
+variants as indices only (a mode as a sign vector, never listed), which is not done.
 """
 
 from __future__ import annotations
@@ -37,14 +39,13 @@ import math
 from collections.abc import Sequence
 
 from ..errors import ArgumentError
-from .discontinuities import MAX_SPLIT_MODES
+from .discontinuities import MAX_FAMILY_MODES
 from .spec import Model, load_model
 
-#: Most blocks :func:`pwsdyn.burridge_knopoff` builds: the ``2**n`` split modes must not exceed
-#: ``MAX_SPLIT_MODES`` (n <= 4), their generated code must fit the code generator's
-#: ``MAX_SOURCE_CHARS`` (77 247 characters for n = 4, 208 784 for n = 5) and every contact
-#: may stick at once (the kernel slides on intersections of up to four surfaces).
-MAX_BLOCKS = 4
+#: Most blocks :func:`pwsdyn.burridge_knopoff` builds: the ``2**n`` variants of its field are
+#: listed one by one (at most ``MAX_FAMILY_MODES`` = 64) and every contact may stick at once
+#: (the kernel slides on intersections of up to ``MULTI_MAX`` = 6 surfaces).
+MAX_BLOCKS = 6
 
 
 def _per_block(name: str, value, n: int) -> list[float]:
@@ -75,8 +76,9 @@ def burridge_knopoff(n: int, *, m: float = 1.0, kc: float = 1.0, kp: float = 1.0
     Parameters
     ----------
     n : int
-        Number of blocks, 1 to ``MAX_BLOCKS`` (4: the :math:`2^n` split modes of the ``sign()``
-        terms and their generated code are limited; see the module's notes).
+        Number of blocks, 1 to ``MAX_BLOCKS`` (6: the :math:`2^n` variants of the ``sign()``
+        terms are listed one by one, and the kernel slides on at most six surfaces at once;
+        see the module's notes).
     m, kc, kp : float
         Mass of each block, stiffness of the springs between neighbours and of each block's
         spring to the frame.
@@ -109,8 +111,8 @@ def burridge_knopoff(n: int, *, m: float = 1.0, kc: float = 1.0, kp: float = 1.0
     """
     if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_BLOCKS:
         raise ArgumentError(f"burridge_knopoff: n must be an integer from 1 to {MAX_BLOCKS} "
-                            f"(the 2**n split modes of more blocks exceed the limits of "
-                            f"{MAX_SPLIT_MODES} modes or of the generated code), not {n!r}")
+                            f"(the 2**n variants of more blocks exceed the limit of "
+                            f"{MAX_FAMILY_MODES} modes), not {n!r}")
     fs = _per_block("Fs", [1.0 + 0.1 * i for i in range(n)] if Fs is None else Fs, n)
     fd = _per_block("Fd", [f / 2 for f in fs] if Fd is None else Fd, n)
     params: dict[str, float] = {"m": float(m), "kc": float(kc), "kp": float(kp),

@@ -26,6 +26,7 @@ import dataclasses
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import sympy as sp
@@ -39,6 +40,7 @@ from .affine import affine_structure
 from .cache import cache_dir as cache_dir, load_module
 from ._printer import NumbaPrinter, unprintable
 from .discontinuities import U_SYMBOL, side_symbol
+from .elements import Mode
 from .spec import Model, check_identifiers
 
 # quantity selectors (the ``which`` argument); the kernel uses the same numbers
@@ -55,6 +57,12 @@ W_FU, W_HDU, W_HDUD = 14, 15, 16
 # nz of the augmented state (0 if no mode is affine); with idx = mode a flag (1 affine, 0 not)
 # followed by the augmented matrix M (nz x nz, row-major)
 W_AFFINE = 17
+# sign families (:class:`~pwsdyn.model.elements.SignFamily`) whose field is multilinear in
+# its sides on the surfaces: with idx = mode, W_FAMILY gives k (0: the mode is in none), the
+# index of the family's first variant, then its k surfaces; with idx = that first variant,
+# W_FS is the field f(t, x, side) with the k sides read from out[:k] (n values) and W_FSD its
+# side derivatives (n x k, row-major)
+W_FAMILY, W_FS, W_FSD = 18, 19, 20
 
 # what each selector computes, for messages
 _QUANTITIES = {W_F: "vector field", W_FX: "Jacobian f_x", W_FT: "time derivative f_t",
@@ -63,14 +71,16 @@ _QUANTITIES = {W_F: "vector field", W_FX: "Jacobian f_x", W_FT: "time derivative
                W_HDT: "normal velocity rate", W_G: "reset map", W_GX: "reset Jacobian",
                W_GT: "reset time derivative", W_GUARD: "guard", W_HHD: "surface",
                W_FU: "sliding family", W_HDU: "sliding normal velocity",
-               W_HDUD: "sliding normal velocity derivative", W_AFFINE: "affine matrix"}
+               W_HDUD: "sliding normal velocity derivative", W_AFFINE: "affine matrix",
+               W_FAMILY: "sign family", W_FS: "sign family's field",
+               W_FSD: "sign family's side derivatives"}
 
 #: Signature of the generated function, ``evaluate(which, idx, t, x, p, out) -> None``.
 EVALUATE_SIGNATURE = types.void(types.int64, types.int64, types.float64, types.float64[::1],
                                 types.float64[::1], types.float64[::1])
 EVALUATE_TYPE = types.FunctionType(EVALUATE_SIGNATURE)
 
-_CODEGEN_VERSION = "9"
+_CODEGEN_VERSION = "10"
 
 #: Largest generated module (characters) handed to the compiler -- numba's time grows faster
 #: than the source (40,000 characters, sixteen split modes, compile in about 7 s; the largest
@@ -197,7 +207,19 @@ def derivatives(model: Model) -> Derivatives:
         cases[(W_GX, j)] = [without_dirac_deltas(e) for e in g.jacobian(X)]
         cases[(W_GT, j)] = [without_dirac_deltas(e) for e in g.diff(t)]
         cases[(W_GUARD, j)] = [ev.guard if ev.guard is not None else sp.true]
-    assert all(len(v) in (1, 2, n, n * n) for v in cases.values())
+    multi = {fam.first: fam for fam in model.families if fam.multilinear}
+    for i in range(nm):
+        fam = next((f for f in multi.values() if f.first <= i < f.first + f.size), None)
+        cases[(W_FAMILY, i)] = ([sp.Integer(0)] if fam is None else
+                                [sp.Integer(len(fam.surfaces)), sp.Integer(fam.first),
+                                 *(sp.Integer(q) for q in fam.surfaces)])
+    for first, fam in multi.items():
+        sides = [side_symbol(j) for j in range(len(fam.surfaces))]
+        f = sp.Matrix(fam.rhs)
+        cases[(W_FS, first)] = list(f)
+        cases[(W_FSD, first)] = [without_dirac_deltas(e) for e in f.jacobian(sides)]
+    assert all(len(v) in (1, 2, n, n * n) or which in (W_FAMILY, W_FSD)
+               for (which, _), v in cases.items())
     # derivatives of finite expressions are finite where they exist; refuse a constant that
     # is not (it would be NaN at every point, or not compile)
     for (which, idx), exprs in cases.items():
@@ -214,9 +236,25 @@ def derivatives(model: Model) -> Derivatives:
                                  f"{str(e)[:200]}; a field that is complex (a negative number to "
                                  "a non-integer power, ...) cannot be integrated",
                                  source=model.origin)
-    aff = affine_structure(model)
+    # the affine matrices of the modes, then those of the families' fields in their sides
+    # (after the modes, so that the forcing frequencies keep the modes' order)
+    fams = model.families
+    aff = affine_structure(SimpleNamespace(
+        t=model.t, state_symbols=model.state_symbols, states=model.states,
+        modes=tuple(model.modes) + tuple(Mode(f"family {j}", f.rhs) for j, f in enumerate(fams))))
     cases[(W_AFFINE, -1)] = [sp.Integer(aff.dimension if aff.any else 0)]
-    for i, M in enumerate(aff.matrices):
+    per_mode = set(range(nm))
+    for j, fam in enumerate(fams):
+        variants = range(fam.first, fam.first + fam.size)
+        M = aff.matrices[nm + j]
+        # one body where the family's field is affine, or where no variant is (a variant that
+        # is affine on its own keeps its own matrix)
+        if M is not None or all(aff.matrices[i] is None for i in variants):
+            per_mode -= set(variants)
+            at = FamilyRange(fam.first, fam.first + fam.size - 1, len(fam.surfaces))
+            cases[(W_AFFINE, at)] = [sp.Integer(0)] if M is None else [sp.Integer(1), *M]
+    for i in sorted(per_mode):
+        M = aff.matrices[i]
         cases[(W_AFFINE, i)] = [sp.Integer(0)] if M is None else [sp.Integer(1), *M]
     return Derivatives(cases)
 
@@ -340,6 +378,10 @@ def _case_body(pr, which, exprs) -> tuple:
         return tuple(lines)
     if which in (W_FU, W_HDU, W_HDUD):
         lines.append("            u_sw = out[0]")
+    if which in (W_FS, W_FSD):
+        used = sorted({str(q) for e in exprs for q in e.free_symbols
+                       if str(q).startswith("side_")}, key=lambda q: int(q[5:]))
+        lines.extend(f"            {q} = out[{q[5:]}]" for q in used)
     subs, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("_c"))
     for sym, val in subs:
         lines.append(f"            {sym} = {pr.doprint(val)}")

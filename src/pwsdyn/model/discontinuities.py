@@ -65,6 +65,12 @@ MAX_SURFACES_PER_MODE = 8
 #: (16 modes of one field with four ``sign`` terms compile in about 7 s, 64 in minutes).
 MAX_SPLIT_MODES = 16
 
+#: Most variants of one mode split into a sign family (one field of their sides, compiled
+#: once for all of them: :class:`~pwsdyn.model.elements.SignFamily`), counted apart from the
+#: other modes; the variants are still listed one by one (names, switches, tables), which
+#: bounds them.
+MAX_FAMILY_MODES = 64
+
 _JUMP = (sp.sign, sp.Heaviside)
 _KINK = (sp.Abs, sp.Max, sp.Min)
 _DISC = _JUMP + _KINK
@@ -254,6 +260,27 @@ def _family_rhs(rhs, registry: _Registry, found: list, jumps: set):
     return tuple(out)
 
 
+def _multilinear(rhs, registry: _Registry, found: list, jumps: set) -> bool:
+    """Whether the family of ``rhs`` is affine in each side on the surfaces, where every
+    ``Abs`` term is zero (``Abs(v - V)`` of a velocity-weakening friction law), with only
+    ``sign``/``Heaviside``/``Abs`` terms (a ``Max``/``Min`` kink is a ``Piecewise`` in its
+    side)."""
+    if any(e.has(sp.Max, sp.Min) for e in rhs):
+        return False
+    on = [e.xreplace({a: sp.Integer(0) for a in e.atoms(sp.Abs)}) for e in rhs]
+    fam = _family_rhs(on, registry, found, jumps)
+    if fam is None:
+        return False
+    sides = [side_symbol(j) for j in range(len(found))]
+    for e in fam:
+        e = sp.expand(e)
+        if not e.is_polynomial(*sides):
+            return False
+        if any(d > 1 for mono in sp.Poly(e, *sides).monoms() for d in mono):
+            return False
+    return True
+
+
 def _side_masks_a_term(expr, sides: set) -> bool:
     """Whether a product in ``expr`` has a factor in the sides that is zero on some side
     (``(1 + side)/2`` of a ``Heaviside``) next to factors that are not a polynomial: the
@@ -366,7 +393,8 @@ def expand_discontinuities(modes, surfaces, events, switches, initial_mode, defi
     ------
     ModelError
         A mode with more than ``MAX_SURFACES_PER_MODE`` distinct surfaces, or a split that
-        would give more than ``MAX_SPLIT_MODES`` modes.
+        would give more than ``MAX_SPLIT_MODES`` modes (the variants of a sign family counted
+        apart: at most ``MAX_FAMILY_MODES`` per family).
     """
     if not any(has_discontinuities(e) for m in modes for e in m.rhs):
         return list(modes), list(events), list(switches), initial_mode, []
@@ -376,6 +404,7 @@ def expand_discontinuities(modes, surfaces, events, switches, initial_mode, defi
     conds: list[dict] = []              # new mode -> {surface: side}
     new_switches: list = []
     families: list = []                 # switch indices relative to new_switches for now
+    in_families = 0                     # modes that are variants of a family
     for m in modes:
         if not any(has_discontinuities(e) for e in m.rhs):
             variants.append([len(new_modes)])
@@ -387,13 +416,19 @@ def expand_discontinuities(modes, surfaces, events, switches, initial_mode, defi
             raise ModelError(f"mode {m.name!r} has more than {MAX_SURFACES_PER_MODE} distinct "
                              f"switching surfaces ({', '.join(registry.label(k) for k in found)}"
                              f"); write it as explicit modes and switches", field=f"modes.{m.name}")
-        total = len(new_modes) + 2 ** len(found) + sum(
-            1 for later in modes[modes.index(m) + 1:]
-            if not any(has_discontinuities(e) for e in later.rhs))
-        if total > MAX_SPLIT_MODES:
+        fam_rhs = _family_rhs(m.rhs, registry, found, jumps)
+        # the variants of a family count against their own bound, the rest together
+        rest = sum(1 for later in modes[modes.index(m) + 1:]
+                   if not any(has_discontinuities(e) for e in later.rhs))
+        if fam_rhs is None:
+            total = len(new_modes) - in_families + 2 ** len(found) + rest
+            limit = MAX_SPLIT_MODES
+        else:
+            total, limit = 2 ** len(found), MAX_FAMILY_MODES
+        if total > limit:
             raise ModelError(f"splitting mode {m.name!r} at its {len(found)} switching surfaces "
                              f"({', '.join(registry.label(k) for k in found)}) would give the "
-                             f"model at least {total} modes; at most {MAX_SPLIT_MODES} are "
+                             f"model at least {total} modes; at most {limit} are "
                              "allowed. Write the modes and switches explicitly, or use fewer "
                              "discontinuous terms per field", field=f"modes.{m.name}")
         first = len(new_modes)
@@ -416,7 +451,6 @@ def expand_discontinuities(modes, surfaces, events, switches, initial_mode, defi
         # switches between variants that differ in the side of one surface: surface by
         # surface, each in the order of the variant above it (so that a family's switches on
         # one surface are a run of indices the generated code decodes)
-        fam_rhs = _family_rhs(m.rhs, registry, found, jumps)
         fam_switches = []
         for j, k in enumerate(found):
             fam_switches.append(len(new_switches) if k in jumps else -1)
@@ -440,7 +474,9 @@ def expand_discontinuities(modes, surfaces, events, switches, initial_mode, defi
                 new_switches.append(Switch(registry.label(k), k, above, below, kind=kind,
                                            family=family))
         if fam_rhs is not None:
-            families.append(SignFamily(first, tuple(found), fam_rhs, tuple(fam_switches)))
+            in_families += 2 ** len(found)
+            families.append(SignFamily(first, tuple(found), fam_rhs, tuple(fam_switches),
+                                       _multilinear(m.rhs, registry, found, jumps)))
 
     def compatible(a, b):
         ca, cb = conds[a], conds[b]
@@ -456,7 +492,7 @@ def expand_discontinuities(modes, surfaces, events, switches, initial_mode, defi
     offset = len(out_switches)
     out_switches.extend(new_switches)
     families = [SignFamily(f.first, f.surfaces, f.rhs,
-                           tuple(-1 if q < 0 else q + offset for q in f.switches))
+                           tuple(-1 if q < 0 else q + offset for q in f.switches), f.multilinear)
                 for f in families]
 
     out_events = []

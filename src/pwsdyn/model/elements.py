@@ -109,12 +109,18 @@ class SignFamily:
     switches : tuple[int, ...]
         Per surface, the index of the first of its ``2**(k-1)`` Filippov switches (ordered by
         the variant above them), or -1 where the surface is a kink (continuous switches).
+    multilinear : bool
+        Whether ``rhs`` is affine in each side on the surfaces (where each ``Abs`` term is
+        zero): then on an intersection of the surfaces the multilinear extension of the
+        variants' fields (the kernel's sliding rule) is ``rhs`` at the sides ``1 - 2 lambda``,
+        and the kernel evaluates it so, with no sum over the ``2**k`` corners.
     """
 
     first: int
     surfaces: tuple
     rhs: tuple
     switches: tuple
+    multilinear: bool = False
 
     @property
     def size(self) -> int:

@@ -24,6 +24,15 @@ stick conditions (each within its static bound while ``lambda_i`` is in ``[0, 1]
 contacts that do not interact the conditions decouple and each contact slides exactly as it
 does alone. For ``k = 1`` it is the convex combination (thesis eq. 2.8), which the kernel keeps
 in its own code path (``SLIDE``).
+
+Where the corners are the variants of one sign family whose field is multilinear in its sides
+on the surfaces (:class:`pwsdyn.model.elements.SignFamily`, ``multilinear``), that field IS
+the multilinear extension: the kernel then solves the tangency conditions for the sides
+``u_i = 1 - 2 lambda_i`` by Newton's method on the family's field and its side derivatives
+(one evaluation of each per iteration, one or two iterations for friction) instead of
+evaluating the ``2^k`` corner fields (:func:`_lambda_family`); where that Newton iteration
+fails it falls back to the corners. Deciding which surface to leave (:func:`_settle_multi`)
+looks at the corners either way.
 """
 
 from __future__ import annotations
@@ -31,9 +40,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ...model.codegen import (W_F, W_FU, W_FX, W_GX, W_H, W_HD, W_HDT, W_HDU, W_HDUD, W_HDX, W_HT,
-                              W_HX)
-from .._codes import MULTI_MAX, REGULAR, SLIDE, SLIDE_MULTI, SLIDE_UTKIN, STICK, SW_FILIPPOV
+from ...model.codegen import (W_F, W_FAMILY, W_FS, W_FSD, W_FU, W_FX, W_GX, W_H, W_HD, W_HDT,
+                              W_HDU, W_HDUD, W_HDX, W_HT, W_HX)
+from .._codes import (FAMILY_MAX, MULTI_MAX, REGULAR, SLIDE, SLIDE_MULTI, SLIDE_UTKIN, STICK,
+                      SW_FILIPPOV)
 from ._base import EVENT_TABLE_TYPE, SWITCH_TABLE_TYPE, _EPS, _FD_STEP, _dot, _hot, _hot_inline
 
 # --------------------------------------------------------------------------------------
@@ -380,7 +390,7 @@ def _rate_band(ev, p, k, mode, nm, t, x, n, hdx):
 def multi_work_size(n):
     """Length of the work vector of :func:`_solve_lambda` for ``n`` states (the kernel's
     ``gx`` and ``buf`` are at least this long; :func:`_multi_offsets`)."""
-    return _multi_offsets(n)[8] + (1 << MULTI_MAX) + 4
+    return _multi_offsets(n)[10] + n * FAMILY_MAX + 4
 
 
 @_hot
@@ -472,7 +482,7 @@ def _multi_weight(c, lam, ol, k, skip):
 
 
 @_hot
-def _solve_lambda(ev, p, mask, ref, nm, t, x, n, stab, w1, work):
+def _solve_lambda(ev, p, mask, ref, nm, t, x, n, stab, w1, work, family=True):
     """The weights ``lambda`` of the multilinear sliding field on the surfaces of ``mask``
     (Dieci & Lopez 2011; the module docstring) at ``(t, x)``, into ``work`` (layout:
     :func:`_multi_offsets`), with the corner fields, gradients and ``h_t`` the field needs.
@@ -486,10 +496,12 @@ def _solve_lambda(ev, p, mask, ref, nm, t, x, n, stab, w1, work):
     For a field affine in the signs of uncoupled contacts the system is triangular in each
     ``lambda_i`` and one or two iterations are exact. Returns ``k`` (the number of surfaces),
     or -1 where a corner mode is missing or Newton fails from every start (the rule has no
-    solution there, e.g. tangency conditions with complex roots only)."""
+    solution there, e.g. tangency conditions with complex roots only). With ``family`` the
+    weights of the corners of a multilinear sign family come from its field
+    (:func:`_lambda_family`; the module docstring)."""
     if not _multi_set_corners(stab, mask, ref, n, work):
         return -1
-    return _lambda_core(ev, p, mask, t, x, n, w1, work)
+    return _lambda_core(ev, p, mask, t, x, n, w1, work, family)
 
 
 @_hot
@@ -507,11 +519,11 @@ def _multi_set_corners(stab, mask, ref, n, work):
 
 
 @_hot
-def _lambda_core(ev, p, mask, t, x, n, w1, work):
+def _lambda_core(ev, p, mask, t, x, n, w1, work, family=True):
     """:func:`_solve_lambda` with the corner modes already in ``work``."""
     k = _multi_count(mask)
     nc = 1 << k
-    o_hx, o_ht, o_fc, o_a, o_lam, o_g, o_jac, o_dl, o_m = _multi_offsets(n)
+    o_hx, o_ht, o_fc, o_a, o_lam, o_g, o_jac, o_dl, o_m, o_fi, o_fu = _multi_offsets(n)
     for i in range(k):
         ks = _multi_surface(mask, i)
         ev(W_HX, ks, t, x, p, w1)
@@ -519,6 +531,10 @@ def _lambda_core(ev, p, mask, t, x, n, w1, work):
             work[o_hx + i * n + q] = w1[q]
         ev(W_HT, ks, t, x, p, w1)
         work[o_ht + i] = w1[0]
+    work[o_fi] = 0.0
+    if family and _lambda_family(ev, p, mask, k, t, x, n, work):
+        work[o_fi] = 1.0
+        return k
     for c in range(nc):
         m = int(work[o_m + c])
         ev(W_F, m, t, x, p, w1)
@@ -582,13 +598,105 @@ def _lambda_newton(work, k, nc, o_a, o_lam, o_g, o_jac):
 
 
 @_hot
+def _lambda_family(ev, p, mask, k, t, x, n, work):
+    """The weights of sliding on the surfaces of ``mask`` (``k`` of them) from the field of
+    the sign family of the reference corner (``work``'s first corner mode), where it is
+    multilinear and holds every surface of the mask: Newton's method for the sides ``u_S``
+    of those surfaces (the other sides fixed at the reference's, +-1) on
+    ``g_i(u) = h_i,t + h_i,x f(t, x, u) = 0`` with ``dg_i/du_j = h_i,x df/du_j``, from
+    ``u_S = 0`` (``lambda = 1/2``, the same start at every call), at most 30 iterations;
+    then ``lambda_i = (1 - u_i)/2``. The gradients and ``h_t`` are in ``work`` already.
+    False where the corners are no such family or Newton does not converge (the caller sums
+    the corners instead). The family's info, sides and side derivatives stay in ``work``
+    (:func:`_multi_offsets`) for :func:`_multi_field`; entries ``0 .. n * FAMILY_MAX`` are
+    the compiled model's scratch."""
+    o_hx, o_ht, o_fc, o_a, o_lam, o_g, o_jac, o_dl, o_m, o_fi, o_fu = _multi_offsets(n)
+    o_sf = o_fi + 3                    # the family's surfaces
+    o_pos = o_sf + FAMILY_MAX          # the side of each surface of the mask
+    o_u = o_pos + MULTI_MAX            # the sides
+    ref = int(work[o_m])
+    ev(W_FAMILY, ref, t, x, p, work)
+    kf = int(work[0])
+    if kf == 0 or kf > FAMILY_MAX:
+        return False
+    first = int(work[1])
+    for j in range(kf):
+        work[o_sf + j] = work[2 + j]
+    work[o_fi + 1] = kf
+    work[o_fi + 2] = first
+    c = ref - first
+    for j in range(kf):
+        work[o_u + j] = -1.0 if (c >> (kf - 1 - j)) & 1 else 1.0
+    for i in range(k):
+        ks = _multi_surface(mask, i)
+        pos = -1
+        for j in range(kf):
+            if int(work[o_sf + j]) == ks:
+                pos = j
+        if pos < 0:
+            return False
+        work[o_pos + i] = pos
+        work[o_u + pos] = 0.0
+    for it in range(30):
+        for j in range(kf):
+            work[j] = work[o_u + j]
+        ev(W_FSD, first, t, x, p, work)
+        for q in range(n * kf):
+            work[o_fu + q] = work[q]
+        for j in range(kf):
+            work[j] = work[o_u + j]
+        ev(W_FS, first, t, x, p, work)
+        for i in range(k):
+            g = work[o_ht + i]
+            for q in range(n):
+                g += work[o_hx + i * n + q] * work[q]
+            work[o_g + i] = -g
+            for l in range(k):
+                pos = int(work[o_pos + l])
+                d = 0.0
+                for q in range(n):
+                    d += work[o_hx + i * n + q] * work[o_fu + q * kf + pos]
+                work[o_jac + i * k + l] = d
+        if not _small_solve(work, o_jac, work, o_g, k):
+            return False
+        step = 0.0
+        for i in range(k):
+            pos = int(work[o_pos + i])
+            work[o_u + pos] += work[o_g + i]
+            step = max(step, abs(work[o_g + i]))
+        if not step <= 1e30:
+            return False
+        if step <= 8.0 * _EPS:
+            for i in range(k):
+                work[o_lam + i] = 0.5 * (1.0 - work[o_u + int(work[o_pos + i])])
+            return True
+    return False
+
+
+@_hot
+def _family_field(ev, p, t, x, n, out, work):
+    """The field of the sign family at the sides :func:`_lambda_family` solved, into
+    ``out``."""
+    o_fi = _multi_offsets(n)[9]
+    kf = int(work[o_fi + 1])
+    o_u = o_fi + 3 + FAMILY_MAX + MULTI_MAX
+    for j in range(kf):
+        work[j] = work[o_u + j]
+    ev(W_FS, int(work[o_fi + 2]), t, x, p, work)
+    for q in range(n):
+        out[q] = work[q]
+
+
+@_hot
 def _multi_offsets(n):
     """Offsets into the work vector of :func:`_solve_lambda`: gradients ``h_i,x`` (k rows of
     n), ``h_i,t``, corner fields (2^k rows of n), tangency values ``a_ic``, ``lambda``, the
-    Newton residual, its matrix, a spare vector, the corner modes. Entries 0-3 stay free for
-    the scalar outputs of the compiled model."""
+    Newton residual, its matrix, a spare vector, the corner modes, a sign family's info
+    (:func:`_lambda_family`: a flag, its number of surfaces, first variant, surfaces, the
+    sides of the mask's surfaces, the sides) and side derivatives. Entries
+    ``0 .. max(4, n * FAMILY_MAX)`` stay free for the outputs of the compiled model."""
     nc = 1 << MULTI_MAX
-    o_hx = 4
+    o_hx = max(4, n * FAMILY_MAX, FAMILY_MAX + 2)
     o_ht = o_hx + MULTI_MAX * n
     o_fc = o_ht + MULTI_MAX
     o_a = o_fc + nc * n
@@ -597,7 +705,9 @@ def _multi_offsets(n):
     o_jac = o_g + MULTI_MAX
     o_dl = o_jac + MULTI_MAX * MULTI_MAX
     o_m = o_dl + 2 * MULTI_MAX
-    return o_hx, o_ht, o_fc, o_a, o_lam, o_g, o_jac, o_dl, o_m
+    o_fi = o_m + nc
+    o_fu = o_fi + 3 + 2 * FAMILY_MAX + MULTI_MAX
+    return o_hx, o_ht, o_fc, o_a, o_lam, o_g, o_jac, o_dl, o_m, o_fi, o_fu
 
 
 @_hot
@@ -613,13 +723,16 @@ def _multi_field(ev, p, mask, ref, nm, t, x, n, out, stab, slide_c, w1, work):
             out[q] = np.nan
         return
     nc = 1 << k
-    o_hx, o_ht, o_fc, o_a, o_lam, o_g, o_jac, o_dl, o_m = _multi_offsets(n)
-    for q in range(n):
-        out[q] = 0.0
-    for c in range(nc):
-        wc = _multi_weight(c, work, o_lam, k, -1)
+    o_hx, o_ht, o_fc, o_a, o_lam, o_g, o_jac, o_dl, o_m, o_fi, o_fu = _multi_offsets(n)
+    if work[o_fi] == 1.0:
+        _family_field(ev, p, t, x, n, out, work)
+    else:
         for q in range(n):
-            out[q] += wc * work[o_fc + c * n + q]
+            out[q] = 0.0
+        for c in range(nc):
+            wc = _multi_weight(c, work, o_lam, k, -1)
+            for q in range(n):
+                out[q] += wc * work[o_fc + c * n + q]
     # remove the residual of the k tangency conditions along the gradients: the Gram system
     # (h_i,x . h_j,x) r = h_i,t + h_i,x f, then f -= sum_j r_j h_j,x
     for i in range(k):
@@ -690,12 +803,13 @@ def _settle_multi(ev, p, t, y, n, nm, mask, ref, stab, buf, hdx, w1, work):
     ``> 1``: below) and the rest is settled again, down to sliding on one surface (the signs
     of ``hdot`` on its two sides, thesis eq. 2.6-2.8) or a regular mode. The state is
     projected onto the surfaces it slides on. Returns ``(dkind, didx, mode)``."""
-    o_hx, o_ht, o_fc, o_a, o_lam, o_g, o_jac, o_dl, o_m = _multi_offsets(n)
+    o_hx, o_ht, o_fc, o_a, o_lam, o_g, o_jac, o_dl, o_m, o_fi, o_fu = _multi_offsets(n)
     tol = 64.0 * _EPS
     for rnd in range(MULTI_MAX + 1):
         k = _multi_count(mask)
         if k >= 2:
-            kk = _solve_lambda(ev, p, mask, ref, nm, t, y, n, stab, w1, work)
+            # the corners' tangency values decide which surface is left
+            kk = _solve_lambda(ev, p, mask, ref, nm, t, y, n, stab, w1, work, False)
             if kk < 0:
                 return -1, mask, ref
             worst = -1
