@@ -499,9 +499,18 @@ def _solve_lambda(ev, p, mask, ref, nm, t, x, n, stab, w1, work, family=True):
     solution there, e.g. tangency conditions with complex roots only). With ``family`` the
     weights of the corners of a multilinear sign family come from its field
     (:func:`_lambda_family`; the module docstring)."""
+    if family:
+        # the family needs the reference corner only: the other 2^k - 1, each a walk through
+        # the switch table, are found only where it does not apply
+        work[_multi_offsets(n)[8]] = ref
+        k = _multi_count(mask)
+        _multi_gradients(ev, p, mask, k, t, x, n, w1, work)
+        if _lambda_family(ev, p, mask, k, t, x, n, work):
+            work[_multi_offsets(n)[9]] = 1.0
+            return k
     if not _multi_set_corners(stab, mask, ref, n, work):
         return -1
-    return _lambda_core(ev, p, mask, t, x, n, w1, work, family)
+    return _lambda_core(ev, p, mask, t, x, n, w1, work, False)
 
 
 @_hot
@@ -524,13 +533,7 @@ def _lambda_core(ev, p, mask, t, x, n, w1, work, family=True):
     k = _multi_count(mask)
     nc = 1 << k
     o_hx, o_ht, o_fc, o_a, o_lam, o_g, o_jac, o_dl, o_m, o_fi, o_fu = _multi_offsets(n)
-    for i in range(k):
-        ks = _multi_surface(mask, i)
-        ev(W_HX, ks, t, x, p, w1)
-        for q in range(n):
-            work[o_hx + i * n + q] = w1[q]
-        ev(W_HT, ks, t, x, p, w1)
-        work[o_ht + i] = w1[0]
+    _multi_gradients(ev, p, mask, k, t, x, n, w1, work)
     work[o_fi] = 0.0
     if family and _lambda_family(ev, p, mask, k, t, x, n, work):
         work[o_fi] = 1.0
@@ -555,6 +558,20 @@ def _lambda_core(ev, p, mask, t, x, n, w1, work, family=True):
         if _lambda_newton(work, k, nc, o_a, o_lam, o_g, o_jac):
             return k
     return -1
+
+
+@_hot
+def _multi_gradients(ev, p, mask, k, t, x, n, w1, work):
+    """The gradients ``h_i,x`` and rates ``h_i,t`` of the surfaces of ``mask`` into
+    ``work``."""
+    o_hx, o_ht = _multi_offsets(n)[:2]
+    for i in range(k):
+        ks = _multi_surface(mask, i)
+        ev(W_HX, ks, t, x, p, w1)
+        for q in range(n):
+            work[o_hx + i * n + q] = w1[q]
+        ev(W_HT, ks, t, x, p, w1)
+        work[o_ht + i] = w1[0]
 
 
 @_hot

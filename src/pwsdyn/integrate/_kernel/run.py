@@ -19,7 +19,7 @@ from .._codes import (ACT_EVENT, ACT_EXIT_ABOVE, ACT_EXIT_BELOW, ACT_EXIT_MULTI,
 from ._base import (EVENT_TABLE_TYPE, OPTIONS_TYPE, SWITCH_TABLE_TYPE, _COINCIDENT_ULPS, _EPS,
                     _EXACT_TERMS, _MAXW, _grow1, _grow2, _grow3,
                     _log_event, _ulp, compiled_on_first_use)
-from .fields import (_field, _multi_corner, _multi_count, _multi_set_corners, _multi_surface,
+from .fields import (_field, _multi_corner, _multi_count, _multi_offsets, _multi_surface,
                      _project_multi, _project_surface, _rate_band, _resolve, _rhs,
                      _start_on_surface, multi_work_size)
 from .steppers import (_affine_setup, _dense_eval, _error_norm, _exact_stepper, _step_dense,
@@ -215,6 +215,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
     xt = np.zeros(n)
     ft = np.zeros(n)
     buf = np.zeros(max(n, 2, multi_work_size(n)))
+    o_corners = _multi_offsets(n)[8]
     fbuf = np.zeros(n)
     xs = np.zeros(nY)
     Kland = np.zeros((s_ext, nY))
@@ -420,6 +421,11 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                     break
                 # (re)build the watch list for the current discrete state
                 nw = 0
+                if dkind == SLIDE_MULTI:
+                    # the corner modes of the intersection, kept in buf for the watches of
+                    # the weights (_watch_value) and read below (-1: a corner is missing)
+                    for c in range(1 << _multi_count(didx)):
+                        buf[o_corners + c] = _multi_corner(stab, didx, mode, c)
                 for j in range(n_events):
                     if eactive[j, mode] == 0:
                         continue
@@ -438,9 +444,10 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                             continue
                         adjacent = False
                         for c in range(1 << _multi_count(didx)):
-                            mc = _multi_corner(stab, didx, mode, c)
+                            mc = int(buf[o_corners + c])
                             if stab[s].above == mc or stab[s].below == mc:
                                 adjacent = True
+                                break
                         dup = False
                         for ww in range(nw):
                             if wact[ww] == ACT_INTERSECTION and widx[ww] == stab[s].surface:
@@ -509,10 +516,9 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                 if dkind == SLIDE_MULTI:
                     # leave surface i of the intersection where its weight lambda_i reaches 0
                     # (to the side above) or 1 (below): one watch per surface,
-                    # min(lambda_i, 1 - lambda_i) (each watch costs a Newton solve over all
-                    # corner fields per sample), whose corner modes are kept in buf (see
-                    # _watch_value)
-                    _multi_set_corners(stab, didx, mode, n, buf)
+                    # min(lambda_i, 1 - lambda_i) (each watch costs a Newton solve per sample,
+                    # on the sign family's field where it applies, else over all corner
+                    # fields), whose corner modes are kept in buf (set above; _watch_value)
                     for i in range(_multi_count(didx)):
                         wtype[nw] = WF_LAMBDA; widx[nw] = i; wmode[nw] = didx
                         wdir[nw] = -1; wact[nw] = ACT_EXIT_MULTI; wref[nw] = i
@@ -520,7 +526,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                     for j in range(n_events):
                         active = False
                         for c in range(1 << _multi_count(didx)):
-                            mc = _multi_corner(stab, didx, mode, c)
+                            mc = int(buf[o_corners + c])
                             if mc >= 0 and eactive[j, mc] != 0:
                                 active = True
                         if not active:
