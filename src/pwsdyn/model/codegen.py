@@ -121,6 +121,9 @@ class FamilyRange:
     def __index__(self) -> int:  # sorts with the plain indices
         return self.lo
 
+    def __str__(self) -> str:  # in messages: the indices it stands for
+        return f"{self.lo}..{self.hi}"
+
     def prologue(self, used) -> list:
         """The lines decoding the side variables in ``used`` (names) from ``idx``."""
         lines = [f"            _v = idx - {self.lo}"]

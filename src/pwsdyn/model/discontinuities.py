@@ -271,14 +271,11 @@ def _multilinear(rhs, registry: _Registry, found: list, jumps: set) -> bool:
     fam = _family_rhs(on, registry, found, jumps)
     if fam is None:
         return False
+    # affine in each side: the second derivative in it vanishes (SymPy's derivative of a
+    # side times anything free of it is that thing, whose derivative is 0; no expansion,
+    # which can take memory exponential in the powers of an arbitrary field)
     sides = [side_symbol(j) for j in range(len(found))]
-    for e in fam:
-        e = sp.expand(e)
-        if not e.is_polynomial(*sides):
-            return False
-        if any(d > 1 for mono in sp.Poly(e, *sides).monoms() for d in mono):
-            return False
-    return True
+    return all(sp.diff(e, s, 2) == 0 for e in fam for s in sides)
 
 
 def _side_masks_a_term(expr, sides: set) -> bool:
