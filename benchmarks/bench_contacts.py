@@ -17,7 +17,8 @@ Timings are reported, never asserted.
 
 Run::
 
-    python benchmarks/bench_contacts.py [--blocks 1 2 3 4 5 6] [--t-end 1000] [--repeats 3] [--save]
+    python benchmarks/bench_contacts.py [--blocks 1 2 3 4 5 6] [--t-end 1000] [--repeats 3]
+        [--save]
 """
 
 from __future__ import annotations

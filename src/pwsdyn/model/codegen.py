@@ -23,6 +23,7 @@ function) and a new model costs only the compilation of its own small function.
 from __future__ import annotations
 
 import dataclasses
+import operator
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -154,7 +155,7 @@ def derivatives(model: Model) -> Derivatives:
                        sp.Matrix(fam.rhs)))
     fields += [(i, sp.Matrix(mode.rhs)) for i, mode in enumerate(model.modes)
                if i not in in_family]
-    fields.sort(key=lambda c: int(c[0].__index__()))
+    fields.sort(key=lambda c: operator.index(c[0]))
     for i, f in fields:
         cases[(W_F, i)] = list(f)
         cases[(W_FX, i)] = [without_dirac_deltas(e) for e in f.jacobian(X)]
@@ -174,14 +175,14 @@ def derivatives(model: Model) -> Derivatives:
             cases[(W_HDX, at)] = [without_dirac_deltas(e) for e in sp.Matrix([hd]).jacobian(X)]
             cases[(W_HDT, at)] = [without_dirac_deltas(sp.diff(hd, t))]
             cases[(W_HHD, at)] = [h, hd]
-    in_family = set()
+    family_switches = set()
     for fam in model.families:
         k = len(fam.surfaces)
         for j, s0 in enumerate(fam.switches):
             if s0 < 0:
                 continue
             half = fam.size // 2
-            in_family.update(range(s0, s0 + half))
+            family_switches.update(range(s0, s0 + half))
             at = FamilyRange(s0, s0 + half - 1, k, "switch", j)
             fu = sp.Matrix(fam.rhs).xreplace({side_symbol(j): U_SYMBOL})
             h = model.surfaces[fam.surfaces[j]].expr
@@ -190,7 +191,7 @@ def derivatives(model: Model) -> Derivatives:
             cases[(W_HDU, at)] = [without_dirac_deltas(hdu)]
             cases[(W_HDUD, at)] = [without_dirac_deltas(sp.diff(hdu, U_SYMBOL))]
     for s, sw in enumerate(model.switches):
-        if s in in_family:
+        if s in family_switches:
             continue
         # family f(t, x, u) of Utkin's equivalent control; affine (the convex combination,
         # thesis eq. 2.7 with alpha = (1 - u)/2) for switches written as two explicit modes
@@ -343,14 +344,14 @@ def emit_evaluate(cases: dict, states, parameters) -> str:
         # numba's compile time grows with the text. The arithmetic is the same either way.
         # A family's range of cases is one body already, its sides decoded from idx.
         bodies: dict = {}
-        for idx, exprs in sorted(by_which[which], key=lambda c: int(c[0].__index__())):
+        for idx, exprs in sorted(by_which[which], key=lambda c: operator.index(c[0])):
             body = _case_body(pr, which, [sp.sympify(e).xreplace(rename) for e in exprs])
             if isinstance(idx, FamilyRange):
                 used = {str(q) for e in exprs for q in sp.sympify(e).free_symbols}
                 bodies[idx] = (tuple(idx.prologue(used)) + body, [idx])
                 continue
             bodies.setdefault(body, (body, []))[1].append(idx)
-        for body, idxs in sorted(bodies.values(), key=lambda b: int(b[1][0].__index__())):
+        for body, idxs in sorted(bodies.values(), key=lambda b: operator.index(b[1][0])):
             if isinstance(idxs[0], FamilyRange):
                 lines.append(f"        if {idxs[0].lo} <= idx <= {idxs[0].hi}:")
             else:

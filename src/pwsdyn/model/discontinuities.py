@@ -48,7 +48,6 @@ from .elements import Mode, SignFamily, Surface, Switch
 U_SYMBOL = sp.Symbol("u_switch", real=True)
 
 
-
 def side_symbol(j: int) -> sp.Symbol:
     """The side variable ``side_j`` of a :class:`~pwsdyn.model.elements.SignFamily`'s field."""
     return sp.Symbol(f"side_{j}", real=True)

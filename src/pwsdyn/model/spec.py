@@ -685,9 +685,9 @@ def model_from_dict(data: dict, origin: str = "<dict>", text: str | None = None)
     parameters = default_parameters(parameters, data.get("defaults"))
     return Model(name=name, states=tuple(states), parameters=parameters, modes=tuple(modes),
                  surfaces=tuple(surfaces), events=tuple(events), switches=tuple(switches),
-                 families=tuple(families), description=desc, reference=ref, definitions=definitions, forcing_period=fp,
-                 initial_mode=init, origin=origin, spec=data,
-                 units=units, descriptions=descriptions, text=text or "")
+                 families=tuple(families), description=desc, reference=ref,
+                 definitions=definitions, forcing_period=fp, initial_mode=init, origin=origin,
+                 spec=data, units=units, descriptions=descriptions, text=text or "")
 
 
 _DEFAULTS_KEYS = {"x0", "t0", "t_end", "params"}
