@@ -242,21 +242,28 @@ def derivatives(model: Model) -> Derivatives:
                                  source=model.origin)
     # the affine matrices of the modes, then those of the families' fields in their sides
     # (after the modes, so that the forcing frequencies keep the modes' order)
-    fams = model.families
-    aff = affine_structure(SimpleNamespace(
-        t=model.t, state_symbols=model.state_symbols, states=model.states,
-        modes=tuple(model.modes) + tuple(Mode(f"family {j}", f.rhs) for j, f in enumerate(fams))))
+    # (the families' fields are looked at only where all their variants are affine: the
+    # affine test simplifies a field's constant term, which in the sides of an arbitrary
+    # field can take long)
+    aff = affine_structure(model)
+    fams = [f for f in model.families
+            if all(aff.matrices[i] is not None for i in range(f.first, f.first + f.size))]
+    if fams:
+        aff = affine_structure(SimpleNamespace(
+            t=model.t, state_symbols=model.state_symbols, states=model.states,
+            modes=tuple(model.modes) + tuple(Mode(f"family {j}", f.rhs)
+                                             for j, f in enumerate(fams))))
     cases[(W_AFFINE, -1)] = [sp.Integer(aff.dimension if aff.any else 0)]
     per_mode = set(range(nm))
     for j, fam in enumerate(fams):
         variants = range(fam.first, fam.first + fam.size)
         M = aff.matrices[nm + j]
-        # one body where the family's field is affine, or where no variant is (a variant that
-        # is affine on its own keeps its own matrix)
-        if M is not None or all(aff.matrices[i] is None for i in variants):
+        # one body where the family's field is affine (each variant keeps its own matrix
+        # otherwise)
+        if M is not None:
             per_mode -= set(variants)
             at = FamilyRange(fam.first, fam.first + fam.size - 1, len(fam.surfaces))
-            cases[(W_AFFINE, at)] = [sp.Integer(0)] if M is None else [sp.Integer(1), *M]
+            cases[(W_AFFINE, at)] = [sp.Integer(1), *M]
     for i in sorted(per_mode):
         M = aff.matrices[i]
         cases[(W_AFFINE, i)] = [sp.Integer(0)] if M is None else [sp.Integer(1), *M]

@@ -253,7 +253,7 @@ def _family_rhs(rhs, registry: _Registry, found: list, jumps: set):
             expr = expr.xreplace(rep)
         else:  # pragma: no cover
             return None
-        if _side_masks_a_term(expr, set(sides.values())):
+        if _side_masks_a_term(expr, set(sides.values()), registry.variables):
             return None
         out.append(expr)
     return tuple(out)
@@ -266,33 +266,35 @@ def _multilinear(rhs, registry: _Registry, found: list, jumps: set) -> bool:
     side)."""
     if any(e.has(sp.Max, sp.Min) for e in rhs):
         return False
-    on = [e.xreplace({a: sp.Integer(0) for a in e.atoms(sp.Abs)}) for e in rhs]
-    fam = _family_rhs(on, registry, found, jumps)
+    # each Abs term as a symbol of its own, free of the sides (it is zero on its surface;
+    # substituting 0 itself would let SymPy evaluate what surrounds it, (0 + 2)**(10**12)
+    # included), then: affine in each side where the second derivative in it vanishes
+    # (SymPy's derivative of a side times anything free of it is that thing, whose
+    # derivative is 0; nothing is expanded or evaluated)
+    absent = {a: sp.Dummy() for e in rhs for a in e.atoms(sp.Abs)}
+    fam = _family_rhs([e.xreplace(absent) for e in rhs], registry, found, jumps)
     if fam is None:
         return False
-    # affine in each side: the second derivative in it vanishes (SymPy's derivative of a
-    # side times anything free of it is that thing, whose derivative is 0; no expansion,
-    # which can take memory exponential in the powers of an arbitrary field)
     sides = [side_symbol(j) for j in range(len(found))]
     return all(sp.diff(e, s, 2) == 0 for e in fam for s in sides)
 
 
-def _side_masks_a_term(expr, sides: set) -> bool:
-    """Whether a product in ``expr`` has a factor in the sides that is zero on some side
-    (``(1 + side)/2`` of a ``Heaviside``) next to factors that are not a polynomial: the
-    variant on that side drops the product, the family would compute ``0 * g`` and give NaN
-    where ``g`` is not finite (``Heaviside(x)*sqrt(x)`` at ``x < 0``)."""
+def _side_masks_a_term(expr, sides: set, variables: tuple) -> bool:
+    """Whether a product in ``expr`` has a factor in the sides that may be zero on some side
+    (``(1 + side)/2`` of a ``Heaviside``: any factor but a side or a power of one) next to
+    factors that are not a polynomial in ``variables`` (the states and time): the variant on
+    that side drops the product, the family would compute ``0 * g`` and give NaN where ``g``
+    is not finite (``Heaviside(x)*sqrt(x)`` at ``x < 0``). Nothing is evaluated (a side set
+    to +-1 in ``(side + 2)**(10**12)`` would be)."""
     for node in sp.preorder_traversal(expr):
         if not isinstance(node, sp.Mul):
             continue
         for f in node.args:
-            fs = f.free_symbols & sides
-            # the other factors finite wherever the states are (a polynomial): nothing to mask
-            if not fs or sp.Mul(*(g for g in node.args if g is not f)).is_polynomial():
+            if not f.free_symbols & sides or f in sides or (f.is_Pow and f.base in sides):
                 continue
-            for pattern in itertools.product((1, -1), repeat=len(fs)):
-                if f.xreplace(dict(zip(sorted(fs, key=str), pattern))) == 0:
-                    return True
+            # the other factors finite wherever the states are (a polynomial): nothing to mask
+            if not sp.Mul(*(g for g in node.args if g is not f)).is_polynomial(*variables):
+                return True
     return False
 
 
