@@ -402,7 +402,6 @@ def expand_discontinuities(modes, surfaces, events, switches, initial_mode, defi
     conds: list[dict] = []              # new mode -> {surface: side}
     new_switches: list = []
     families: list = []                 # switch indices relative to new_switches for now
-    in_families = 0                     # modes that are variants of a family
     for m in modes:
         if not any(has_discontinuities(e) for e in m.rhs):
             variants.append([len(new_modes)])
@@ -419,7 +418,7 @@ def expand_discontinuities(modes, surfaces, events, switches, initial_mode, defi
         rest = sum(1 for later in modes[modes.index(m) + 1:]
                    if not any(has_discontinuities(e) for e in later.rhs))
         if fam_rhs is None:
-            total = len(new_modes) - in_families + 2 ** len(found) + rest
+            total = len(new_modes) - sum(f.size for f in families) + 2 ** len(found) + rest
             limit = MAX_SPLIT_MODES
         else:
             total, limit = 2 ** len(found), MAX_FAMILY_MODES
@@ -472,7 +471,6 @@ def expand_discontinuities(modes, surfaces, events, switches, initial_mode, defi
                 new_switches.append(Switch(registry.label(k), k, above, below, kind=kind,
                                            family=family))
         if fam_rhs is not None:
-            in_families += 2 ** len(found)
             families.append(SignFamily(first, tuple(found), fam_rhs, tuple(fam_switches),
                                        _multilinear(m.rhs, registry, found, jumps)))
 
