@@ -9,9 +9,13 @@ sentinel file that every code payload below would write must never appear.
 
 from __future__ import annotations
 
+import _thread
 import ast
+import contextlib
 import json
 import math
+import os
+import threading
 import time
 from collections import Counter
 from pathlib import Path
@@ -77,6 +81,21 @@ _ATOMS = ["1", "0", "-1", "2.5", "1e-320", "1e308", "1e309", "nan", "inf", "-inf
           _PAYLOAD, f"__import__('os').system({str(SENTINEL)!r})"]
 
 
+#: Longest text :func:`_repeated` makes: far past the loader's bound on syntax nodes (so the
+#: refusal of a long expression is still exercised), but bounded. The repetition is the one
+#: operation that multiplies lengths; nested, unbounded, it made strings of gigabytes and the
+#: out-of-memory killer ended the whole test run.
+MAX_REPEATED_TEXT = 200_000
+
+
+def _repeated(a) -> str:
+    """``(e+1)*(e+1)*...``: ``a = (e, times)``, as many times as fit in MAX_REPEATED_TEXT
+    (``e`` itself where not even one term fits)."""
+    term = f"({a[0]}+1)"
+    times = min(a[1], (MAX_REPEATED_TEXT + 1) // (len(term) + 1))
+    return "*".join([term] * times) if times else a[0]
+
+
 def expressions(names: list[str]):
     leaves = st.one_of(st.sampled_from(names or ["x"]), st.sampled_from(_ATOMS),
                        st.integers(-10**30, 10**30).map(str),
@@ -90,7 +109,7 @@ def expressions(names: list[str]):
                 lambda a: f"{a[0]}({', '.join(a[1])})"),
             st.tuples(st.sampled_from(["sin(", "sqrt(", "("]), st.integers(1, 220), inner).map(
                 lambda a: a[0] * a[1] + a[2] + ")" * a[1]),
-            st.tuples(inner, st.integers(2, 3000)).map(lambda a: "*".join([f"({a[0]}+1)"] * a[1])),
+            st.tuples(inner, st.integers(2, 3000)).map(_repeated),
         )
 
     text = st.recursive(leaves, extend, max_leaves=12)
@@ -340,6 +359,58 @@ def exercise(source, *, compile_it, cli_it=lambda: False) -> str:
         assert not SENTINEL.exists(), "a payload ran"
 
 
+def _rss_bytes() -> int:
+    """This process's resident memory (Linux; 0 where /proc is not there)."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return 0
+
+
+class MemoryWatch:
+    """Ends a fuzz run whose process grows by more than ``budget`` bytes with an error that
+    says what it was doing (running an input, or generating the one after it), instead of
+    letting the machine's out-of-memory killer end the whole test run without a word.
+
+    A thread samples the resident memory; past the budget it interrupts the main thread (a
+    KeyboardInterrupt raised between two bytecodes of whatever runs: a single allocation in C
+    is seen once it returns), which :meth:`Tally.watching` turns into an AssertionError."""
+
+    def __init__(self, budget: float = 4 * 2**30, period: float = 0.1):
+        self.budget, self.period = budget, period
+        self.base = 0
+        self.tripped = ""
+        self._active = False
+        self._thread = None
+        # held while the interrupt is sent, so that it lands inside the ``with`` block (at
+        # worst in ``__exit__``, which is still inside it)
+        self._lock = threading.Lock()
+
+    def __enter__(self):
+        self.base, self.tripped, self._active = _rss_bytes(), "", True
+        if self._thread is None or not self._thread.is_alive():
+            self._thread = threading.Thread(target=self._watch, daemon=True)
+            self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        with self._lock:
+            self._active = False
+        return False
+
+    def _watch(self):
+        while True:
+            time.sleep(self.period)
+            with self._lock:
+                if self._active and not self.tripped:
+                    grown = _rss_bytes() - self.base
+                    if grown > self.budget:
+                        self.tripped = (f"the process grew by {grown / 2**30:.1f} GiB (budget "
+                                        f"{self.budget / 2**30:.1f} GiB)")
+                        _thread.interrupt_main()
+
+
 class Tally:
     """Counts of outcomes, and the slowest input, over a fuzz run. The first model that
     loads, and every ``compile_every``-th after it, is compiled and run (numba takes about a
@@ -353,6 +424,8 @@ class Tally:
         self.cli_every = cli_every
         self._accepted = 0
         self._seen = 0
+        self.watch = MemoryWatch()
+        self.doing = "starting"
 
     def _cli_next(self) -> bool:
         self._seen += 1
@@ -365,9 +438,22 @@ class Tally:
         self._accepted += 1
         return bool(self.compile_every) and (self._accepted - 1) % self.compile_every == 0
 
+    @contextlib.contextmanager
+    def watching(self):
+        """The fuzz run inside, under :class:`MemoryWatch`."""
+        try:
+            with self.watch:
+                yield self
+        except KeyboardInterrupt:
+            if not self.watch.tripped:
+                raise
+            raise AssertionError(f"{self.watch.tripped} while {self.doing}"[:20_000]) from None
+
     def run(self, source) -> str:
         t0 = time.perf_counter()
+        self.doing = f"running the input {source!r}"
         outcome = exercise(source, compile_it=self._compile_next, cli_it=self._cli_next)
+        self.doing = f"generating the input after {source!r}"
         dt = time.perf_counter() - t0
         self.slowest = max(self.slowest, dt)
         self.slowest_by[outcome] = max(self.slowest_by.get(outcome, 0.0), dt)

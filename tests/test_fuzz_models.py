@@ -7,11 +7,15 @@ The default run is bounded (a few hundred models, a sample of them compiled and 
 
 from __future__ import annotations
 
+import time
+
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
-from _fuzz_models import SENTINEL, Tally, model_dicts, to_toml
+from _fuzz_models import (MAX_REPEATED_TEXT, SENTINEL, Tally, _repeated, model_dicts,
+                          to_toml)
 
 import pwsdyn
 
@@ -70,7 +74,8 @@ def _fuzz_mutated_zoo(n: int, tally: Tally):
 
 def test_fuzzed_model_dicts(capsys):
     tally = Tally(compile_every=12)
-    _fuzz_dicts(300, tally)
+    with tally.watching():
+        _fuzz_dicts(300, tally)
     with capsys.disabled():
         print("\n" + tally.report("model dicts"))
     assert tally.total >= 300
@@ -79,8 +84,9 @@ def test_fuzzed_model_dicts(capsys):
 
 def test_fuzzed_model_files(capsys):
     tally = Tally(compile_every=25, cli_every=10)
-    _fuzz_toml(150, tally)
-    _fuzz_mutated_zoo(150, tally)
+    with tally.watching():
+        _fuzz_toml(150, tally)
+        _fuzz_mutated_zoo(150, tally)
     with capsys.disabled():
         print("\n" + tally.report("TOML model files"))
     assert tally.total >= 300 and tally.counts["also run through the CLI"]
@@ -89,9 +95,49 @@ def test_fuzzed_model_files(capsys):
 @pytest.mark.slow
 def test_fuzz_campaign_of_5000_models(capsys):
     tally = Tally(compile_every=10, cli_every=10)
-    _fuzz_dicts(2500, tally)
-    _fuzz_toml(1500, tally)
-    _fuzz_mutated_zoo(1000, tally)
+    with tally.watching():
+        _fuzz_dicts(2500, tally)
+        _fuzz_toml(1500, tally)
+        _fuzz_mutated_zoo(1000, tally)
     with capsys.disabled():
         print("\n" + tally.report("fuzz campaign"))
     assert tally.total >= 5000
+
+
+def test_memory_watch_names_what_the_run_was_doing(monkeypatch):
+    """A fuzz run whose process grows past the budget fails, naming the input it was running
+    (or the one before the input being generated), where the out-of-memory killer would end
+    the whole test run without a word."""
+    import _fuzz_models
+
+    def hog(source, **kw):
+        block = []
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline:    # grows until interrupted (or gives up)
+            block.append(np.ones(2**20))     # 8 MiB a step
+            time.sleep(0.005)
+        return "accepted (source checked)"
+
+    monkeypatch.setattr(_fuzz_models, "exercise", lambda source, **kw: "refused at load")
+    tally = Tally()
+    tally.watch.budget = 200 * 2**20
+    with tally.watching():
+        assert tally.run("a quiet one") == "refused at load"
+    monkeypatch.setattr(_fuzz_models, "exercise", hog)
+    with pytest.raises(AssertionError, match=r"grew by .* while running the input 'the hog'"):
+        with tally.watching():
+            tally.run("the hog")
+    monkeypatch.setattr(_fuzz_models, "exercise", lambda source, **kw: "refused at load")
+    with pytest.raises(AssertionError, match=r"while generating the input after 'quiet'"):
+        with tally.watching():
+            tally.run("quiet")
+            hog(None)                        # as a generator gone wild would
+
+
+@settings(max_examples=300, **_SETTINGS)
+@given(text=st.recursive(st.just("x"), lambda inner: st.tuples(inner, st.integers(2, 3000))
+                         .map(_repeated), max_leaves=12))
+def test_generated_expressions_stay_bounded(text):
+    """The repetition of the expression generator, nested as deep as it goes, stays within its
+    bound: unbounded it multiplied lengths into gigabytes (3000 copies of 3000 copies ...)."""
+    assert len(text) <= MAX_REPEATED_TEXT
