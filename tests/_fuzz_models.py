@@ -15,6 +15,7 @@ import contextlib
 import json
 import math
 import os
+import signal
 import threading
 import time
 from collections import Counter
@@ -368,14 +369,21 @@ def _rss_bytes() -> int:
         return 0
 
 
+def _interrupted(signum, frame):
+    raise KeyboardInterrupt
+
+
 class MemoryWatch:
     """Ends a fuzz run whose process grows by more than ``budget`` bytes with an error that
     says what it was doing (running an input, or generating the one after it), instead of
     letting the machine's out-of-memory killer end the whole test run without a word.
 
-    A thread samples the resident memory; past the budget it interrupts the main thread (a
-    KeyboardInterrupt raised between two bytecodes of whatever runs: a single allocation in C
-    is seen once it returns), which :meth:`Tally.watching` turns into an AssertionError."""
+    A thread samples the resident memory; past the budget it interrupts the main thread with
+    SIGUSR1, whose handler (installed for the watch) raises KeyboardInterrupt between two
+    bytecodes of whatever runs (a single allocation in C is seen once it returns), which
+    :meth:`Tally.watching` turns into an AssertionError. Not SIGINT: a process started in the
+    background by a shell without job control ignores it, and then ``interrupt_main`` does
+    nothing. Enter the watch from the main thread (signal handlers are set there)."""
 
     def __init__(self, budget: float = 4 * 2**30, period: float = 0.1):
         self.budget, self.period = budget, period
@@ -386,8 +394,10 @@ class MemoryWatch:
         # held while the interrupt is sent, so that it lands inside the ``with`` block (at
         # worst in ``__exit__``, which is still inside it)
         self._lock = threading.Lock()
+        self._previous = signal.SIG_DFL
 
     def __enter__(self):
+        self._previous = signal.signal(signal.SIGUSR1, _interrupted)
         self.base, self.tripped, self._active = _rss_bytes(), "", True
         if self._thread is None or not self._thread.is_alive():
             self._thread = threading.Thread(target=self._watch, daemon=True)
@@ -397,6 +407,7 @@ class MemoryWatch:
     def __exit__(self, *exc):
         with self._lock:
             self._active = False
+        signal.signal(signal.SIGUSR1, self._previous)
         return False
 
     def _watch(self):
@@ -408,7 +419,7 @@ class MemoryWatch:
                     if grown > self.budget:
                         self.tripped = (f"the process grew by {grown / 2**30:.1f} GiB (budget "
                                         f"{self.budget / 2**30:.1f} GiB)")
-                        _thread.interrupt_main()
+                        _thread.interrupt_main(signal.SIGUSR1)
 
 
 class Tally:
@@ -448,6 +459,8 @@ class Tally:
             if not self.watch.tripped:
                 raise
             raise AssertionError(f"{self.watch.tripped} while {self.doing}"[:20_000]) from None
+        if self.watch.tripped:      # tripped as the run ended, before the interrupt landed
+            raise AssertionError(f"{self.watch.tripped} while {self.doing}"[:20_000])
 
     def run(self, source) -> str:
         t0 = time.perf_counter()
