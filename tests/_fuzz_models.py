@@ -458,9 +458,9 @@ class Tally:
         except KeyboardInterrupt:
             if not self.watch.tripped:
                 raise
+        # interrupted by the watch, or tripped as the run ended, before the interrupt landed
+        if self.watch.tripped:
             raise AssertionError(f"{self.watch.tripped} while {self.doing}"[:20_000]) from None
-        if self.watch.tripped:      # tripped as the run ended, before the interrupt landed
-            raise AssertionError(f"{self.watch.tripped} while {self.doing}"[:20_000])
 
     def run(self, source) -> str:
         t0 = time.perf_counter()
