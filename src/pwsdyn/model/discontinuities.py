@@ -97,6 +97,16 @@ def _innermost(exprs) -> list:
     return out
 
 
+def _disc_nodes(exprs):
+    """The distinct discontinuous terms of ``exprs``, nested ones included."""
+    seen = set()
+    for e in exprs:
+        for node in sp.preorder_traversal(e):
+            if _is_disc(node) and node not in seen:
+                seen.add(node)
+                yield node
+
+
 def _switch_args(atom) -> tuple:
     """The arguments of a discontinuous term that decide its side (Heaviside's optional value
     at zero does not)."""
@@ -303,6 +313,17 @@ def _surfaces_of_mode(rhs, registry: _Registry) -> tuple[list, set]:
     on which a jump (sign/Heaviside) is met."""
     found: list = []
     jumps: set = set()
+    atoms = _innermost(rhs)
+    if len(atoms) == sum(1 for _ in _disc_nodes(rhs)):
+        # no term nested in another's argument: every surface is met in the field as it is
+        # written (the search below, over the 2**k sides, would find them in this order)
+        for atom in atoms:
+            k, _ = registry.find(_surface_of(atom))
+            if k not in found:
+                found.append(k)
+            if isinstance(atom, _JUMP):
+                jumps.add(k)
+        return found, jumps
 
     def explore(exprs, sides, depth):
         if depth > 2 * MAX_SURFACES_PER_MODE + 2:
@@ -355,6 +376,43 @@ def _partial(expr, registry, sides):
             return expr
         expr = expr.xreplace(rep)
     return expr  # pragma: no cover
+
+
+class _Components:
+    """The components of one mode's field on given sides, each evaluated once per combination
+    of the sides of the surfaces it meets: a contact's friction force depends on its own side
+    only, so a mode split at ``k`` contacts has two values per component, not ``2**k``.
+
+    The result is :func:`_apply`'s on all the sides: a component is evaluated on the sides of
+    the surfaces found in it (``_surfaces_of_mode`` on the component alone), and again on all
+    the sides where it meets one more."""
+
+    def __init__(self, rhs, registry: _Registry):
+        self.rhs, self.registry = tuple(rhs), registry
+        self.met = [frozenset(_surfaces_of_mode((e,), registry)[0]) for e in self.rhs]
+        self._values: dict = {}
+        self._disc: dict = {}
+
+    def on(self, i: int, sides: dict, u_surface: int | None = None):
+        """``_apply(rhs[i], registry, sides, u_surface)``."""
+        met = self.met[i]
+        u = u_surface if u_surface in met else None
+        key = (i, u, tuple(sorted((k, sd) for k, sd in sides.items() if k in met and k != u)))
+        out = self._values.get(key)
+        if out is None:
+            out = _apply(self.rhs[i], self.registry, dict(key[2]), u)
+            if out[1] is not None:
+                # a surface the search did not list (or none may be resolved): on every side
+                return _apply(self.rhs[i], self.registry, sides, u_surface)
+            self._values[key] = out
+        return out
+
+    def discontinuous(self, expr) -> bool:
+        """``has_discontinuities(expr)``, once per distinct expression."""
+        out = self._disc.get(expr)
+        if out is None:
+            out = self._disc[expr] = has_discontinuities(expr)
+        return out
 
 
 def expand_discontinuities(modes, surfaces, events, switches, initial_mode, definitions,
@@ -430,17 +488,18 @@ def expand_discontinuities(modes, surfaces, events, switches, initial_mode, defi
                              "discontinuous terms per field", field=f"modes.{m.name}")
         first = len(new_modes)
         index = {}
+        terms = _Components(m.rhs, registry)
+        labels = [registry.label(k) for k in found]
         for pattern in itertools.product((1, -1), repeat=len(found)):
             sides = dict(zip(found, pattern))
             rhs = []
-            for e in m.rhs:
-                val, pending = _apply(e, registry, sides)
+            for i, e in enumerate(m.rhs):
+                val, pending = terms.on(i, sides)
                 if pending is not None:  # pragma: no cover - found covers every surface
                     raise ModelError(f"mode {m.name!r}: could not resolve the discontinuous "
                                      f"terms of {e}", field=f"modes.{m.name}")
                 rhs.append(val)
-            label = ",".join(f"{registry.label(k)}{'>' if sd > 0 else '<'}0"
-                             for k, sd in zip(found, pattern))
+            label = ",".join(f"{lab}{'>' if sd > 0 else '<'}0" for lab, sd in zip(labels, pattern))
             index[pattern] = len(new_modes)
             new_modes.append(Mode(f"{m.name}[{label}]", tuple(rhs)))
             conds.append(sides)
@@ -461,14 +520,14 @@ def expand_discontinuities(modes, surfaces, events, switches, initial_mode, defi
                 if kind == FILIPPOV:
                     sides = dict(zip(found, pattern))
                     fam = []
-                    for e in m.rhs:
-                        val, pending = _apply(e, registry, sides, u_surface=k)
-                        if pending is not None or has_discontinuities(val):
+                    for i in range(len(m.rhs)):
+                        val, pending = terms.on(i, sides, u_surface=k)
+                        if pending is not None or terms.discontinuous(val):
                             fam = None
                             break
                         fam.append(val)
                     family = tuple(fam) if fam is not None else None
-                new_switches.append(Switch(registry.label(k), k, above, below, kind=kind,
+                new_switches.append(Switch(labels[j], k, above, below, kind=kind,
                                            family=family))
         if fam_rhs is not None:
             families.append(SignFamily(first, tuple(found), fam_rhs, tuple(fam_switches),

@@ -154,15 +154,31 @@ class Model(SymbolicSystem):
         """SHA-256 (64 hex digits) of everything that defines the compiled model (not its
         description, units, descriptions or parameter values); names the compiled module in
         the cache."""
+        # sp.srepr of a tuple, each element object printed once: the variants of a mode split
+        # at k contacts share most of their components and sliding families (the same
+        # objects; by identity, since SymPy may call 1 and 1.0 equal)
+        printed: dict = {}
+
+        def srepr(items) -> str:
+            if items is None:
+                return "None"
+            out = []
+            for e in items:
+                text = printed.get(id(e))
+                if text is None:
+                    text = printed[id(e)] = sp.srepr(e)
+                out.append(text)
+            return f"({out[0]},)" if len(out) == 1 else f"({', '.join(out)})"
+
         parts = [self.name, repr(self.states), repr(list(self.parameters))]
-        parts += [f"mode {m.name}: " + sp.srepr(m.rhs) for m in self.modes]
+        parts += [f"mode {m.name}: " + srepr(m.rhs) for m in self.modes]
         parts += [f"surface {s.name}: " + sp.srepr(s.expr) for s in self.surfaces]
         for e in self.events:
             parts.append(f"event {e.name} {e.kind} {e.surface} {e.direction} {e.modes} "
                          f"{e.target} {e.terminal} {sp.srepr(e.guard)} {sp.srepr(e.reset)}")
         for s in self.switches:
             parts.append(f"switch {s.name} {s.surface} {s.above} {s.below} {s.kind} "
-                         f"{sp.srepr(s.family)}")
+                         f"{srepr(s.family)}")
         for f in self.families:
             parts.append(f"family {f.first} {f.surfaces} {f.switches} {sp.srepr(f.rhs)}")
         return hashlib.sha256("\n".join(parts).encode()).hexdigest()
@@ -674,13 +690,22 @@ def model_from_dict(data: dict, origin: str = "<dict>", text: str | None = None)
             raise W.error(f"{prefix}: {msg}", fieldname)
         return fail
 
+    # each expression object once: the variants of a mode split at k contacts share most of
+    # their components (the loader gives them the same objects; the first variant that holds
+    # a bad one is named, as before)
+    checked: set = set()
     for mode in modes:
         for s, e in zip(states, mode.rhs):
-            check_expression(e, refuse(f"in mode {mode.name!r}",
-                                       f"modes.{mode.name.split('[', 1)[0]}.{s}"))
+            if id(e) not in checked:
+                check_expression(e, refuse(f"in mode {mode.name!r}",
+                                           f"modes.{mode.name.split('[', 1)[0]}.{s}"))
+                checked.add(id(e))
     for sw in switches:
         for e in sw.family or ():
-            check_expression(e, refuse(f"in the sliding family of switch {sw.name!r}", "modes"))
+            if id(e) not in checked:
+                check_expression(e, refuse(f"in the sliding family of switch {sw.name!r}",
+                                           "modes"))
+                checked.add(id(e))
     # the values runs use: [parameters] with [defaults] params over them (checked above)
     parameters = default_parameters(parameters, data.get("defaults"))
     return Model(name=name, states=tuple(states), parameters=parameters, modes=tuple(modes),
