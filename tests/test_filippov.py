@@ -131,8 +131,8 @@ def test_abs_max_min_give_continuous_switches_and_too_many_surfaces_fail():
                            "modes": {"m": {"x": "v", "v": "-k1*Max(x, 0) - k2*Min(x, 0)"}}})
     assert [s.kind for s in m.switches] == ["continuous"]
     assert m.mode_names == ("m[x>0]", "m[x<0]")
-    terms = " + ".join(f"sign(x - {i})" for i in range(10))
-    with pytest.raises(ModelError, match="more than 8 distinct switching surfaces"):
+    terms = " + ".join(f"sign(x - {i})" for i in range(11))
+    with pytest.raises(ModelError, match="more than 10 distinct switching surfaces"):
         pwsdyn.load_model({"name": "many", "states": ["x"], "modes": {"m": {"x": terms}}})
 
 

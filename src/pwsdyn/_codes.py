@@ -31,13 +31,15 @@ STATE_KINDS = ("mode", "stick", "slide", "slide_multi")
 REGULAR, STICK, SLIDE, SLIDE_MULTI = range(4)
 
 #: Most switching surfaces slid on at once (``SLIDE_MULTI``): 2**k corner modes, as many as
-#: the variants of a mode split at k terms (``model.discontinuities.MAX_FAMILY_MODES`` = 64).
-MULTI_MAX = 6
+#: the variants of a mode split at k terms (``model.discontinuities.MAX_FAMILY_MODES`` = 256).
+#: The kernel's work vectors hold the corners of the largest intersection a model's switch
+#: table allows, not of ``MULTI_MAX`` surfaces.
+MULTI_MAX = 8
 
 #: Most surfaces of a sign family whose field the kernel evaluates at continuous sides on an
 #: intersection (``model.discontinuities.MAX_SURFACES_PER_MODE``); a larger one is summed
 #: over its corners.
-FAMILY_MAX = 8
+FAMILY_MAX = 10
 
 #: Kinds of the event log, indexed by the kernel's ``K_*`` codes (``trajectory.EVENT_KINDS``
 #: and ``orbits.signature.KINDS`` must list the same names in the same order; a test checks).

@@ -57,7 +57,7 @@ def side_symbol(j: int) -> sp.Symbol:
 FILIPPOV, CONTINUOUS = "filippov", "continuous"
 
 #: Most distinct surfaces in one mode (2**k variants).
-MAX_SURFACES_PER_MODE = 8
+MAX_SURFACES_PER_MODE = 10
 
 #: Most modes a model may have once its modes are split -- each variant is compiled with its
 #: derivatives, surfaces and switches, and compilation grows faster than the number of modes
@@ -68,7 +68,7 @@ MAX_SPLIT_MODES = 16
 #: once for all of them: :class:`~pwsdyn.model.elements.SignFamily`), counted apart from the
 #: other modes; the variants are still listed one by one (names, switches, tables), which
 #: bounds them.
-MAX_FAMILY_MODES = 64
+MAX_FAMILY_MODES = 256
 
 _JUMP = (sp.sign, sp.Heaviside)
 _KINK = (sp.Abs, sp.Max, sp.Min)

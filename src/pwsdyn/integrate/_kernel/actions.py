@@ -186,10 +186,10 @@ def _chatter_saltation(ev, p, j, k, mode, nm, t, x_in, n, S, etab, stab, slide_c
     whole map divided its error, growing with |t|, by v).
     """
     W = np.zeros(n)
-    gx = np.zeros(max(n * n, multi_work_size(n)))
+    gx = np.zeros(max(n * n, multi_work_size(n, stab)))
     hdx = np.zeros(n)
     f = np.zeros(n)
-    buf = np.zeros(max(n, 2, multi_work_size(n)))
+    buf = np.zeros(max(n, 2, multi_work_size(n, stab)))
     hx = np.zeros(n)
     hx1 = np.zeros(n)
     hd1 = np.zeros(n)
@@ -756,7 +756,7 @@ def _multi_entry(ev, p, mask, m, k2, nm, t, y, n, stab, w1, work):
     k = _lambda_core(ev, p, mask, t, y, n, w1, work)
     if k < 0:
         return IX_NO_WEIGHTS, ref, 0
-    o_lam = _multi_offsets(n)[4]
+    o_lam = _multi_offsets(n)[2]
     tol = 64.0 * 2.220446049250313e-16
     for i in range(k):
         lam = work[o_lam + i]
@@ -802,7 +802,7 @@ def _act_multi_intersection(ev, p, k3, new_sign, log_ref, old_idx, old_mode, nm,
     if ref2 >= 0:
         k = _solve_lambda(ev, p, mask, ref2, nm, t, y, n, stab, w1, gx)
         if k > 0:
-            o_lam = _multi_offsets(n)[4]
+            o_lam = _multi_offsets(n)[2]
             inside = True
             for i in range(k):
                 if not (0.0 <= gx[o_lam + i] <= 1.0):
@@ -834,7 +834,7 @@ def _act_multi_exit(ev, p, i, old_idx, old_mode, nm, t, y, n, stab, buf, wk):
     ks = _multi_surface(old_idx, i)
     below = False
     if _solve_lambda(ev, p, old_idx, old_mode, nm, t, y, n, stab, w1, gx) > 0:
-        below = gx[_multi_offsets(n)[4] + i] > 0.5
+        below = gx[_multi_offsets(n)[2] + i] > 0.5
     ref = old_mode
     if below:
         ref = _partner(stab, ks, ref)
@@ -921,7 +921,7 @@ def _intersection_cause(ev, p, dkind, didx, mode, nm, t, x, stab, out):
     where no surface was found)."""
     n = x.shape[0]
     w1 = np.zeros(n)
-    work = np.zeros(max(n * n, multi_work_size(n)))
+    work = np.zeros(max(n * n, multi_work_size(n, stab)))
     hdx = np.zeros(n)
     buf = np.zeros(max(n, 2))
     if dkind == SLIDE:
@@ -961,7 +961,7 @@ def _intersection_cause(ev, p, dkind, didx, mode, nm, t, x, stab, out):
     out[1] = cause
     out[2] = k
     if cause == IX_NOT_ATTRACTING:
-        o_lam = _multi_offsets(n)[4]
+        o_lam = _multi_offsets(n)[2]
         for i in range(k):
             out[3 + i] = work[o_lam + i]
     elif cause == IX_NO_CORNER:

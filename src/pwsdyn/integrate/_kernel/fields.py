@@ -387,10 +387,36 @@ def _rate_band(ev, p, k, mode, nm, t, x, n, hdx):
 # --------------------------------------------------------------------------------------
 
 @_hot
-def multi_work_size(n):
-    """Length of the work vector of :func:`_solve_lambda` for ``n`` states (the kernel's
-    ``gx`` and ``buf`` are at least this long; :func:`_multi_offsets`)."""
-    return _multi_offsets(n)[10] + n * FAMILY_MAX + 4
+def multi_work_size(n, stab):
+    """Length of the work vector of :func:`_solve_lambda` for ``n`` states and the switch
+    table ``stab`` (the kernel's ``gx`` and ``buf`` are at least this long;
+    :func:`_multi_offsets`): its corner region holds the ``2**k`` corners of the largest
+    intersection the table allows (:func:`_multi_kmax`), so a model without switches does
+    not carry room for ``2**MULTI_MAX`` of them."""
+    k = _multi_kmax(stab)
+    return _multi_offsets(n)[8] + ((1 + n + k) << k) + 4
+
+
+@_hot
+def _multi_kmax(stab):
+    """The most surfaces an intersection of this switch table can have: its distinct
+    surfaces (every mask the kernel slides on is made of them), at most ``MULTI_MAX``."""
+    mask = 0
+    for s in range(stab.shape[0]):
+        ks = stab[s].surface
+        if ks < 63:
+            mask |= 1 << ks
+    return min(_multi_count(mask), MULTI_MAX)
+
+
+@_hot
+def _corner_offsets(n, k):
+    """Offsets into the work vector of the corner fields (``2**k`` rows of ``n``) and the
+    tangency values ``a_ic`` (``k`` rows of ``2**k``) of an intersection of ``k`` surfaces:
+    after its ``2**k`` corner modes, at the end of the vector (:func:`_multi_offsets`)."""
+    o_m = _multi_offsets(n)[8]
+    o_fc = o_m + (1 << k)
+    return o_fc, o_fc + (n << k)
 
 
 @_hot
@@ -434,6 +460,21 @@ def _multi_corner(stab, mask, ref, c):
             if m < 0:
                 return -1
     return m
+
+
+@_hot
+def _multi_corners(stab, mask, ref, out, o):
+    """All ``2**k`` corner modes of :func:`_multi_corner` into ``out[o:o + 2**k]`` (-1 where
+    a switch is missing): corner ``c`` is one step from the corner without ``c``'s highest
+    bit, across that bit's surface -- the same walk (surfaces crossed in increasing order),
+    one switch-table search per corner instead of one per set bit."""
+    out[o] = ref
+    for c in range(1, 1 << _multi_count(mask)):
+        i = 0
+        while c >> (i + 1):
+            i += 1
+        prev = int(out[o + (c ^ (1 << i))])
+        out[o + c] = -1 if prev < 0 else _partner(stab, _multi_surface(mask, i), prev)
 
 
 @_hot
@@ -506,7 +547,7 @@ def _solve_lambda(ev, p, mask, ref, nm, t, x, n, stab, w1, work, family=True):
         k = _multi_count(mask)
         _multi_gradients(ev, p, mask, k, t, x, n, w1, work)
         if _lambda_family(ev, p, mask, k, t, x, n, work):
-            work[_multi_offsets(n)[9]] = 1.0
+            work[_multi_offsets(n)[6]] = 1.0
             return k
     if not _multi_set_corners(stab, mask, ref, n, work):
         return -1
@@ -519,11 +560,10 @@ def _multi_set_corners(stab, mask, ref, n, work):
     :func:`_lambda_core`; the kernel sets them once per sliding state in its ``buf``, whose
     watch functions have no switch table). False if a corner is missing."""
     o_m = _multi_offsets(n)[8]
+    _multi_corners(stab, mask, ref, work, o_m)
     for c in range(1 << _multi_count(mask)):
-        m = _multi_corner(stab, mask, ref, c)
-        if m < 0:
+        if work[o_m + c] < 0.0:
             return False
-        work[o_m + c] = m
     return True
 
 
@@ -532,7 +572,8 @@ def _lambda_core(ev, p, mask, t, x, n, w1, work, family=True):
     """:func:`_solve_lambda` with the corner modes already in ``work``."""
     k = _multi_count(mask)
     nc = 1 << k
-    o_hx, o_ht, o_fc, o_a, o_lam, o_g, o_jac, o_dl, o_m, o_fi, o_fu = _multi_offsets(n)
+    o_hx, o_ht, o_lam, o_g, o_jac, o_dl, o_fi, o_fu, o_m = _multi_offsets(n)
+    o_fc, o_a = _corner_offsets(n, k)
     _multi_gradients(ev, p, mask, k, t, x, n, w1, work)
     work[o_fi] = 0.0
     if family and _lambda_family(ev, p, mask, k, t, x, n, work):
@@ -627,7 +668,7 @@ def _lambda_family(ev, p, mask, k, t, x, n, work):
     the corners instead). The family's info, sides and side derivatives stay in ``work``
     (:func:`_multi_offsets`) for :func:`_multi_field`; entries ``0 .. n * FAMILY_MAX`` are
     the compiled model's scratch."""
-    o_hx, o_ht, o_fc, o_a, o_lam, o_g, o_jac, o_dl, o_m, o_fi, o_fu = _multi_offsets(n)
+    o_hx, o_ht, o_lam, o_g, o_jac, o_dl, o_fi, o_fu, o_m = _multi_offsets(n)
     o_sf = o_fi + 3                    # the family's surfaces
     o_pos = o_sf + FAMILY_MAX          # the side of each surface of the mask
     o_u = o_pos + MULTI_MAX            # the sides
@@ -694,7 +735,7 @@ def _lambda_family(ev, p, mask, k, t, x, n, work):
 def _family_field(ev, p, t, x, n, out, work):
     """The field of the sign family at the sides :func:`_lambda_family` solved, into
     ``out``."""
-    o_fi = _multi_offsets(n)[9]
+    o_fi = _multi_offsets(n)[6]
     kf = int(work[o_fi + 1])
     o_u = o_fi + 3 + FAMILY_MAX + MULTI_MAX
     for j in range(kf):
@@ -707,24 +748,23 @@ def _family_field(ev, p, t, x, n, out, work):
 @_hot
 def _multi_offsets(n):
     """Offsets into the work vector of :func:`_solve_lambda`: gradients ``h_i,x`` (k rows of
-    n), ``h_i,t``, corner fields (2^k rows of n), tangency values ``a_ic``, ``lambda``, the
-    Newton residual, its matrix, a spare vector, the corner modes, a sign family's info
-    (:func:`_lambda_family`: a flag, its number of surfaces, first variant, surfaces, the
-    sides of the mask's surfaces, the sides) and side derivatives. Entries
-    ``0 .. max(4, n * FAMILY_MAX)`` stay free for the outputs of the compiled model."""
-    nc = 1 << MULTI_MAX
+    n), ``h_i,t``, ``lambda``, the Newton residual, its matrix, a spare vector, a sign
+    family's info (:func:`_lambda_family`: a flag, its number of surfaces, first variant,
+    surfaces, the sides of the mask's surfaces, the sides) and side derivatives, then the
+    corner region, whose length depends on the number ``k`` of surfaces: the corner modes
+    (``2**k``), the corner fields and the tangency values (:func:`_corner_offsets`), sized
+    by :func:`multi_work_size`. Entries ``0 .. max(4, n * FAMILY_MAX)`` stay free for the
+    outputs of the compiled model."""
     o_hx = max(4, n * FAMILY_MAX, FAMILY_MAX + 2)
     o_ht = o_hx + MULTI_MAX * n
-    o_fc = o_ht + MULTI_MAX
-    o_a = o_fc + nc * n
-    o_lam = o_a + MULTI_MAX * nc
+    o_lam = o_ht + MULTI_MAX
     o_g = o_lam + MULTI_MAX
     o_jac = o_g + MULTI_MAX
     o_dl = o_jac + MULTI_MAX * MULTI_MAX
-    o_m = o_dl + 2 * MULTI_MAX
-    o_fi = o_m + nc
+    o_fi = o_dl + 2 * MULTI_MAX
     o_fu = o_fi + 3 + 2 * FAMILY_MAX + MULTI_MAX
-    return o_hx, o_ht, o_fc, o_a, o_lam, o_g, o_jac, o_dl, o_m, o_fi, o_fu
+    o_m = o_fu + n * FAMILY_MAX
+    return o_hx, o_ht, o_lam, o_g, o_jac, o_dl, o_fi, o_fu, o_m
 
 
 @_hot
@@ -740,7 +780,8 @@ def _multi_field(ev, p, mask, ref, nm, t, x, n, out, stab, slide_c, w1, work):
             out[q] = np.nan
         return
     nc = 1 << k
-    o_hx, o_ht, o_fc, o_a, o_lam, o_g, o_jac, o_dl, o_m, o_fi, o_fu = _multi_offsets(n)
+    o_hx, o_ht, o_lam, o_g, o_jac, o_dl, o_fi, o_fu, o_m = _multi_offsets(n)
+    o_fc = _corner_offsets(n, k)[0]
     if work[o_fi] == 1.0:
         _family_field(ev, p, t, x, n, out, work)
     else:
@@ -820,7 +861,7 @@ def _settle_multi(ev, p, t, y, n, nm, mask, ref, stab, buf, hdx, w1, work):
     ``> 1``: below) and the rest is settled again, down to sliding on one surface (the signs
     of ``hdot`` on its two sides, thesis eq. 2.6-2.8) or a regular mode. The state is
     projected onto the surfaces it slides on. Returns ``(dkind, didx, mode)``."""
-    o_hx, o_ht, o_fc, o_a, o_lam, o_g, o_jac, o_dl, o_m, o_fi, o_fu = _multi_offsets(n)
+    o_lam = _multi_offsets(n)[2]
     tol = 64.0 * _EPS
     for rnd in range(MULTI_MAX + 1):
         k = _multi_count(mask)
@@ -846,6 +887,7 @@ def _settle_multi(ev, p, t, y, n, nm, mask, ref, stab, buf, hdx, w1, work):
             # its weight points to
             amin = np.inf
             amax = -np.inf
+            o_a = _corner_offsets(n, k)[1]
             for c in range(1 << k):
                 amin = min(amin, work[o_a + worst * (1 << k) + c])
                 amax = max(amax, work[o_a + worst * (1 << k) + c])
@@ -921,6 +963,6 @@ def state_field(ev, p, dkind, didx, mode, nm, t, x, etab, stab, slide_c, out):
     n = x.shape[0]
     w1 = np.zeros(n)
     w2 = np.zeros(n)
-    gx = np.zeros(max(n * n, multi_work_size(n)))
+    gx = np.zeros(max(n * n, multi_work_size(n, stab)))
     hdx = np.zeros(n)
     _field(ev, p, dkind, didx, mode, nm, t, x, n, out, etab, stab, slide_c, w1, w2, gx, hdx)

@@ -19,7 +19,7 @@ from .._codes import (ACT_EVENT, ACT_EXIT_ABOVE, ACT_EXIT_BELOW, ACT_EXIT_MULTI,
 from ._base import (EVENT_TABLE_TYPE, OPTIONS_TYPE, SWITCH_TABLE_TYPE, _COINCIDENT_ULPS, _EPS,
                     _EXACT_TERMS, _MAXW, _grow1, _grow2, _grow3,
                     _log_event, _ulp, compiled_on_first_use)
-from .fields import (_field, _multi_corner, _multi_count, _multi_offsets, _multi_surface,
+from .fields import (_field, _multi_corners, _multi_count, _multi_offsets, _multi_surface,
                      _project_multi, _project_surface, _rate_band, _resolve, _rhs,
                      _start_on_surface, multi_work_size)
 from .steppers import (_affine_setup, _dense_eval, _error_norm, _exact_stepper, _step_dense,
@@ -60,7 +60,7 @@ def _dense_coefficients(ev, p, etab, stab, options, A, C, P, s_fsal, t0, x0, nod
     Q = np.zeros((nY, max(deg, P.shape[1], _EXACT_TERMS if nz > 0 else 1)))
     w1 = np.zeros(n)
     w2 = np.zeros(n)
-    gx = np.zeros(max(n * n, multi_work_size(n)))
+    gx = np.zeros(max(n * n, multi_work_size(n, stab)))
     hdx = np.zeros(n)
     jac = np.zeros(n * n)
     xt = np.zeros(n)
@@ -209,12 +209,12 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
     Q = np.zeros((nY, deg))
     w1 = np.zeros(n)
     w2 = np.zeros(n)
-    gx = np.zeros(max(n * n, multi_work_size(n)))
+    gx = np.zeros(max(n * n, multi_work_size(n, stab)))
     hdx = np.zeros(n)
     jac = np.zeros(n * n)
     xt = np.zeros(n)
     ft = np.zeros(n)
-    buf = np.zeros(max(n, 2, multi_work_size(n)))
+    buf = np.zeros(max(n, 2, multi_work_size(n, stab)))
     o_corners = _multi_offsets(n)[8]
     fbuf = np.zeros(n)
     xs = np.zeros(nY)
@@ -424,8 +424,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                 if dkind == SLIDE_MULTI:
                     # the corner modes of the intersection, kept in buf for the watches of
                     # the weights (_watch_value) and read below (-1: a corner is missing)
-                    for c in range(1 << _multi_count(didx)):
-                        buf[o_corners + c] = _multi_corner(stab, didx, mode, c)
+                    _multi_corners(stab, didx, mode, buf, o_corners)
                 for j in range(n_events):
                     if eactive[j, mode] == 0:
                         continue

@@ -32,7 +32,7 @@ def _watch_value(ev, p, wtype, widx, wmode, nm, t, x, n, buf, fbuf, hdx):
         # (set when the watch list is built)
         if _lambda_core(ev, p, wmode, t, x, n, fbuf, buf) < 0:
             return np.nan
-        lam = buf[_multi_offsets(n)[4] + widx]
+        lam = buf[_multi_offsets(n)[2] + widx]
         return min(lam, 1.0 - lam)
     # WF_HDDOT: free normal acceleration hdot_t + hdot_x f
     ev(W_F, wmode, t, x, p, fbuf)
