@@ -49,6 +49,7 @@ def bcnf_file(tmp_path):
     return path
 
 
+@pytest.mark.slow   # ~10-20 s: among the long checks, run by CI
 def test_a_planar_maps_crisis_file_is_the_apis_and_the_figure_is_drawn(bcnf_file, tmp_path):
     out, plot = tmp_path / "c.nc", tmp_path / "c.png"
     res = _run(["crisis", bcnf_file, "--param", "tL", "--from", 1.8, "--to", 2.0,

@@ -207,6 +207,7 @@ def shear_pd():
     return model, br
 
 
+@pytest.mark.slow   # ~30-50 s: among the long checks, run by CI
 def test_period_doubling_reports_its_coefficient(shear_pd, tmp_path):
     _, br = shear_pd
     pd = br.special("PD")

@@ -352,6 +352,7 @@ BALL_SWEEP = dict(params={"omega": OMEGA, "e": E}, transient=100, samples=24, ch
                   direction="both")
 
 
+@pytest.mark.slow   # ~20-30 s (the sweeps' stitching and scans test the same in the default run)
 def test_serial_and_parallel_give_identical_datasets(tmp_path):
     """Same chunking, 1 worker (in-process) vs 2 threads (the default, ``workers=2``) vs a
     LocalCluster of 2 worker processes (``scheduler="processes"``, or the user's, reached by

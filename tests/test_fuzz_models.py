@@ -75,21 +75,21 @@ def _fuzz_mutated_zoo(n: int, tally: Tally):
 def test_fuzzed_model_dicts(capsys):
     tally = Tally(compile_every=12)
     with tally.watching():
-        _fuzz_dicts(300, tally)
+        _fuzz_dicts(120, tally)
     with capsys.disabled():
         print("\n" + tally.report("model dicts"))
-    assert tally.total >= 300
+    assert tally.total >= 120
     assert tally.counts["refused at load"] and len(tally.counts) >= 2
 
 
 def test_fuzzed_model_files(capsys):
     tally = Tally(compile_every=25, cli_every=10)
     with tally.watching():
-        _fuzz_toml(150, tally)
-        _fuzz_mutated_zoo(150, tally)
+        _fuzz_toml(60, tally)
+        _fuzz_mutated_zoo(90, tally)
     with capsys.disabled():
         print("\n" + tally.report("TOML model files"))
-    assert tally.total >= 300 and tally.counts["also run through the CLI"]
+    assert tally.total >= 150 and tally.counts["also run through the CLI"]
 
 
 @pytest.mark.slow

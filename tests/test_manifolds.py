@@ -445,6 +445,7 @@ def _segments_cross(P0, P1, Q0, Q1):
             & (np.sign(orient(C, D, A)) * np.sign(orient(C, D, B)) < 0))
 
 
+@pytest.mark.slow   # ~10-25 s: among the long checks, run by CI
 def test_a_basin_boundary_of_the_impact_oscillator_is_the_saddles_stable_manifold():
     # omega = 3.05: a period-2 saddle orbit with three impacts per orbit and multipliers about
     # 4513 and 5.8e-5, between two period-2 attractors. Its strongly contracting stable
