@@ -313,16 +313,20 @@ def _surfaces_of_mode(rhs, registry: _Registry) -> tuple[list, set]:
     on which a jump (sign/Heaviside) is met."""
     found: list = []
     jumps: set = set()
-    atoms = _innermost(rhs)
-    if len(atoms) == sum(1 for _ in _disc_nodes(rhs)):
-        # no term nested in another's argument: every surface is met in the field as it is
-        # written (the search below, over the 2**k sides, would find them in this order)
+
+    def note(atoms):
         for atom in atoms:
             k, _ = registry.find(_surface_of(atom))
             if k not in found:
                 found.append(k)
             if isinstance(atom, _JUMP):
                 jumps.add(k)
+
+    atoms = _innermost(rhs)
+    if len(atoms) == sum(1 for _ in _disc_nodes(rhs)):
+        # no term nested in another's argument: every surface is met in the field as it is
+        # written (the search below, over the 2**k sides, would find them in this order)
+        note(atoms)
         return found, jumps
 
     def explore(exprs, sides, depth):
@@ -331,12 +335,7 @@ def _surfaces_of_mode(rhs, registry: _Registry) -> tuple[list, set]:
         atoms = _innermost(exprs)
         if not atoms:
             return
-        for atom in atoms:
-            k, _ = registry.find(_surface_of(atom))
-            if k not in found:
-                found.append(k)
-            if isinstance(atom, _JUMP):
-                jumps.add(k)
+        note(atoms)
         if len(found) > MAX_SURFACES_PER_MODE:
             return
         free = [registry.find(_surface_of(a))[0] for a in atoms]
