@@ -15,7 +15,7 @@ from .._codes import (ACT_EVENT, ACT_INTERSECTION, ACT_SWITCH, IX_ATTRACTING, IX
                       SLIDE_MULTI, STICK, ST_INTERSECTION, ST_SUCCESS, SW_FILIPPOV)
 from ._base import (EVENT_TABLE_TYPE, SWITCH_TABLE_TYPE, _FD_STEP, _dot, _hot, _hot_inline,
                     compiled_on_first_use)
-from .fields import (_field, _find_switch, _impact_direction, _lambda_core, _multi_corner,
+from .fields import (_field, _find_switch, _impact_direction, _lambda_core, _multi_corners,
                      _multi_count, _multi_field, _multi_offsets, _multi_reference,
                      _multi_set_corners, _multi_surface, _on_surfaces, _partner, _project_multi,
                      _project_surface, _resolve, _settle_multi, _solve_lambda, multi_work_size)
@@ -186,10 +186,11 @@ def _chatter_saltation(ev, p, j, k, mode, nm, t, x_in, n, S, etab, stab, slide_c
     whole map divided its error, growing with |t|, by v).
     """
     W = np.zeros(n)
-    gx = np.zeros(max(n * n, multi_work_size(n, stab)))
+    n_work = multi_work_size(n, stab)
+    gx = np.zeros(max(n * n, n_work))
     hdx = np.zeros(n)
     f = np.zeros(n)
-    buf = np.zeros(max(n, 2, multi_work_size(n, stab)))
+    buf = np.zeros(max(n, 2, n_work))
     hx = np.zeros(n)
     hx1 = np.zeros(n)
     hd1 = np.zeros(n)
@@ -931,6 +932,13 @@ def _intersection_cause(ev, p, dkind, didx, mode, nm, t, x, stab, out):
         mask0 = didx
         m = mode
     k0 = _multi_count(mask0)
+    # the modes of the sliding motion, found once for every row of the table below
+    corners = np.full(1 << k0, -1.0)
+    if dkind == SLIDE_MULTI:
+        _multi_corners(stab, mask0, m, corners, 0)
+    else:
+        corners[0] = stab[didx].above
+        corners[1] = stab[didx].below
     best = np.inf
     k2 = -1
     for s in range(stab.shape[0]):
@@ -939,8 +947,7 @@ def _intersection_cause(ev, p, dkind, didx, mode, nm, t, x, stab, out):
             continue
         adjacent = False
         for c in range(1 << k0):
-            mc = _multi_corner(stab, mask0, m, c) if dkind == SLIDE_MULTI else (
-                stab[didx].above if c == 0 else stab[didx].below)
+            mc = int(corners[c])
             if mc >= 0 and (stab[s].above == mc or stab[s].below == mc):
                 adjacent = True
         if not adjacent:
@@ -968,7 +975,7 @@ def _intersection_cause(ev, p, dkind, didx, mode, nm, t, x, stab, out):
         kk = _multi_count(mask)
         out[2] = kk
         # the walk of _multi_reference (to the corner above all surfaces), then that of
-        # _multi_corner (from it across the surfaces of each corner): the first step that
+        # _multi_corners (from it across the surfaces of each corner): the first step that
         # finds no switch
         for c in range(1 if ref < 0 else 1 << kk):
             mm = m if ref < 0 else ref

@@ -447,27 +447,13 @@ def _multi_surface(mask, i):
 
 
 @_hot
-def _multi_corner(stab, mask, ref, c):
-    """The corner mode ``c`` of sliding on the surfaces of ``mask`` with reference ``ref`` (the
-    corner above all of them): bit ``i`` of ``c`` set, below the ``i``-th surface. Reached
-    from ``ref`` across one surface at a time (the product variants are joined pairwise:
-    :mod:`pwsdyn.model.discontinuities`); -1 if a switch is missing."""
-    m = ref
-    k = _multi_count(mask)
-    for i in range(k):
-        if (c >> i) & 1:
-            m = _partner(stab, _multi_surface(mask, i), m)
-            if m < 0:
-                return -1
-    return m
-
-
-@_hot
 def _multi_corners(stab, mask, ref, out, o):
-    """All ``2**k`` corner modes of :func:`_multi_corner` into ``out[o:o + 2**k]`` (-1 where
-    a switch is missing): corner ``c`` is one step from the corner without ``c``'s highest
-    bit, across that bit's surface -- the same walk (surfaces crossed in increasing order),
-    one switch-table search per corner instead of one per set bit."""
+    """The ``2**k`` corner modes of sliding on the surfaces of ``mask`` with reference ``ref``
+    (the corner above all of them) into ``out[o:o + 2**k]``: corner ``c`` lies below the
+    ``i``-th surface where bit ``i`` of ``c`` is set, and is reached from ``ref`` across one
+    surface at a time, in increasing order (the product variants are joined pairwise:
+    :mod:`pwsdyn.model.discontinuities`); -1 where a switch is missing. Each corner is one
+    switch-table search from the corner without its highest bit."""
     out[o] = ref
     for c in range(1, 1 << _multi_count(mask)):
         i = 0
