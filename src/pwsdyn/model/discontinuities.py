@@ -86,15 +86,8 @@ def has_discontinuities(expr) -> bool:
 
 def _innermost(exprs) -> list:
     """Discontinuous terms of ``exprs`` whose arguments contain no discontinuous term."""
-    out = []
-    seen = set()
-    for e in exprs:
-        for node in sp.preorder_traversal(e):
-            if _is_disc(node) and node not in seen:
-                if not any(has_discontinuities(a) for a in _switch_args(node)):
-                    seen.add(node)
-                    out.append(node)
-    return out
+    return [node for node in _disc_nodes(exprs)
+            if not any(has_discontinuities(a) for a in _switch_args(node))]
 
 
 def _disc_nodes(exprs):
