@@ -9,7 +9,7 @@ from importlib.metadata import PackageNotFoundError, version
 
 PACKAGES = ["numpy", "scipy", "numba", "llvmlite", "sympy", "xarray", "pandas", "dask",
             "distributed", "click", "matplotlib", "h5netcdf", "h5py", "tqdm", "pytest",
-            "hypothesis"]
+            "pytest-xdist", "hypothesis"]
 
 
 def _version(name: str) -> str:

@@ -27,6 +27,8 @@ import shutil
 import tempfile
 from pathlib import Path
 
+import pytest
+
 _TEMPORARY: list[Path] = []
 
 
@@ -59,3 +61,30 @@ def pytest_configure(config) -> None:
 def pytest_unconfigure(config) -> None:
     for path in _TEMPORARY:
         shutil.rmtree(path, ignore_errors=True)
+
+
+# --------------------------------------------------------------------------------------------
+# summaries printed at the end of the run
+# --------------------------------------------------------------------------------------------
+# The fuzz tests count what happened to their inputs. The counts are the evidence that the
+# inputs reached the code (not only its first refusal), so they are printed where they are
+# read: in the terminal summary. They travel as a property of the test's report, since the
+# tests run in pytest-xdist's worker processes, whose own output pytest does not show.
+
+_SUMMARY = "pwsdyn_summary"
+
+
+@pytest.fixture
+def summary(request):
+    """``summary(text)``: print ``text`` in the terminal summary at the end of the run."""
+    return lambda text: request.node.user_properties.append((_SUMMARY, text))
+
+
+def pytest_terminal_summary(terminalreporter) -> None:
+    texts = [value for reports in terminalreporter.stats.values() for report in reports
+             if getattr(report, "when", None) == "call"
+             for name, value in getattr(report, "user_properties", ()) if name == _SUMMARY]
+    if texts:
+        terminalreporter.section("summaries of the fuzz runs")
+        for text in texts:
+            terminalreporter.write_line(text)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import time
 
+import hypothesis
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, Phase, given, settings
@@ -34,7 +35,13 @@ def _private_cache(tmp_path_factory, monkeypatch):
     assert not SENTINEL.exists(), "a payload ran"
 
 
-def _fuzz_dicts(n: int, tally: Tally):
+def _seeded(seed):
+    """Hypothesis's seed for a run (the default: derived from the test function)."""
+    return (lambda f: f) if seed is None else hypothesis.seed(seed)
+
+
+def _fuzz_dicts(n: int, tally: Tally, seed=None):
+    @_seeded(seed)
     @settings(max_examples=n, **_SETTINGS)
     @given(spec=model_dicts())
     def run(spec):
@@ -43,7 +50,8 @@ def _fuzz_dicts(n: int, tally: Tally):
     run()
 
 
-def _fuzz_toml(n: int, tally: Tally):
+def _fuzz_toml(n: int, tally: Tally, seed=None):
+    @_seeded(seed)
     @settings(max_examples=n, **_SETTINGS)
     @given(spec=model_dicts())
     def run(spec):
@@ -52,10 +60,11 @@ def _fuzz_toml(n: int, tally: Tally):
     run()
 
 
-def _fuzz_mutated_zoo(n: int, tally: Tally):
+def _fuzz_mutated_zoo(n: int, tally: Tally, seed=None):
     """Valid built-in model files with characters inserted, deleted or replaced."""
     texts = [pwsdyn.model.spec.zoo_path(z).read_text() for z in pwsdyn.zoo_names()]
 
+    @_seeded(seed)
     @settings(max_examples=n, **_SETTINGS)
     @given(i=st.integers(0, len(texts) - 1), data=st.data())
     def run(i, data):
@@ -72,36 +81,45 @@ def _fuzz_mutated_zoo(n: int, tally: Tally):
     run()
 
 
-def test_fuzzed_model_dicts(capsys):
+def test_fuzzed_model_dicts(summary):
     tally = Tally(compile_every=12)
     with tally.watching():
         _fuzz_dicts(120, tally)
-    with capsys.disabled():
-        print("\n" + tally.report("model dicts"))
+    summary(tally.report("model dicts"))
     assert tally.total >= 120
     assert tally.counts["refused at load"] and len(tally.counts) >= 2
 
 
-def test_fuzzed_model_files(capsys):
+def test_fuzzed_model_files(summary):
     tally = Tally(compile_every=25, cli_every=10)
     with tally.watching():
         _fuzz_toml(60, tally)
         _fuzz_mutated_zoo(90, tally)
-    with capsys.disabled():
-        print("\n" + tally.report("TOML model files"))
+    summary(tally.report("TOML model files"))
     assert tally.total >= 150 and tally.counts["also run through the CLI"]
 
 
+#: The slow campaign: 5,000 inputs in parts that run in parallel under pytest-xdist, each with
+#: its own seed (the same seed would draw the same inputs again).
+_CAMPAIGN = {"dicts-1": (_fuzz_dicts, 1250, 1), "dicts-2": (_fuzz_dicts, 1250, 2),
+             "toml-1": (_fuzz_toml, 750, 3), "toml-2": (_fuzz_toml, 750, 4),
+             "mutated-zoo": (_fuzz_mutated_zoo, 1000, 5)}
+
+
+def test_the_campaign_has_5000_inputs():
+    assert sum(n for _, n, _ in _CAMPAIGN.values()) == 5000
+    assert len({s for _, _, s in _CAMPAIGN.values()}) == len(_CAMPAIGN)
+
+
 @pytest.mark.slow
-def test_fuzz_campaign_of_5000_models(capsys):
+@pytest.mark.parametrize("part", list(_CAMPAIGN))
+def test_fuzz_campaign_of_5000_models(part, summary):
+    fuzz, n, seed = _CAMPAIGN[part]
     tally = Tally(compile_every=10, cli_every=10)
     with tally.watching():
-        _fuzz_dicts(2500, tally)
-        _fuzz_toml(1500, tally)
-        _fuzz_mutated_zoo(1000, tally)
-    with capsys.disabled():
-        print("\n" + tally.report("fuzz campaign"))
-    assert tally.total >= 5000
+        fuzz(n, tally, seed=seed)
+    summary(tally.report(f"fuzz campaign, part {part}"))
+    assert tally.total >= n
 
 
 def test_memory_watch_names_what_the_run_was_doing(monkeypatch):
