@@ -431,6 +431,7 @@ class Tally:
         self.counts: Counter = Counter()
         self.slowest = 0.0
         self.slowest_by: dict = {}   # outcome -> slowest input (s) with that outcome
+        self.slowest_input = ""      # the slowest input, for a look at what made it slow
         self.compile_every = compile_every
         self.cli_every = cli_every
         self._accepted = 0
@@ -468,7 +469,8 @@ class Tally:
         outcome = exercise(source, compile_it=self._compile_next, cli_it=self._cli_next)
         self.doing = f"generating the input after {source!r}"
         dt = time.perf_counter() - t0
-        self.slowest = max(self.slowest, dt)
+        if dt > self.slowest:
+            self.slowest, self.slowest_input = dt, repr(source)
         self.slowest_by[outcome] = max(self.slowest_by.get(outcome, 0.0), dt)
         self.counts[outcome] += 1
         return outcome
@@ -482,5 +484,9 @@ class Tally:
         parts = ", ".join(f"{k}: {v}" for k, v in sorted(self.counts.items()))
         examples = "".join(f"\n  last {k}: {v}" for k, v in LAST_REFUSAL.items())
         slow = ", ".join(f"{k} {v:.2f} s" for k, v in sorted(self.slowest_by.items()))
+        shown = self.slowest_input
+        if len(shown) > 600:
+            shown = shown[:300] + f" ... ({len(shown) - 600} characters) ... " + shown[-300:]
         return (f"{what}: {total} inputs; {parts}; 0 code executions, 0 foreign exceptions; "
-                f"slowest input {self.slowest:.2f} s (by outcome: {slow}){examples}")
+                f"slowest input {self.slowest:.2f} s (by outcome: {slow}){examples}"
+                f"\n  the slowest input: {shown}")
