@@ -1,13 +1,13 @@
 """A message on stderr while numba compiles pwsdyn's integrator.
 
 The integrator is compiled by numba with ``cache=True``: the first use on a machine (or after
-an upgrade of pwsdyn, numba or Python) compiles it, one to two minutes on two cores
+an upgrade of pwsdyn, numba or Python) compiles it, two to five minutes on two cores
 (:data:`KERNEL_COMPILE_TIME`); every later process loads the machine code from numba's cache
 next to the module in a fraction of a second. Numba announces a real compilation -- a cache
 miss, never a load from the cache -- with its ``numba:compile`` event, so
 :func:`compile_notice` listens for that event and prints
 
-    pwsdyn: compiling the integrator (first run only, 1-2 minutes on 2 cores)...
+    pwsdyn: compiling the integrator (first run only, 2-5 minutes on 2 cores)...
     pwsdyn: still compiling the integrator, 15 s so far
     pwsdyn: still compiling the integrator, 30 s so far
     ...
@@ -37,11 +37,12 @@ from pathlib import Path
 #: Environment variable that silences the message (any value but "", "0", "false", "no").
 QUIET_ENV = "PWSDYN_QUIET"
 
-#: How long the first compilation of the integrator takes, measured from fresh checkouts on a
-#: 2-core x86-64 virtual machine: 51-60 s of CPU; 51 s of wall time when the machine is idle,
-#: 102 s with one other job, 331 s at a load average of 4.7 (which the message cannot know:
-#: it counts the seconds instead).
-KERNEL_COMPILE_TIME = "1-2 minutes on 2 cores"
+#: How long the first compilation of the integrator takes, measured from fresh caches on
+#: 2-core x86-64 virtual machines: 85-92 s of CPU on one (about the wall time when it is idle;
+#: 126 s at a load average of 3, 331 s at 4.7), 278 s of CPU on a slower one (idle), where the
+#: integrator without the intersections of several switching surfaces took 214 s. Nearly all
+#: of it is LLVM's: the message cannot know the machine, so it counts the seconds as well.
+KERNEL_COMPILE_TIME = "2-5 minutes on 2 cores"
 
 #: Seconds between two progress lines when stderr is not a terminal.
 PROGRESS_EVERY = 15.0

@@ -1,7 +1,7 @@
 """The one way into the compiled integrator: :func:`kernel`.
 
 Importing :mod:`pwsdyn.integrate._kernel` compiles it (its functions have explicit numba
-signatures), 1-2 minutes on two cores without numba's on-disk cache. Nothing in pwsdyn imports it at
+signatures), 2-5 minutes on two cores without numba's on-disk cache. Nothing in pwsdyn imports it at
 module level: ``import pwsdyn``, ``pwsdyn --help`` and argument checks never wait for it. The
 first run that needs the kernel calls :func:`kernel`, which imports it once per process,
 under :func:`pwsdyn._compiling.compile_notice`, so a real compilation is announced on stderr
