@@ -1,4 +1,4 @@
-"""Benchmark: Burridge-Knopoff chains of n = 1..8 blocks (one friction contact per block).
+"""Benchmark: Burridge-Knopoff chains of n = 1..10 blocks (one friction contact per block).
 
 Model: ``pwsdyn.burridge_knopoff(n)`` (m = kp = 1, kc = 1, V = 0.2, Fs = 1, 1.1, ..., Fd =
 Fs/2, delta = 3), from rest, 1000 time units, ``rtol = atol = 1e-10``. For each n:
@@ -11,14 +11,14 @@ Fs/2, delta = 3), from rest, 1000 time units, ``rtol = atol = 1e-10``. For each 
   the 1-block chain. A run that stops (the kernel refusing a state it does not support) is
   reported with its status and the time it reached.
 
-The variants are listed one by one (at most ``MAX_FAMILY_MODES`` = 256) and the kernel slides
-on intersections of at most ``MULTI_MAX`` = 8 surfaces, so n <= 8 here
+The variants are listed one by one (at most ``MAX_FAMILY_MODES`` = 1024) and the kernel
+slides on intersections of at most ``MULTI_MAX`` = 10 surfaces, so n <= 10 here
 (``pwsdyn.model.chains.MAX_BLOCKS``).
 Timings are reported, never asserted.
 
 Run::
 
-    python benchmarks/bench_contacts.py [--blocks 1 2 3 4 5 6 7 8] [--t-end 1000] [--repeats 3]
+    python benchmarks/bench_contacts.py [--blocks 1 2 3 4 5 6 7 8 9 10] [--t-end 1000] [--repeats 3]
         [--save]
 """
 
@@ -91,7 +91,7 @@ def run_chain(n: int, t_end: float, repeats: int) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--blocks", type=int, nargs="+", default=[1, 2, 3, 4, 5, 6, 7, 8])
+    ap.add_argument("--blocks", type=int, nargs="+", default=[1, 2, 3, 4, 5, 6, 7, 8, 9, 10])
     ap.add_argument("--t-end", type=float, default=1000.0)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--no-compile", action="store_true", help="skip the compile timings")

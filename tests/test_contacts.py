@@ -471,24 +471,27 @@ def test_burridge_knopoff_one_block_is_the_stick_slip_oscillator():
 
 #: blocks with no coupling (kc = 0) and Coulomb friction (delta = 0): each is the
 #: oscillator x'' + x = -Fs sign(v - V); (Fs, x0, v0) chosen so that all of them (the first
-#: four, six or all eight) stick at once on [0.518, 2.784] (the closed form's arrival and
-#: release times)
-CHAIN8 = [(1.0, 0.0, 0.8), (0.8, 0.2, 0.5), (1.2, 0.1, 0.7), (0.9, -0.1, 0.6),
-          (1.1, 0.0, 0.7), (0.85, 0.05, 0.55), (0.95, 0.0, 0.65), (1.05, 0.05, 0.6)]
+#: four, six, eight or all ten) stick at once on [0.518, 2.784] (the closed form's arrival
+#: and release times)
+CHAIN10 = [(1.0, 0.0, 0.8), (0.8, 0.2, 0.5), (1.2, 0.1, 0.7), (0.9, -0.1, 0.6),
+           (1.1, 0.0, 0.7), (0.85, 0.05, 0.55), (0.95, 0.0, 0.65), (1.05, 0.05, 0.6),
+           (1.15, -0.05, 0.75), (0.9, 0.1, 0.55)]
 
 
 @needs_multi
-# (8 blocks: ~25 s to compile the 256-variant model on a cold cache, so among the long checks)
-@pytest.mark.parametrize("n", [4, 6, pytest.param(8, marks=pytest.mark.slow)])
+# (8 and 10 blocks: ~25 s and ~60 s to compile the 256- and 1024-variant models on a cold
+# cache, so among the long checks)
+@pytest.mark.parametrize("n", [4, 6, pytest.param(8, marks=pytest.mark.slow),
+                               pytest.param(10, marks=pytest.mark.slow)])
 def test_block_chain_follows_each_closed_form_while_all_stick(n):
-    """Chains of 4 blocks (16 modes), 6 and the longest the builder makes (8 contacts, 256
-    modes, sliding on the intersection of all eight surfaces, the stick forces solved from
-    the chain's sign family): uncoupled, each block follows its own Coulomb oscillator's
-    closed form to 1e-8 through the interval where all of them stick at once, and each
-    block's arrival and release are events at their closed-form times (1e-9)."""
+    """Chains of 4 blocks (16 modes), 6, 8 and the longest the builder makes (10 contacts,
+    1024 modes, sliding on the intersection of all ten surfaces, the stick forces solved
+    from the chain's sign family): uncoupled, each block follows its own Coulomb
+    oscillator's closed form to 1e-8 through the interval where all of them stick at once,
+    and each block's arrival and release are events at their closed-form times (1e-9)."""
     from pwsdyn.model.chains import MAX_BLOCKS
-    assert MAX_BLOCKS == len(CHAIN8)
-    blocks = CHAIN8[:n]
+    assert MAX_BLOCKS == len(CHAIN10)
+    blocks = CHAIN10[:n]
     phases = [coulomb_oscillator(x0, v0, 1.0, F, BELT) for F, x0, v0 in blocks]
     assert max(ta for ta, *_ in phases) < min(tr for _, tr, *_ in phases)   # all stick
     end = min(tg for *_, tg, _ in phases) - 0.05

@@ -290,13 +290,17 @@ def test_message_when_a_corner_mode_is_missing():
     assert "lacks a corner mode: no switch on surface 'sy' joins mode 'B'" in msg
 
 
+# (2**11 variants: about a minute to load and compile, so among the long checks)
+@pytest.mark.slow
 def test_message_when_more_surfaces_meet_than_the_rule_takes(monkeypatch):
     """K = ``MULTI_MAX`` relays x_i' = -i sign(x_i) from 1 (x_i = 0 at t = 1/i: sliding on all
     K from t = 1) and one more, x_{K+1}' = -sign(x_{K+1}) from 2: at t = 2 K + 1 surfaces
     would meet, one more than ``MULTI_MAX`` (one sign family of 2**(K+1) variants, over the
-    loader's bound, which is raised here)."""
+    loader's bounds on the surfaces of a mode and the variants of a family, which are raised
+    here)."""
     from pwsdyn.model import discontinuities
     K = _codes.MULTI_MAX
+    monkeypatch.setattr(discontinuities, "MAX_SURFACES_PER_MODE", K + 1)
     monkeypatch.setattr(discontinuities, "MAX_FAMILY_MODES", 2 ** (K + 1))
     m = {"name": "one-too-many", "states": [f"x{i + 1}" for i in range(K + 1)],
          "modes": {"relays": {**{f"x{i + 1}": f"-{i + 1}*sign(x{i + 1})" for i in range(K)},
@@ -306,6 +310,7 @@ def test_message_when_more_surfaces_meet_than_the_rule_takes(monkeypatch):
     _says_where(msg, 2.0, f"slide_multi:{all_k}", {f"x{i}": 0.0 for i in range(1, K + 2)})
     assert (f"reached surface 'x{K + 1}', on the intersection {all_k}&x{K + 1}: {K + 1} "
             f"surfaces, more than the {K}") in msg
+    assert f"or more than {K} surfaces meet" in msg
 
 
 def test_weights_found_where_newton_from_the_centre_is_singular():

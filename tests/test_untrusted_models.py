@@ -400,13 +400,16 @@ def test_long_sums_and_products_are_built_in_linear_time_and_big_ones_refused():
 
 
 def test_splitting_into_too_many_modes_is_refused_with_the_count():
-    # a sign family (one field of its sides) may have 256 variants, not 512
-    terms = " + ".join(f"sign(x - {i})" for i in range(9))
-    with pytest.raises(ModelError, match="at least 512 modes; at most 256"):
+    # a sign family (one field of its sides) may have 1024 variants, one per side of each of
+    # the ten surfaces a mode may have; an eleventh surface is refused with the names
+    terms = " + ".join(f"sign(x - {i})" for i in range(11))
+    with pytest.raises(ModelError, match=r"field `modes.m`: mode 'm' has more than 10 "
+                                         r"distinct switching surfaces \(x, -1\+x, .*, -2\+x\); "
+                                         "write it as explicit"):
         pwsdyn.load_model({"name": "many", "states": ["x"], "modes": {"m": {"x": terms}}})
-    eight = " + ".join(f"sign(x - {i})" for i in range(8))
-    assert len(pwsdyn.load_model({"name": "eight", "states": ["x"],
-                                  "modes": {"m": {"x": eight}}}).modes) == 256
+    ten = " + ".join(f"sign(x - {i})" for i in range(10))
+    assert len(pwsdyn.load_model({"name": "ten", "states": ["x"],
+                                  "modes": {"m": {"x": ten}}}).modes) == 1024
     # nested terms are no family: each variant is its own field, 16 at most
     nested = " + ".join(f"Max({i}*y, Min({i + 1}*y, x))" for i in range(1, 4))
     with pytest.raises(ModelError, match="at least 32 modes; at most 16"):
@@ -430,11 +433,11 @@ _HANG_SCRIPT = textwrap.dedent("""
 def test_inputs_that_took_minutes_are_answered_at_once(tmp_path):
     """These took minutes or never finished (power towers, a 2,000-factor product, sign
     terms past the bound: seven took minutes when each variant was compiled on its own;
-    since they are one sign family, nine, 512 variants, are over its bound of 256). The
+    since they are one sign family, eleven, 2048 variants, are over its bound of 1024). The
     subprocess's timeout only guards the test run against a hang; the inputs are refused
     before any symbolic work."""
     fields = ["((9**999)**999)**999", "*".join(f"(x + {k})" for k in range(2000)),
-              " + ".join(f"sign(x - {k})" for k in range(9)), "sin(" * 198 + "x" + ")" * 198]
+              " + ".join(f"sign(x - {k})" for k in range(11)), "sin(" * 198 + "x" + ")" * 198]
     specs = [{"name": "h", "states": ["x"], "modes": {"m": {"x": f}}} for f in fields]
     env = dict(os.environ, PWSDYN_CACHE_DIR=str(tmp_path))
     res = subprocess.run([sys.executable, "-c", _HANG_SCRIPT, json.dumps(specs)], env=env,

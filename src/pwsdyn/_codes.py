@@ -31,10 +31,11 @@ STATE_KINDS = ("mode", "stick", "slide", "slide_multi")
 REGULAR, STICK, SLIDE, SLIDE_MULTI = range(4)
 
 #: Most switching surfaces slid on at once (``SLIDE_MULTI``): 2**k corner modes, as many as
-#: the variants of a mode split at k terms (``model.discontinuities.MAX_FAMILY_MODES`` = 256).
-#: The kernel's work vectors hold the corners of the largest intersection a model's switch
-#: table allows, not of ``MULTI_MAX`` surfaces.
-MULTI_MAX = 8
+#: the variants of a mode split at k terms (``model.discontinuities.MAX_FAMILY_MODES`` = 1024),
+#: and as many as the surfaces of one sign family (``FAMILY_MAX``), so that every contact of a
+#: chain of ten blocks can stick at once. The kernel's work vectors hold the corners of the
+#: largest intersection a model's switch table allows, not of ``MULTI_MAX`` surfaces.
+MULTI_MAX = 10
 
 #: Most surfaces of a sign family whose field the kernel evaluates at continuous sides on an
 #: intersection (``model.discontinuities.MAX_SURFACES_PER_MODE``); a larger one is summed

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import enum
 
+from ._codes import MULTI_MAX
+
 
 class PwsdynError(Exception):
     """Base class of all pwsdyn errors."""
@@ -207,11 +209,12 @@ _STATUS_MESSAGES = {
                                  "surfaces while sliding, where the motion can neither cross "
                                  "nor leave them and cannot slide on the intersection: it is "
                                  "not attracting (the multilinear sliding rule has no solution "
-                                 "in [0, 1]^k), a corner mode is missing, or more than 4 "
-                                 "surfaces meet; or a contact would stick on an impact surface "
-                                 "while a switching surface is slid on, which no discrete "
-                                 "state holds. The final state is the state that reached it, "
-                                 "and the message names the surface reached and the cause.",
+                                 "in [0, 1]^k), a corner mode is missing, or more than "
+                                 f"{MULTI_MAX} surfaces meet; or a contact would stick on an "
+                                 "impact surface while a switching surface is slid on, which "
+                                 "no discrete state holds. The final state is the state that "
+                                 "reached it, and the message names the surface reached and "
+                                 "the cause.",
     Status.ZENO: "Events accumulate in finite time (Zeno) and no chattering map applies.",
     Status.DIVERGED: "A state component grew beyond `bound`: the run diverged. Raise `bound` "
                      "if the attractor is that large.",

@@ -28,12 +28,12 @@ Newton's method) instead of summing the :math:`2^k` corner fields. The loader ev
 each component of the field once per side of the contacts it depends on (two values for a
 block's friction force, not :math:`2^n`), so loading and hashing the chain costs little.
 What bounds the chain is that the variants are still listed one by one (names, switches,
-tables of the kernel): at most ``MAX_FAMILY_MODES`` (256) of them
-(:mod:`pwsdyn.model.discontinuities`), and the kernel slides on intersections of at most
-``MULTI_MAX`` (8) surfaces, so chains of up to ``MAX_BLOCKS`` = 8 blocks, all eight able to
-stick at once. Compile times and the cost per contact are measured in
-``benchmarks/bench_contacts.py``. Chains of 10 or 20 blocks need the variants as indices only
-(a mode as a sign vector, never listed), which is not done.
+tables of the kernel): at most ``MAX_FAMILY_MODES`` (1024, one per side of each of the ten
+surfaces a mode may have) of them (:mod:`pwsdyn.model.discontinuities`), and the kernel slides
+on intersections of at most ``MULTI_MAX`` (10) surfaces, so chains of up to ``MAX_BLOCKS`` = 10
+blocks, all ten able to stick at once. Compile times and the cost per contact are measured in
+``benchmarks/bench_contacts.py``. Chains of 20 blocks need the variants as indices only (a
+mode as a sign vector, never listed; switches as bit flips), which is not done.
 """
 
 from __future__ import annotations
@@ -46,9 +46,9 @@ from .discontinuities import MAX_FAMILY_MODES
 from .spec import Model, load_model
 
 #: Most blocks :func:`pwsdyn.burridge_knopoff` builds: the ``2**n`` variants of its field are
-#: listed one by one (at most ``MAX_FAMILY_MODES`` = 256) and every contact may stick at once
-#: (the kernel slides on intersections of up to ``MULTI_MAX`` = 8 surfaces).
-MAX_BLOCKS = 8
+#: listed one by one (at most ``MAX_FAMILY_MODES`` = 1024) and every contact may stick at once
+#: (the kernel slides on intersections of up to ``MULTI_MAX`` = 10 surfaces).
+MAX_BLOCKS = 10
 
 
 def _per_block(name: str, value, n: int) -> list[float]:
@@ -79,8 +79,8 @@ def burridge_knopoff(n: int, *, m: float = 1.0, kc: float = 1.0, kp: float = 1.0
     Parameters
     ----------
     n : int
-        Number of blocks, 1 to ``MAX_BLOCKS`` (8: the :math:`2^n` variants of the ``sign()``
-        terms are listed one by one, and the kernel slides on at most eight surfaces at once;
+        Number of blocks, 1 to ``MAX_BLOCKS`` (10: the :math:`2^n` variants of the ``sign()``
+        terms are listed one by one, and the kernel slides on at most ten surfaces at once;
         see the module's notes).
     m, kc, kp : float
         Mass of each block, stiffness of the springs between neighbours and of each block's

@@ -67,8 +67,9 @@ MAX_SPLIT_MODES = 16
 #: Most variants of one mode split into a sign family (one field of their sides, compiled
 #: once for all of them: :class:`~pwsdyn.model.elements.SignFamily`), counted apart from the
 #: other modes; the variants are still listed one by one (names, switches, tables), which
-#: bounds them.
-MAX_FAMILY_MODES = 256
+#: bounds them: ``2**MAX_SURFACES_PER_MODE``, one variant per side of each of the most
+#: surfaces a mode may have.
+MAX_FAMILY_MODES = 2 ** MAX_SURFACES_PER_MODE
 
 _JUMP = (sp.sign, sp.Heaviside)
 _KINK = (sp.Abs, sp.Max, sp.Min)

@@ -21,7 +21,7 @@ Discrete state
   control ``f(t, x, u_eq)`` (slides; switch table column 4), optionally with the stabilising
   term ``-C h h_x^T`` of the slides; each accepted sliding step is projected back onto
   ``h = 0``;
-* ``SLIDE_MULTI``: sliding on the intersection of ``k = 2 .. MULTI_MAX (8)`` Filippov
+* ``SLIDE_MULTI``: sliding on the intersection of ``k = 2 .. MULTI_MAX (10)`` Filippov
   surfaces; ``didx`` is the bit mask of their surface indices, ``mode`` the reference corner
   (the product variant above all of them; the other ``2^k - 1`` corners are reached from it
   across one surface at a time). The field is the multilinear extension of L. Dieci and
