@@ -331,6 +331,67 @@ def test_weights_found_where_newton_from_the_centre_is_singular():
 
 
 # ======================================================================================
+# the switch table's sign-family blocks
+# ======================================================================================
+
+#: models whose switch tables mix sign-family blocks with other switches: a chain of four
+#: contacts (four blocks of eight), and fields with kinks (``abs``: continuous switches, no
+#: block) and a product of signs next to the family's surfaces
+TABLE_MODELS = [
+    lambda: pwsdyn.burridge_knopoff(4),
+    lambda: {"name": "kinks", "states": ["x", "y", "z"],
+             "modes": {"m": {"x": "-sign(x) + abs(y)", "y": "1 - 2*sign(y - x)",
+                             "z": "sign(x)*sign(y) + abs(z - 1)"}}},
+    lambda: {"name": "two-kinds", "states": ["x", "y"],
+             "modes": {"m": {"x": "-sign(x)", "y": "0.5 - sign(y)"},
+                       "n": {"x": "1", "y": "-1"}},
+             "switches": [{"name": "mn", "surface": "x + y - 3", "above": "n", "below": "m"}]},
+]
+
+
+def _linear_touching(stab, s, m):
+    for r in range(s, len(stab)):
+        if stab[r]["above"] == m or stab[r]["below"] == m:
+            return r
+    return len(stab)
+
+
+@pytest.mark.parametrize("make", TABLE_MODELS)
+def test_switch_lookups_by_block_agree_with_a_search_of_the_table(make):
+    """The kernel finds the switch of a sign family's block that touches a mode by arithmetic
+    (``_block_row``); every lookup of the table -- the next switch touching a mode from every
+    record, the partner across every surface of every mode, every switch by its two modes --
+    agrees with a plain search of the table in order, and the chain's Filippov switches are
+    all in blocks (so the arithmetic is what ran)."""
+    from pwsdyn.integrate.compiled import ModelContext
+    from pwsdyn.integrate._kernel.fields import _find_switch, _next_touching, _partner
+    model = pwsdyn.load_model(make())
+    stab = ModelContext(model).stab
+    nm, ns = len(model.modes), len(stab)
+    if model.name.startswith("burridge"):
+        assert np.all(stab["block"] >= 0) and ns == 4 * 8
+    assert any(stab["block"] >= 0)
+    for m in range(nm):
+        for s in range(ns + 1):
+            assert _next_touching(stab, s, m) == _linear_touching(stab, s, m), (m, s)
+        for k in sorted(set(stab["surface"].tolist())):
+            rows = [r for r in range(ns) if stab[r]["surface"] == k
+                    and m in (stab[r]["above"], stab[r]["below"])]
+            want = -1 if not rows else int(stab[rows[0]]["below"] if stab[rows[0]]["above"] == m
+                                           else stab[rows[0]]["above"])
+            assert _partner(stab, k, m) == want, (m, k)
+    def linear_find(k, a, b):
+        return next((r for r in range(ns) if (stab[r]["surface"], stab[r]["above"],
+                                              stab[r]["below"]) == (k, a, b)), -1)
+
+    for r in range(ns):
+        k, a, b = (int(stab[r][f]) for f in ("surface", "above", "below"))
+        assert _find_switch(stab, k, a, b) == r
+        for args in ((k, b, a), (k + 1, a, b), (k, a, (b + 1) % nm)):
+            assert _find_switch(stab, *args) == linear_find(*args), args
+
+
+# ======================================================================================
 # exact propagation, names, files
 # ======================================================================================
 

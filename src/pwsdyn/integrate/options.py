@@ -20,7 +20,7 @@ from .. import _validate as V
 from ..errors import ArgumentError
 from ..model.affine import affine_structure
 from ..model.codegen import CompiledModel
-from ._codes import EVENT_TABLE, SWITCH_TABLE
+from ._codes import EVENT_TABLE, SW_FILIPPOV, SWITCH_TABLE
 from .tableaus import METHODS
 
 #: Default options of :func:`~pwsdyn.simulate` (each documented there).
@@ -198,7 +198,8 @@ def _check_exact(model) -> None:
 def kernel_tables(cm: CompiledModel, sliding: str = "convex"):
     """The kernel's event table (records of ``EVENT_TABLE``: surface, direction, kind,
     target, terminal, has_reset, time_dependent), event activity per mode and switch table
-    (records of ``SWITCH_TABLE``: surface, above, below, kind, sliding, time_dependent).
+    (records of ``SWITCH_TABLE``: surface, above, below, kind, sliding, time_dependent, and
+    the layout of the sign families' blocks).
     Built once per model and sliding method: loops (shooting, sweeps) call the kernel many
     times."""
     key = (cm.model.hash, cm.source_path, sliding)
@@ -226,5 +227,34 @@ def _build_kernel_tables(cm: CompiledModel, sliding: str):
     kinds = cm.switch_kind if cm.switch_kind is not None else np.zeros(ns, dtype=np.int64)
     for s in range(ns):
         stab[s] = (cm.switch_surface[s], cm.switch_above[s], cm.switch_below[s], kinds[s],
-                   SLIDING_METHODS[sliding], tdep[cm.switch_surface[s]])
+                   SLIDING_METHODS[sliding], tdep[cm.switch_surface[s]], -1, -1, -1, -1)
+    _mark_family_blocks(model, stab)
     return etab, eact, stab
+
+
+def _mark_family_blocks(model, stab) -> None:
+    """Mark the switches of each sign family on each of its surfaces as one block of the
+    switch table (``SWITCH_TABLE``), where the records are laid out as a block must be:
+    ``2**(k-1)`` consecutive Filippov switches on the surface, record ``r`` joining the
+    variant ``first + c`` above, ``c`` the ``r``-th index with bit ``bit`` clear, to
+    ``first + (c | 1 << bit)`` below (variant ``first + c`` lies below ``surfaces[j]`` where
+    bit ``k - 1 - j`` of ``c`` is set). A family whose switches are laid out otherwise keeps
+    unmarked records, which the kernel searches one by one: slower, never wrong."""
+    for fam in model.families:
+        k = len(fam.surfaces)
+        half = 1 << (k - 1)
+        for j, s0 in enumerate(fam.switches):
+            if s0 < 0 or s0 + half > len(stab):
+                continue
+            bit = k - 1 - j
+            rows = stab[s0:s0 + half]
+            r = np.arange(half, dtype=np.int64)
+            above = ((r >> bit) << (bit + 1)) | (r & ((1 << bit) - 1))
+            if (np.all(rows["surface"] == fam.surfaces[j])
+                    and np.all(rows["kind"] == SW_FILIPPOV)
+                    and np.all(rows["above"] == fam.first + above)
+                    and np.all(rows["below"] == fam.first + (above | (1 << bit)))):
+                rows["block"] = s0
+                rows["block_end"] = s0 + half
+                rows["first"] = fam.first
+                rows["bit"] = bit            # (rows is a view: the table itself)

@@ -54,14 +54,19 @@ which surface was reached and why). Sliding on an intersection ends on surface
 ``i`` (``slide_end``) where ``lambda_i`` reaches 0 (the motion leaves to the side above) or
 1 (below); the other surfaces keep sliding as far as their own weights allow (on the rest of
 the intersection, on one surface, or none: a released contact may make another slip at
-once). A start on several Filippov surfaces is resolved the same way.
+once). A start on several Filippov surfaces is resolved the same way. The switches of a
+sign family on one of its surfaces are a block of the switch table, and the switch of a
+block that touches a mode is computed from the mode's index (the bit of the surface flipped),
+not searched for: a chain of ten contacts has 5120 switches, and a search of them per lookup
+cost more than the integration.
 
 Watch functions
 ---------------
 In each discrete state the kernel watches a small list of scalar functions of ``(t, x)`` for
 zero crossings: surfaces ``h`` (events, switches), normal velocities ``hdot`` (sliding exit),
 normal accelerations ``hddot`` (release from sticking) and ``min(lambda_i, 1 - lambda_i)`` of
-the weights of sliding on an intersection (exit from one of its surfaces). On every accepted
+the weights of sliding on an intersection (exit from one of its surfaces; the ``k`` watches of
+an intersection share one solve of the weights per sample, kept in a small cache). On every accepted
 step each is sampled on the dense output -- surfaces at the ends and at the interior extrema
 of the cubic Hermite fit from ``h`` and ``hdot`` at the ends, the other functions at the ends
 and the midpoint (the normal acceleration of a sticking motion also at the extrema of its

@@ -198,24 +198,64 @@ def _project_surface(ev, p, k, t, y, n, hdx, buf):
             y[i] -= hv * hdx[i] / nrm2
 
 
+@_hot_inline
+def _block_row(stab, b0, m):
+    """The record of the block starting at record ``b0`` (a sign family's switches on one
+    surface: ``SWITCH_TABLE``) that mode ``m`` is above or below, or -1 where ``m`` is not a
+    variant of the family. Its index ``c`` in the family with bit ``bit`` cleared is the
+    variant above the switch; the record is that index's rank among those with the bit
+    clear: ``c`` with the bit removed."""
+    c = m - stab[b0].first
+    if c < 0 or c >= 2 * (stab[b0].block_end - b0):
+        return -1
+    bit = stab[b0].bit
+    a = c & ~(1 << bit)
+    return b0 + (((a >> (bit + 1)) << bit) | (a & ((1 << bit) - 1)))
+
+
+@_hot
+def _next_touching(stab, s, m):
+    """The first switch at or after record ``s`` that has mode ``m`` above or below it, in
+    table order (the table's length where none): a search of the table that passes over a
+    sign family's block at once, computing the one record of it that touches ``m``
+    (:func:`_block_row`)."""
+    n_sw = stab.shape[0]
+    while s < n_sw:
+        b0 = stab[s].block
+        if b0 >= 0:
+            r = _block_row(stab, b0, m)
+            if r >= s:
+                return r
+            s = stab[s].block_end
+            continue
+        if stab[s].above == m or stab[s].below == m:
+            return s
+        s += 1
+    return n_sw
+
+
 @_hot
 def _partner(stab, k, m):
-    """The mode across surface ``k`` from mode ``m`` (-1 if no switch joins them)."""
-    for s in range(stab.shape[0]):
+    """The mode across surface ``k`` from mode ``m`` (-1 if no switch joins them): of the
+    first switch on ``k`` that touches ``m``."""
+    n_sw = stab.shape[0]
+    s = _next_touching(stab, 0, m)
+    while s < n_sw:
         if stab[s].surface == k:
-            if stab[s].above == m:
-                return stab[s].below
-            if stab[s].below == m:
-                return stab[s].above
+            return stab[s].below if stab[s].above == m else stab[s].above
+        s = _next_touching(stab, s + 1, m)
     return -1
 
 
 @_hot
 def _find_switch(stab, k, a, b):
     """The switch on surface ``k`` with mode ``a`` above and ``b`` below (-1 if none)."""
-    for s in range(stab.shape[0]):
+    n_sw = stab.shape[0]
+    s = _next_touching(stab, 0, a)
+    while s < n_sw:
         if stab[s].surface == k and stab[s].above == a and stab[s].below == b:
             return s
+        s = _next_touching(stab, s + 1, a)
     return -1
 
 
@@ -268,14 +308,14 @@ def _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx):
     xmax = 1.0
     for i in range(n):
         xmax = max(xmax, abs(y[i]))
-    # 1. the side of every surface the state is off
+    # 1. the side of every surface the state is off (the switches touching the mode, in
+    # table order; after a change those touching the new one)
     for sweep in range(n_sw + 1):
         changed = False
-        for s in range(n_sw):
+        s = _next_touching(stab, 0, mode)
+        while s < n_sw:
             a = stab[s].above
             b = stab[s].below
-            if mode != a and mode != b:
-                continue
             hv, tol = _surface_offset(ev, p, stab[s].surface, t, y, n, xmax, buf, hdx)
             new = mode
             if hv > tol:
@@ -285,43 +325,43 @@ def _resolve(ev, p, t, y, n, nm, mode, stab, buf, hdx):
             if new != mode:
                 mode = new
                 changed = True
+            s = _next_touching(stab, s + 1, mode)
         if not changed:
             break
     # 2. on a surface: slide, or take the side the flow leaves to
-    for s in range(n_sw):
+    s = _next_touching(stab, 0, mode)
+    while s < n_sw:
         a = stab[s].above
         b = stab[s].below
-        if mode != a and mode != b:
-            continue
         k = stab[s].surface
         hv, tol = _surface_offset(ev, p, k, t, y, n, xmax, buf, hdx)
-        if abs(hv) > tol:
-            continue
-        ev(W_HD, k * nm + a, t, y, p, buf)
-        sa = buf[0]
-        ev(W_HD, k * nm + b, t, y, p, buf)
-        sb = buf[0]
-        filippov = stab[s].kind == SW_FILIPPOV
-        if filippov and sa < 0.0 and sb > 0.0:
-            # on further Filippov surfaces of the corner modes too (a start on an
-            # intersection): sliding on the intersection or on some of its surfaces, as the
-            # multilinear weights decide (_settle_multi; buf, at least multi_work_size long,
-            # is its work vector)
-            mask = _on_surfaces(ev, p, t, y, n, xmax, k, a, stab, buf, hdx)
-            if mask != 0:
-                mask |= 1 << k
-                ref = _multi_reference(stab, mask, a)
-                if ref >= 0:
-                    dk, di, dm = _settle_multi(ev, p, t, y, n, nm, mask, ref, stab, buf, hdx,
-                                               hdx, buf)
-                    if dk >= 0:
-                        return dk, di, dm
-            _project_surface(ev, p, k, t, y, n, hdx, buf)
-            return SLIDE, s, a
-        if sa >= 0.0 and sb > 0.0 or sa > 0.0 and sb >= 0.0:
-            mode = a
-        elif sa <= 0.0 and sb < 0.0 or sa < 0.0 and sb <= 0.0:
-            mode = b
+        if abs(hv) <= tol:
+            ev(W_HD, k * nm + a, t, y, p, buf)
+            sa = buf[0]
+            ev(W_HD, k * nm + b, t, y, p, buf)
+            sb = buf[0]
+            filippov = stab[s].kind == SW_FILIPPOV
+            if filippov and sa < 0.0 and sb > 0.0:
+                # on further Filippov surfaces of the corner modes too (a start on an
+                # intersection): sliding on the intersection or on some of its surfaces, as
+                # the multilinear weights decide (_settle_multi; buf, at least
+                # multi_work_size long, is its work vector)
+                mask = _on_surfaces(ev, p, t, y, n, xmax, k, a, stab, buf, hdx)
+                if mask != 0:
+                    mask |= 1 << k
+                    ref = _multi_reference(stab, mask, a)
+                    if ref >= 0:
+                        dk, di, dm = _settle_multi(ev, p, t, y, n, nm, mask, ref, stab, buf,
+                                                   hdx, hdx, buf)
+                        if dk >= 0:
+                            return dk, di, dm
+                _project_surface(ev, p, k, t, y, n, hdx, buf)
+                return SLIDE, s, a
+            if sa >= 0.0 and sb > 0.0 or sa > 0.0 and sb >= 0.0:
+                mode = a
+            elif sa <= 0.0 and sb < 0.0 or sa < 0.0 and sb <= 0.0:
+                mode = b
+        s = _next_touching(stab, s + 1, mode)
     return REGULAR, -1, mode
 
 
@@ -392,9 +432,76 @@ def multi_work_size(n, stab):
     table ``stab`` (the kernel's ``gx`` and ``buf`` are at least this long;
     :func:`_multi_offsets`): its corner region holds the ``2**k`` corners of the largest
     intersection the table allows (:func:`_multi_kmax`), so a model without switches does
-    not carry room for ``2**MULTI_MAX`` of them."""
+    not carry room for ``2**MULTI_MAX`` of them; the last :func:`lambda_cache_size` entries
+    are the cache of the weights of the watch functions (:func:`_cached_lambda`)."""
     k = _multi_kmax(stab)
-    return _multi_offsets(n)[8] + ((1 + n + k) << k) + 4
+    return _multi_offsets(n)[8] + ((1 + n + k) << k) + 4 + lambda_cache_size(n)
+
+
+#: Entries of the cache of the weights of sliding on an intersection (:func:`_cached_lambda`):
+#: one per distinct sample of a step (start, midpoint, end, the central differences of the
+#: slopes at the ends), with room to spare.
+_LAM_SLOTS = 8
+
+
+@_hot
+def lambda_cache_size(n):
+    """Length of the cache of :func:`_cached_lambda` at the end of the work vector ``buf``: a
+    counter (the entry to write next), then ``_LAM_SLOTS`` entries of ``[valid, t, mask,
+    x (n), lambda (MULTI_MAX)]``."""
+    return 1 + _LAM_SLOTS * (3 + n + MULTI_MAX)
+
+
+@_hot
+def _clear_lambda_cache(buf, n):
+    """Empty the cache (when the watch list is rebuilt: a new discrete state, new corners)."""
+    o_c = buf.shape[0] - lambda_cache_size(n)
+    buf[o_c] = 0.0
+    for j in range(_LAM_SLOTS):
+        buf[o_c + 1 + j * (3 + n + MULTI_MAX)] = 0.0
+
+
+@_hot
+def _cached_lambda(ev, p, mask, t, x, n, fbuf, buf):
+    """The weights of sliding on the surfaces of ``mask`` at ``(t, x)`` (:func:`_lambda_core`
+    with the corners the kernel keeps in ``buf``), into ``buf``'s weight region
+    (:func:`_multi_offsets`). Each of the ``k`` watch functions of the state (one per
+    surface, ``min(lambda_i, 1 - lambda_i)``) samples the step at the same times and states,
+    so the weights of one sample are solved once, not ``k`` times: a solve at ``(t, x)`` equal
+    to a cached one in every bit is copied from the cache (the same arithmetic, the same
+    numbers). Returns ``k``, or -1 where the weights have no solution (not cached)."""
+    o_lam = _multi_offsets(n)[2]
+    o_c = buf.shape[0] - lambda_cache_size(n)
+    width = 3 + n + MULTI_MAX
+    fm = float(mask)
+    for j in range(_LAM_SLOTS):
+        o = o_c + 1 + j * width
+        if buf[o] == 1.0 and buf[o + 1] == t and buf[o + 2] == fm:
+            same = True
+            for i in range(n):
+                if buf[o + 3 + i] != x[i]:
+                    same = False
+                    break
+            if same:
+                k = _multi_count(mask)
+                for i in range(k):
+                    buf[o_lam + i] = buf[o + 3 + n + i]
+                return k
+    k = _lambda_core(ev, p, mask, t, x, n, fbuf, buf)
+    if k < 0 or mask >= (1 << 52):
+        # (a mask beyond 2**52 would not survive the cache's float)
+        return k
+    j = int(buf[o_c])
+    buf[o_c] = float((j + 1) % _LAM_SLOTS)
+    o = o_c + 1 + j * width
+    buf[o] = 1.0
+    buf[o + 1] = t
+    buf[o + 2] = fm
+    for i in range(n):
+        buf[o + 3 + i] = x[i]
+    for i in range(k):
+        buf[o + 3 + n + i] = buf[o_lam + i]
+    return k
 
 
 @_hot
@@ -821,20 +928,15 @@ def _project_multi(ev, p, mask, t, y, n, hdx, buf):
 def _multi_reference(stab, mask, m):
     """The corner of mode ``m`` above every surface of ``mask`` (-1 if a switch is missing)."""
     k = _multi_count(mask)
+    n_sw = stab.shape[0]
     for i in range(k):
         ks = _multi_surface(mask, i)
-        found = False
-        for s in range(stab.shape[0]):
-            if stab[s].surface == ks:
-                if stab[s].above == m:
-                    found = True
-                    break
-                if stab[s].below == m:
-                    m = stab[s].above
-                    found = True
-                    break
-        if not found:
+        s = _next_touching(stab, 0, m)
+        while s < n_sw and stab[s].surface != ks:
+            s = _next_touching(stab, s + 1, m)
+        if s == n_sw:
             return -1
+        m = stab[s].above
     return m
 
 
@@ -848,12 +950,27 @@ def _settle_multi(ev, p, t, y, n, nm, mask, ref, stab, buf, hdx, w1, work):
     of ``hdot`` on its two sides, thesis eq. 2.6-2.8) or a regular mode. The state is
     projected onto the surfaces it slides on. Returns ``(dkind, didx, mode)``."""
     o_lam = _multi_offsets(n)[2]
+    o_fi = _multi_offsets(n)[6]
     tol = 64.0 * _EPS
     for rnd in range(MULTI_MAX + 1):
         k = _multi_count(mask)
         if k >= 2:
-            # the corners' tangency values decide which surface is left
-            kk = _solve_lambda(ev, p, mask, ref, nm, t, y, n, stab, w1, work, False)
+            # the weights from the sign family's field where it applies (its Newton iterates
+            # are the corner sum's, an affine change of variables apart): where they all lie
+            # in [0, 1] the motion slides on the whole intersection, and the 2**k corner
+            # fields are not needed
+            kk = _solve_lambda(ev, p, mask, ref, nm, t, y, n, stab, w1, work)
+            if kk >= 0 and work[o_fi] == 1.0:
+                inside = True
+                for i in range(k):
+                    lam = work[o_lam + i]
+                    if max(-lam, lam - 1.0) > tol:
+                        inside = False
+                if inside:
+                    _project_multi(ev, p, mask, t, y, n, hdx, buf)
+                    return SLIDE_MULTI, mask, ref
+                # the corners' tangency values decide which surface is left
+                kk = _solve_lambda(ev, p, mask, ref, nm, t, y, n, stab, w1, work, False)
             if kk < 0:
                 return -1, mask, ref
             worst = -1
@@ -918,16 +1035,16 @@ def _on_surfaces(ev, p, t, y, n, xmax, k, a, stab, buf, hdx):
     :func:`_surface_offset`), at most ``MULTI_MAX - 1`` of them (0: none)."""
     mask = 0
     cnt = 0
-    for s in range(stab.shape[0]):
+    n_sw = stab.shape[0]
+    s = _next_touching(stab, 0, a)
+    while s < n_sw:
         ks = stab[s].surface
-        if ks == k or stab[s].kind != SW_FILIPPOV or (mask >> ks) & 1:
-            continue
-        if stab[s].above != a and stab[s].below != a:
-            continue
-        hv, tol = _surface_offset(ev, p, ks, t, y, n, xmax, buf, hdx)
-        if abs(hv) <= tol and cnt < MULTI_MAX - 1 and ks < 63:
-            mask |= 1 << ks
-            cnt += 1
+        if ks != k and stab[s].kind == SW_FILIPPOV and not (mask >> ks) & 1:
+            hv, tol = _surface_offset(ev, p, ks, t, y, n, xmax, buf, hdx)
+            if abs(hv) <= tol and cnt < MULTI_MAX - 1 and ks < 63:
+                mask |= 1 << ks
+                cnt += 1
+        s = _next_touching(stab, s + 1, a)
     return mask
 
 

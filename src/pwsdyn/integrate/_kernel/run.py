@@ -19,9 +19,10 @@ from .._codes import (ACT_EVENT, ACT_EXIT_ABOVE, ACT_EXIT_BELOW, ACT_EXIT_MULTI,
 from ._base import (EVENT_TABLE_TYPE, OPTIONS_TYPE, SWITCH_TABLE_TYPE, _COINCIDENT_ULPS, _EPS,
                     _EXACT_TERMS, _MAXW, _grow1, _grow2, _grow3,
                     _log_event, _ulp, compiled_on_first_use)
-from .fields import (_field, _multi_corners, _multi_count, _multi_offsets, _multi_surface,
-                     _project_multi, _project_surface, _rate_band, _resolve, _rhs,
-                     _start_on_surface, multi_work_size)
+from .fields import (_block_row, _clear_lambda_cache, _field, _multi_corners, _multi_count,
+                     _multi_offsets, _multi_surface, _next_touching, _project_multi,
+                     _project_surface, _rate_band, _resolve, _rhs, _start_on_surface,
+                     multi_work_size)
 from .steppers import (_affine_setup, _dense_eval, _error_norm, _exact_stepper, _step_dense,
                        _step_stages, _take_samples)
 from .watch import (_crosses, _graze_samples, _hdot_rate, _hermite_extrema, _locate_exact,
@@ -423,6 +424,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                 # (re)build the watch list for the current discrete state
                 nw = 0
                 if dkind == SLIDE_MULTI:
+                    _clear_lambda_cache(buf, n)
                     # the corner modes of the intersection, kept in buf for the watches of
                     # the weights (_watch_value) and read below (-1: a corner is missing)
                     _multi_corners(stab, didx, mode, buf, o_corners)
@@ -436,62 +438,78 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                     wtype[nw] = WF_SURFACE; widx[nw] = etab[j].surface; wmode[nw] = mode
                     wdir[nw] = etab[j].direction; wact[nw] = ACT_EVENT; wref[nw] = j
                     nw += 1
-                for s in range(n_sw):
+                # the switches in table order; those of a sign family's block (all on one
+                # surface) by arithmetic, not one by one (_next_touching, _block_row)
+                s = 0
+                while s < n_sw:
                     if dkind == SLIDE_MULTI:
                         # a further surface bounding a corner of the intersection: crossed
-                        # while sliding on the intersection, or joined to it
-                        if (didx >> stab[s].surface) & 1:
-                            continue
-                        adjacent = False
-                        for c in range(1 << _multi_count(didx)):
-                            mc = int(buf[o_corners + c])
-                            if stab[s].above == mc or stab[s].below == mc:
-                                adjacent = True
-                                break
-                        dup = False
-                        for ww in range(nw):
-                            if wact[ww] == ACT_INTERSECTION and widx[ww] == stab[s].surface:
-                                dup = True
-                        if dup or not adjacent:
-                            continue
-                        wtype[nw] = WF_SURFACE; widx[nw] = stab[s].surface; wmode[nw] = mode
-                        wdir[nw] = 0; wact[nw] = ACT_INTERSECTION; wref[nw] = s
-                        nw += 1
+                        # while sliding on the intersection, or joined to it; one watch per
+                        # surface, from its first switch that touches a corner
+                        b0 = stab[s].block
+                        nxt = s + 1 if b0 < 0 else stab[s].block_end
+                        r = -1
+                        if not (didx >> stab[s].surface) & 1:
+                            for c in range(1 << _multi_count(didx)):
+                                mc = int(buf[o_corners + c])
+                                if b0 >= 0:
+                                    rc = _block_row(stab, b0, mc)
+                                    if rc >= s and (r < 0 or rc < r):
+                                        r = rc
+                                elif stab[s].above == mc or stab[s].below == mc:
+                                    r = s
+                                    break
+                        if r >= 0:
+                            dup = False
+                            for ww in range(nw):
+                                if wact[ww] == ACT_INTERSECTION and widx[ww] == stab[r].surface:
+                                    dup = True
+                            if not dup:
+                                wtype[nw] = WF_SURFACE; widx[nw] = stab[r].surface
+                                wmode[nw] = mode; wdir[nw] = 0; wact[nw] = ACT_INTERSECTION
+                                wref[nw] = r
+                                nw += 1
+                        s = nxt
                         continue
                     if dkind == SLIDE:
                         # another surface bounding the sliding pair's modes: crossing it while
                         # sliding, or reaching the intersection of the two surfaces
-                        if stab[s].surface == stab[didx].surface:
-                            continue
-                        sa, sb = stab[s].above, stab[s].below
-                        da, db = stab[didx].above, stab[didx].below
-                        if sa != da and sb != da and sa != db and sb != db:
-                            continue
-                        dup = False
-                        for ww in range(nw):
-                            if wact[ww] == ACT_INTERSECTION and widx[ww] == stab[s].surface:
-                                dup = True
-                        if dup:
-                            continue
-                        wtype[nw] = WF_SURFACE; widx[nw] = stab[s].surface; wmode[nw] = mode
-                        wdir[nw] = 0; wact[nw] = ACT_INTERSECTION; wref[nw] = s
-                        nw += 1
+                        s = min(_next_touching(stab, s, stab[didx].above),
+                                _next_touching(stab, s, stab[didx].below))
+                        if s >= n_sw:
+                            break
+                        if stab[s].surface != stab[didx].surface:
+                            dup = False
+                            for ww in range(nw):
+                                if wact[ww] == ACT_INTERSECTION and widx[ww] == stab[s].surface:
+                                    dup = True
+                            if not dup:
+                                wtype[nw] = WF_SURFACE; widx[nw] = stab[s].surface
+                                wmode[nw] = mode; wdir[nw] = 0; wact[nw] = ACT_INTERSECTION
+                                wref[nw] = s
+                                nw += 1
+                        s += 1
                         continue
-                    if stab[s].above == mode or stab[s].below == mode:
-                        if dkind == STICK and stab[s].kind == SW_CONTINUOUS:
-                            # a kink surface that the sticking motion lies in (bilinear damping of
-                            # a relative velocity held at zero against a stop): the two variants
-                            # agree there, and its sign is round-off
-                            ev(W_H, stab[s].surface, t, y, p, buf)
-                            xmax = 1.0
-                            for i in range(n):
-                                xmax = max(xmax, abs(y[i]))
-                            if abs(buf[0]) <= 1e3 * _EPS * xmax:
-                                continue
+                    s = _next_touching(stab, s, mode)
+                    if s >= n_sw:
+                        break
+                    watched = True
+                    if dkind == STICK and stab[s].kind == SW_CONTINUOUS:
+                        # a kink surface that the sticking motion lies in (bilinear damping of
+                        # a relative velocity held at zero against a stop): the two variants
+                        # agree there, and its sign is round-off
+                        ev(W_H, stab[s].surface, t, y, p, buf)
+                        xmax = 1.0
+                        for i in range(n):
+                            xmax = max(xmax, abs(y[i]))
+                        if abs(buf[0]) <= 1e3 * _EPS * xmax:
+                            watched = False
+                    if watched:
                         wtype[nw] = WF_SURFACE; widx[nw] = stab[s].surface; wmode[nw] = mode
                         wdir[nw] = -1 if stab[s].above == mode else 1
                         wact[nw] = ACT_SWITCH; wref[nw] = s
                         nw += 1
+                    s += 1
                 if dkind == STICK:
                     k = etab[didx].surface
                     wtype[nw] = WF_HDDOT; widx[nw] = k; wmode[nw] = mode

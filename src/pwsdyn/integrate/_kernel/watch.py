@@ -10,7 +10,7 @@ import numpy as np
 from ...model.codegen import W_F, W_H, W_HD, W_HDT, W_HDX, W_HHD, W_HT, W_HX
 from .._codes import REGULAR, WF_HDOT, WF_LAMBDA, WF_SURFACE
 from ._base import _EPS, _FD_STEP, _dot, _hot, _ulp
-from .fields import _field, _lambda_core, _multi_offsets, _rate_band
+from .fields import _cached_lambda, _field, _multi_offsets, _rate_band
 from .steppers import _dense_eval
 
 # --------------------------------------------------------------------------------------
@@ -30,7 +30,7 @@ def _watch_value(ev, p, wtype, widx, wmode, nm, t, x, n, buf, fbuf, hdx):
         # multilinear field on the surfaces of the mask wmode (zero where lambda_i reaches 0 or
         # 1; its kink at 1/2 is far from the zero), whose corner modes the kernel keeps in buf
         # (set when the watch list is built)
-        if _lambda_core(ev, p, wmode, t, x, n, fbuf, buf) < 0:
+        if _cached_lambda(ev, p, wmode, t, x, n, fbuf, buf) < 0:
             return np.nan
         lam = buf[_multi_offsets(n)[2] + widx]
         return min(lam, 1.0 - lam)
