@@ -218,7 +218,7 @@ def test_sympy_model_definition_roundtrip(tmp_path):
 def test_model_read_differently_warns(tmp_path):
     # the expression parser reads literals as doubles, so a 70-bit SymPy Float cannot come back
     # exactly: the reloaded model differs, and the user is told so
-    y, v = sp.Symbol("y", real=True), sp.Symbol("v", real=True)
+    v = sp.Symbol("v", real=True)
     spec = {"name": "hp", "states": ["y", "v"],
             "modes": {"m": {"y": v, "v": -sp.Float("9.8100000000000000001", 21)}}}
     a = pwsdyn.simulate(spec, [1.0, 0.0], (0.0, 0.1))

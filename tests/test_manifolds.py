@@ -341,7 +341,6 @@ def test_square_root_map_manifolds_are_invariant_next_to_the_border(kind):
     if kind == "unstable":
         # the fold: the image of the segment across x = 0 leaves the kink with a square-root
         # (unbounded) stretching; the points next to the kink are refined far below max_step
-        branch = m.branches[0] if m.branches[0][0][-1][0] > 0 or True else None
         steps = [np.linalg.norm(np.diff(p, axis=0), axis=1) for br in m.branches for p in br]
         assert min(s.min() for s in steps) < 1e-3 * m.options["max_step"]
 

@@ -166,7 +166,7 @@ def test_parameter_overrides_against_free_fall():
 def test_malformed_toml_names_file_and_line(tmp_path):
     path = tmp_path / "broken.toml"
     path.write_text('name = "x"\nstates = ["y"]\n[parameters]\ng = \n')
-    with pytest.raises(ModelError, match=rf"broken\.toml:4: malformed TOML") as info:
+    with pytest.raises(ModelError, match=r"broken\.toml:4: malformed TOML") as info:
         pwsdyn.load_model(path)
     assert info.value.line == 4 and info.value.source == str(path)
     with pytest.raises(ModelError, match=r"<string>:2: malformed TOML"):

@@ -15,7 +15,6 @@ import subprocess
 import sys
 import textwrap
 import uuid
-import warnings
 from pathlib import Path
 
 import numpy as np
