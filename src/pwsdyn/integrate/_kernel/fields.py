@@ -235,16 +235,26 @@ def _next_touching(stab, s, m):
 
 
 @_hot
-def _partner(stab, k, m):
-    """The mode across surface ``k`` from mode ``m`` (-1 if no switch joins them): of the
-    first switch on ``k`` that touches ``m``."""
+def _switch_on(stab, k, m):
+    """The first switch on surface ``k`` that has mode ``m`` above or below it (-1 if
+    none)."""
     n_sw = stab.shape[0]
     s = _next_touching(stab, 0, m)
     while s < n_sw:
         if stab[s].surface == k:
-            return stab[s].below if stab[s].above == m else stab[s].above
+            return s
         s = _next_touching(stab, s + 1, m)
     return -1
+
+
+@_hot
+def _partner(stab, k, m):
+    """The mode across surface ``k`` from mode ``m`` (-1 if no switch joins them): of the
+    first switch on ``k`` that touches ``m``."""
+    s = _switch_on(stab, k, m)
+    if s < 0:
+        return -1
+    return stab[s].below if stab[s].above == m else stab[s].above
 
 
 @_hot
@@ -928,13 +938,9 @@ def _project_multi(ev, p, mask, t, y, n, hdx, buf):
 def _multi_reference(stab, mask, m):
     """The corner of mode ``m`` above every surface of ``mask`` (-1 if a switch is missing)."""
     k = _multi_count(mask)
-    n_sw = stab.shape[0]
     for i in range(k):
-        ks = _multi_surface(mask, i)
-        s = _next_touching(stab, 0, m)
-        while s < n_sw and stab[s].surface != ks:
-            s = _next_touching(stab, s + 1, m)
-        if s == n_sw:
+        s = _switch_on(stab, _multi_surface(mask, i), m)
+        if s < 0:
             return -1
         m = stab[s].above
     return m

@@ -442,23 +442,34 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                 # surface) by arithmetic, not one by one (_next_touching, _block_row)
                 s = 0
                 while s < n_sw:
-                    if dkind == SLIDE_MULTI:
-                        # a further surface bounding a corner of the intersection: crossed
-                        # while sliding on the intersection, or joined to it; one watch per
-                        # surface, from its first switch that touches a corner
-                        b0 = stab[s].block
-                        nxt = s + 1 if b0 < 0 else stab[s].block_end
+                    if dkind == SLIDE_MULTI or dkind == SLIDE:
+                        # a further surface bounding the modes slid between: crossed while
+                        # sliding, or reaching (joining) the intersection with it; one watch
+                        # per surface, from its first switch that touches one of those modes
                         r = -1
-                        if not (didx >> stab[s].surface) & 1:
-                            for c in range(1 << _multi_count(didx)):
-                                mc = int(buf[o_corners + c])
-                                if b0 >= 0:
-                                    rc = _block_row(stab, b0, mc)
-                                    if rc >= s and (r < 0 or rc < r):
-                                        r = rc
-                                elif stab[s].above == mc or stab[s].below == mc:
-                                    r = s
-                                    break
+                        if dkind == SLIDE_MULTI:
+                            # the corners of the intersection
+                            b0 = stab[s].block
+                            nxt = s + 1 if b0 < 0 else stab[s].block_end
+                            if not (didx >> stab[s].surface) & 1:
+                                for c in range(1 << _multi_count(didx)):
+                                    mc = int(buf[o_corners + c])
+                                    if b0 >= 0:
+                                        rc = _block_row(stab, b0, mc)
+                                        if rc >= s and (r < 0 or rc < r):
+                                            r = rc
+                                    elif stab[s].above == mc or stab[s].below == mc:
+                                        r = s
+                                        break
+                        else:
+                            # the sliding pair's two modes
+                            s = min(_next_touching(stab, s, stab[didx].above),
+                                    _next_touching(stab, s, stab[didx].below))
+                            if s >= n_sw:
+                                break
+                            nxt = s + 1
+                            if stab[s].surface != stab[didx].surface:
+                                r = s
                         if r >= 0:
                             dup = False
                             for ww in range(nw):
@@ -470,25 +481,6 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                                 wref[nw] = r
                                 nw += 1
                         s = nxt
-                        continue
-                    if dkind == SLIDE:
-                        # another surface bounding the sliding pair's modes: crossing it while
-                        # sliding, or reaching the intersection of the two surfaces
-                        s = min(_next_touching(stab, s, stab[didx].above),
-                                _next_touching(stab, s, stab[didx].below))
-                        if s >= n_sw:
-                            break
-                        if stab[s].surface != stab[didx].surface:
-                            dup = False
-                            for ww in range(nw):
-                                if wact[ww] == ACT_INTERSECTION and widx[ww] == stab[s].surface:
-                                    dup = True
-                            if not dup:
-                                wtype[nw] = WF_SURFACE; widx[nw] = stab[s].surface
-                                wmode[nw] = mode; wdir[nw] = 0; wact[nw] = ACT_INTERSECTION
-                                wref[nw] = s
-                                nw += 1
-                        s += 1
                         continue
                     s = _next_touching(stab, s, mode)
                     if s >= n_sw:
