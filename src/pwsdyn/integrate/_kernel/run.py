@@ -203,6 +203,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
 
     # work arrays
     K = np.zeros((s_ext, nY))
+    # K[0] is the field at (t, y) unless k_stale: after an exact step it is made where read
+    k_stale = False
     kst = np.zeros(nY)
     ytmp = np.zeros(nY)
     ynew = np.zeros(nY)
@@ -573,6 +575,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                      w1, w2, gx, hdx, jac, xt, ft)
                 for i in range(nY):
                     K[0, i] = kst[i]
+                k_stale = False
                 stats[2] += 1
                 # at the start and after every event (a reset, a chattering jump in time, a new
                 # mode): time, state and field must be finite. A NaN field here would make the
@@ -628,12 +631,16 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
 
             # ---- one step: the exact flow of an affine mode or the Runge-Kutta pair
             if exact_now:
-                err, finite, q_made, nf = _exact_stepper(ev, p, mode, t, y, h, K, s_fsal, ynew,
-                        kst, Q, aff, aff_P, aff_ph, min(aff_h[mode], hmax), nz, T1, T2)
+                err, finite, q_made, nf = _exact_stepper(mode, t, y, h, ynew, Q, aff, aff_P,
+                                                         aff_ph, min(aff_h[mode], hmax), nz, T1,
+                                                         T2)
             else:
-                # the Runge-Kutta step, written out here (the stepper with the interface of
-                # _exact_stepper): as a call it passes ~20 arrays per step, measured 10-15% of
-                # an RK45 step on a two-state model
+                # the Runge-Kutta step, written out here: as a call it would pass ~20 arrays
+                # per step, measured 10-15% of an RK45 step on a two-state model
+                if k_stale:
+                    ev(W_F, mode, t, y, p, K[0])
+                    stats[2] += 1
+                    k_stale = False
                 q_made = False
                 nf = s_fsal
                 fast = dkind == REGULAR and nvar == 0
@@ -706,6 +713,10 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                     else:
                         v0 = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t, y, n, buf,
                                           fbuf, hdx)
+                        if k_stale:
+                            ev(W_F, mode, t, y, p, K[0])
+                            stats[2] += 1
+                            k_stale = False
                         r0 = _surface_rate(ev, p, dkind, widx[w], mode, nm, t, y, K[0], n, buf,
                                            hdx)
                         if ((wact[w] == ACT_EVENT or wact[w] == ACT_SWITCH)
@@ -762,6 +773,16 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                     vals[w, 0] = v0
                     # the interior extrema of the cubic Hermite fit (2.0: none)
                     ra, rb = _hermite_extrema(v0, v1, d0, d1)
+                    if (exact_now and rb > 1.0 and ra < 1.0 and v0 * v1 > 0.0 and v0 * d0 > 0.0
+                            and v1 * d1 < 0.0 and wtdep[w] == 0
+                            and not (wforce[w] != 0.0 and t == last_t)):
+                        # the one extremum of the fit lies beyond both ends, on the far side of
+                        # zero (the exact flow moves away from the surface and back: the lowest
+                        # point of a flight below a wall). Within the exact step's bound no
+                        # crossing or graze hides there, and its sample (the step's Taylor
+                        # series, a dense evaluation, the surface) would not change a decision
+                        # below: it is not taken
+                        ra = 2.0
                     if ra < 1.0:
                         thetas[ns] = ra
                         ns += 1
@@ -1025,7 +1046,13 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                 t = t_new
                 for i in range(nY):
                     y[i] = ynew[i]
-                    K[0, i] = K[s_fsal, i]
+                if exact_now:
+                    # the exact step did not evaluate the field at its end (no step needs it:
+                    # it is made here where K[0] is read)
+                    k_stale = True
+                else:
+                    for i in range(nY):
+                        K[0, i] = K[s_fsal, i]
                 for ww in range(nw):
                     wvalid[ww] = 1
                 fac = 10.0 if err == 0.0 else min(10.0, max(0.2, 0.9 * err ** (-1.0 / order)))
@@ -1041,6 +1068,10 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
             # evaluation, and the step's Taylor terms are rescaled to the shorter interval.
             w = best
             h_ev = best_th * h
+            if k_stale:
+                ev(W_F, mode, t, y, p, K[0])
+                stats[2] += 1
+                k_stale = False
             for i in range(nY):
                 Kland[0, i] = K[0, i]
             for polish in range(8):

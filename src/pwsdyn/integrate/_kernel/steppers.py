@@ -398,6 +398,21 @@ def _augment(M, sc, md, nz, n, t, y, z):
 
 @_hot
 def _dense_eval(y0, Q, theta, nY, deg, out):
+    """``out = y0 + sum_k Q[:, k] theta^(k+1)`` by Horner's rule.
+
+    For two components (the impact oscillator, the ball on a table) the two Horner chains
+    are summed side by side in scalars: each is a chain of dependent multiply-adds, and two
+    run in parallel where one after the other they wait on each other (each component's sums
+    are the same, in the same order, as in the general loop)."""
+    if nY == 2:
+        a0 = 0.0
+        a1 = 0.0
+        for k in range(deg - 1, -1, -1):
+            a0 = (a0 + Q[0, k]) * theta
+            a1 = (a1 + Q[1, k]) * theta
+        out[0] = y0[0] + a0
+        out[1] = y0[1] + a1
+        return
     for i in range(nY):
         acc = 0.0
         for k in range(deg - 1, -1, -1):
@@ -420,15 +435,16 @@ def _dense_eval(y0, Q, theta, nY, deg, out):
 # affine tables as ``aff = (M, sc, wt, z, v)``, both built once per run.
 
 @_hot_inline
-def _exact_stepper(ev, p, mode, t, y, h, K, s_fsal, ynew, kst, Q, aff, aff_P, aff_ph, aff_full,
-                   nz, T1, T2):
+def _exact_stepper(mode, t, y, h, ynew, Q, aff, aff_P, aff_ph, aff_full, nz, T1, T2):
     """One exact step of affine mode ``mode`` (see "Exact propagation" in the module
-    docstring), with the outputs of the Runge-Kutta step of run_kernel: the new state into
-    ``ynew``, the FSAL stage ``f(t + h, ynew)`` into ``K[s_fsal]``. The error is zero (the
-    step is limited only by the convergence of the Taylor sum, the largest step and the
-    events). A full step (``h == aff_full``) is one product with the propagator made once per
-    mode and length; a shorter one sums the Taylor series of the vector, whose terms are the
-    dense output in ``Q``. Returns ``(err, finite, dense_made, nfev)``."""
+    docstring), with the outputs of the Runge-Kutta step of run_kernel except its FSAL stage:
+    the new state into ``ynew``. The field at the step's end is not evaluated here: an exact
+    step needs none (its rates come from the watch functions), and run_kernel evaluates it
+    where a later step or event reads ``K[0]``. The error is zero (the step is limited only by
+    the convergence of the Taylor sum, the largest step and the events). A full step
+    (``h == aff_full``) is one product with the propagator made once per mode and length; a
+    shorter one sums the Taylor series of the vector, whose terms are the dense output in
+    ``Q``. Returns ``(err, finite, dense_made, nfev)``."""
     aff_M, aff_s, aff_w, zv, zv1 = aff
     n = y.shape[0]   # (exact steps carry no variational equations)
     q_made = False
@@ -440,13 +456,12 @@ def _exact_stepper(ev, p, mode, t, y, h, K, s_fsal, ynew, kst, Q, aff, aff_P, af
     else:
         _exact_step(aff_M, aff_s, aff_w, mode, nz, n, t, y, h, zv, zv1, Q, ynew)
         q_made = True
-    ev(W_F, mode, t + h, ynew, p, kst)
+    # (an affine field with a finite matrix is finite wherever the state is)
     finite = True
     for i in range(n):
-        K[s_fsal, i] = kst[i]
-        if not (np.isfinite(kst[i]) and np.isfinite(ynew[i])):
+        if not np.isfinite(ynew[i]):
             finite = False
-    return (0.0 if finite else np.inf), finite, q_made, 1
+    return (0.0 if finite else np.inf), finite, q_made, 0
 
 
 @_hot

@@ -314,9 +314,13 @@ def _hermite_extrema(v0, v1, d0, d1):
     parabolic ``h``, where the textbook formula loses all digits."""
     qa = 3.0 * (2.0 * v0 - 2.0 * v1 + d0 + d1)
     qb = 2.0 * (-3.0 * v0 + 3.0 * v1 - 2.0 * d0 - d1)
-    disc = qb * qb - 4.0 * qa * d0
     ra = 2.0
     rb = 2.0
+    if d0 * d1 > 0.0 and not (0.0 < -qb < 2.0 * qa or 2.0 * qa < -qb < 0.0):
+        # H' has one sign at both ends and its vertex -qb / (2 qa) is not inside: no root in
+        # (0, 1), known without the square root and the divisions (most steps)
+        return ra, rb
+    disc = qb * qb - 4.0 * qa * d0
     if disc >= 0.0:
         qq = -0.5 * (qb + (np.sqrt(disc) if qb >= 0.0 else -np.sqrt(disc)))
         if qa != 0.0:
