@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 import xarray as xr
 
 import pwsdyn
@@ -683,3 +685,81 @@ def test_state_times_from_event_columns():
     stick, slide = state_times(t, after, chatter, 1.5, 6.0, initial=0)
     assert stick == pytest.approx(0.5 + 1.0) and slide == pytest.approx(1.5)
     assert state_times(t[:0], after[:0], chatter[:0], 0.0, 2.0, initial=1) == (2.0, 0.0)
+
+
+def _period_by_loop(points, max_period, tol):
+    """The period rule of ``period_estimate`` written as its definition: shifts k = 1, 2, ...
+    tried one by one on the second half of the finite prefix of the record."""
+    pts = np.asarray(points, dtype=float)
+    good = np.all(np.isfinite(pts), axis=1)
+    if not good.all():
+        pts = pts[: np.argmin(good)] if not good[0] or good.any() else pts[:0]
+    m = len(pts)
+    if m < 2:
+        return 0
+    scale = tol * (1.0 + float(np.max(np.abs(pts))))
+    start = m // 2
+    for k in range(1, max_period + 1):
+        if m - start - k < k:
+            break
+        if np.all(np.abs(pts[start + k:] - pts[start:m - k]) <= scale):
+            return k
+    return 0
+
+
+@settings(max_examples=300, deadline=None, derandomize=True)
+@given(period=st.integers(1, 9), m=st.integers(0, 60), d=st.integers(1, 3),
+       noise=st.sampled_from([0.0, 1e-9, 5e-7, 2e-6, 1e-3]), nan_tail=st.integers(0, 5),
+       max_period=st.integers(1, 30), seed=st.integers(0, 2**31 - 1))
+def test_period_estimate_is_the_shift_rule(period, m, d, noise, nan_tail, max_period, seed):
+    """``period_estimate`` (all shifts compared in one array) against the rule written as a
+    loop over the shifts, on cycles of period 1-9 with noise below, near and above the
+    tolerance (1e-6 of the record's scale), records of any length with NaN rows at the end."""
+    from pwsdyn.explore._common import period_estimate
+
+    rng = np.random.default_rng(seed)
+    cycle = rng.uniform(-2.0, 2.0, size=(period, d))
+    pts = cycle[np.arange(m) % period] + noise * rng.standard_normal((m, d))
+    pts = np.vstack([pts, np.full((nan_tail, d), np.nan)])
+    assert period_estimate(pts, max_period, 1e-6) == _period_by_loop(pts, max_period, 1e-6)
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(kinds=st.lists(st.integers(-1, 2), max_size=12), initial=st.integers(0, 2),
+       seed=st.integers(0, 2**31 - 1))
+def test_state_times_without_sticking_or_sliding_are_zero_and_otherwise_unchanged(
+        kinds, initial, seed):
+    """``state_times`` (with its shortcut for runs that never stick nor slide) against the
+    rule written out interval by interval: each interval between events is in the state
+    after the last non-chatter record before it, ``initial`` before the first."""
+    from pwsdyn.explore._common import state_times
+
+    rng = np.random.default_rng(seed)
+    t = np.sort(rng.uniform(0.0, 10.0, len(kinds)))
+    after = np.array(kinds, dtype=int)
+    chatter = rng.uniform(size=len(kinds)) < 0.2
+    lo, hi = 2.0, 8.0
+    want = [0.0, 0.0]
+    state = initial
+    edges = [lo] + list(np.clip(t, lo, hi)) + [hi]
+    for i in range(len(edges) - 1):
+        if i > 0 and not chatter[i - 1]:
+            state = after[i - 1]
+        if state in (1, 2):
+            want[state - 1] += edges[i + 1] - edges[i]
+    got = state_times(t, after, chatter, lo, hi, initial)
+    assert got == pytest.approx(tuple(want), abs=1e-12)
+    if initial == 0 and not np.any(after > 0):
+        assert got == (0.0, 0.0)
+
+
+@pytest.mark.parametrize("x, bound, ok", [
+    ([0.0, 1.0], 1.0, True), ([0.0, -1.0 - 1e-12], 1.0, False), ([np.nan, 0.0], 1e8, False),
+    ([np.inf, 0.0], np.inf, False), ([-np.inf], 1e8, False), ([1e300, -1e300], np.inf, True),
+    ([], 1.0, True)])
+def test_check_bound(x, bound, ok):
+    """A state is within the bound while every component is finite and at most ``bound`` in
+    magnitude (an infinite bound still refuses an infinite component)."""
+    from pwsdyn.explore._common import check_bound
+
+    assert check_bound(np.array(x, dtype=float), bound) is ok

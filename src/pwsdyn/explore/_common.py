@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from .. import _validate as V
 from ..errors import ArgumentError, Status
@@ -165,12 +166,27 @@ def period_estimate(points: np.ndarray, max_period: int, tol: float) -> int:
     if m < 2:
         return 0
     scale = tol * (1.0 + float(np.max(np.abs(pts))))
+    return int(_first_shift(np.ascontiguousarray(pts), int(max_period), scale))
+
+
+@njit(cache=True, nogil=True)
+def _first_shift(pts, max_period, scale):
+    """The loop of :func:`period_estimate` over the shifts, compiled (a sweep estimates a
+    period per value; in numpy it cost three array calls per shift tried)."""
+    m, d = pts.shape
     start = m // 2
     for k in range(1, max_period + 1):
         if m - start - k < k:
             break
-        diff = np.abs(pts[start + k:] - pts[start:m - k])
-        if np.all(diff <= scale):
+        same = True
+        for j in range(start, m - k):
+            for c in range(d):
+                if not abs(pts[j + k, c] - pts[j, c]) <= scale:
+                    same = False
+                    break
+            if not same:
+                break
+        if same:
             return k
     return 0
 
@@ -184,6 +200,10 @@ def state_times(t, after, chatter, t_lo: float, t_hi: float, initial: int = 0
     ``initial`` is the kind of state before the first event.
     """
     t = np.asarray(t, dtype=float)
+    after = np.asarray(after)
+    if initial == 0 and not (len(after) and after.max() > 0):
+        # never sticking nor sliding (an impact oscillator): nothing to add up
+        return 0.0, 0.0
     # the state after each event: that of the last non-chatter record up to it
     last = np.where(np.asarray(chatter, dtype=bool), -1, np.arange(len(t)))
     if len(t):
@@ -273,7 +293,9 @@ def check_time_unit(model, p, period, phase: float, n_periods: int, *, pidx=None
 
 def check_bound(x: np.ndarray, bound: float) -> bool:
     """True while every component is finite and within ``bound``."""
-    return bool(np.all(np.isfinite(x)) and np.all(np.abs(x) <= bound))
+    # (the largest magnitude is NaN where a component is, inf where one is infinite)
+    big = float(np.max(np.abs(x))) if np.size(x) else 0.0
+    return math.isfinite(big) and big <= bound
 
 
 __all__ = ["period_estimate", "readmit", "state_times"]
