@@ -15,7 +15,7 @@ from .._codes import (ACT_EVENT, ACT_INTERSECTION, ACT_SWITCH, IX_ATTRACTING, IX
                       SLIDE_MULTI, STICK, ST_INTERSECTION, ST_SUCCESS, SW_FILIPPOV)
 from ._base import (EVENT_TABLE_TYPE, SWITCH_TABLE_TYPE, _FD_STEP, _dot, _hot, _hot_inline,
                     compiled_on_first_use)
-from .fields import (_field, _find_switch, _impact_direction, _lambda_core, _multi_corners,
+from .fields import (_field, _find_switch, _impact_direction_hdx, _lambda_core, _multi_corners,
                      _multi_count, _multi_field, _multi_offsets, _multi_reference,
                      _multi_set_corners, _multi_surface, _on_surfaces, _partner, _project_multi,
                      _project_surface, _resolve, _settle_multi, _solve_lambda, multi_work_size)
@@ -93,7 +93,7 @@ def _impact_law(ev, p, j, k, mode, nm, t, x, n, W, gx, hdx, f, buf):
     ev(W_HDX, k * nm + mode, t, x, p, hdx)
     ev(W_HDT, k * nm + mode, t, x, p, buf)
     acc = buf[0] + _dot(hdx, f, n)
-    hw = _impact_direction(ev, p, j, k, mode, nm, t, x, n, W, gx, hdx)
+    hw = _impact_direction_hdx(ev, p, j, t, x, n, W, gx, hdx)
     return acc, -(1.0 + hw)
 
 
@@ -416,22 +416,24 @@ def chatter_saltation(ev, p, j, mode, nm, t, x, etab, stab, slide_c, S):
 
 @_hot_inline
 def _act_impact(ev, p, j, dkind, didx, mode, nm, t, y, xs, n, etab, t_end, rtol, atol, chat_rel,
-                chat_abs, chatter_on, chain_event, chain_vmax, buf, fbuf, ytmp, wk):
+                chat_abs, chatter_on, chain_event, chain_vmax, vin, buf, fbuf, ytmp, wk):
     """Impact on event ``j``: the reset ``g``, or the complete-chattering map where the
     sequence of impacts accumulates (:func:`_act_chatter`), or, where the accumulation point
     lies past ``t_end`` and the bounces are below the velocity floor, the end of the run on
     the chord of the chattering gap. ``chain_event``/``chain_vmax``: the impacts of the
     current sequence and its largest normal speed (the relative chattering threshold).
-    Returns ``(dkind, didx, mode, log_kind, t_after, chatter_tail, chain_event, chain_vmax,
-    chattered)``."""
+    ``vin``: the normal velocity ``hdot`` of the mode at ``(t, y)`` where the caller has it,
+    else NaN. Returns ``(dkind, didx, mode, log_kind, t_after, chatter_tail, chain_event,
+    chain_vmax, chattered)``."""
     w1, w2, gx, hdx, jac, xt, ft = wk
     # a negative ratio is the default one, applied only where the chattering map is accurate
     chat_gated = chat_rel < 0.0
     chat_rel = abs(chat_rel)
     k = etab[j].surface
     # normal velocity and acceleration at impact, impact direction W, restitution r
-    ev(W_HD, k * nm + mode, t, y, p, buf)
-    vin = buf[0]
+    if vin != vin:
+        ev(W_HD, k * nm + mode, t, y, p, buf)
+        vin = buf[0]
     acc, r = _impact_law(ev, p, j, k, mode, nm, t, y, n, w1, gx, hdx, fbuf, buf)
     if chain_event != j:
         chain_event = j

@@ -59,8 +59,14 @@ def _impact_direction(ev, p, j, k, mode, nm, t, x, n, W, gx, hdx):
     ``W = (g_x - I) hdot_x^T / |hdot_x|^2`` -- computed from the compiled derivatives.
     Returns ``hdot_x . W`` (so the restitution coefficient is ``r = -(1 + hdot_x W)``).
     """
-    ev(W_GX, j, t, x, p, gx)
     ev(W_HDX, k * nm + mode, t, x, p, hdx)
+    return _impact_direction_hdx(ev, p, j, t, x, n, W, gx, hdx)
+
+
+@_hot
+def _impact_direction_hdx(ev, p, j, t, x, n, W, gx, hdx):
+    """:func:`_impact_direction` where ``hdx`` already holds ``hdot_x`` at ``(t, x)``."""
+    ev(W_GX, j, t, x, p, gx)
     nrm2 = _dot(hdx, hdx, n)
     for i in range(n):
         s = -hdx[i]
@@ -274,12 +280,17 @@ def _surface_offset(ev, p, k, t, y, n, xmax, buf, hdx):
     """h of surface ``k`` at (t, y) and the round-off band around zero it is judged with
     (64 ulps of the state and gradient scales)."""
     ev(W_H, k, t, y, p, buf)
-    hv = buf[0]
+    return buf[0], _surface_band(ev, p, k, t, y, n, xmax, hdx)
+
+
+@_hot
+def _surface_band(ev, p, k, t, y, n, xmax, hdx):
+    """The round-off band of :func:`_surface_offset` alone (``h`` itself known)."""
     ev(W_HX, k, t, y, p, hdx)
     gmax = 1.0
     for i in range(n):
         gmax = max(gmax, abs(hdx[i]))
-    return hv, 64.0 * _EPS * xmax * gmax
+    return 64.0 * _EPS * xmax * gmax
 
 
 @_hot_inline
@@ -295,7 +306,7 @@ def _start_on_surface(ev, p, k, dkind, mode, nm, t, y, n, v0, r0, buf, hdx):
     xmax = 1.0
     for i in range(n):
         xmax = max(xmax, abs(y[i]))
-    hv, tolb = _surface_offset(ev, p, k, t, y, n, xmax, buf, hdx)
+    tolb = _surface_band(ev, p, k, t, y, n, xmax, hdx)
     if abs(v0) <= tolb:
         v0 = 0.0
         if dkind == REGULAR and abs(r0) <= _rate_band(ev, p, k, mode, nm, t, y, n, hdx):

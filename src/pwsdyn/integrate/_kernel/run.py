@@ -1068,12 +1068,10 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
             # evaluation, and the step's Taylor terms are rescaled to the shorter interval.
             w = best
             h_ev = best_th * h
-            if k_stale:
-                ev(W_F, mode, t, y, p, K[0])
-                stats[2] += 1
-                k_stale = False
-            for i in range(nY):
-                Kland[0, i] = K[0, i]
+            if not exact_now:
+                # (an exact landing step is the dense output: it reads no stage)
+                for i in range(nY):
+                    Kland[0, i] = K[0, i]
             for polish in range(8):
                 stats[2] += _step_stages(ev, p, exact_now, dkind, didx, mode, nm, t, y, h_ev, h,
                         Kland, A, C, s_fsal, Q, ytmp, etab, stab, slide_c, wk)
@@ -1225,6 +1223,7 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                      chattered) = _act_impact(ev, p, j, dkind, didx, mode, nm, t, y, xs, n, etab,
                                               t_end, rtol, atol, chat_rel, chat_abs, chatter_on,
                                               chain_event, chain_vmax,
+                                              vn if dkind == REGULAR else np.nan,
                                               buf, fbuf, ytmp, wk)
                     stats[4] += chattered
                 else:
