@@ -9,6 +9,7 @@ hand. Long checks are marked ``slow``.
 from __future__ import annotations
 
 import json
+import math
 import signal
 import subprocess
 import sys
@@ -688,21 +689,23 @@ def test_state_times_from_event_columns():
 
 
 def _period_by_loop(points, max_period, tol):
-    """The period rule of ``period_estimate`` written as its definition: shifts k = 1, 2, ...
-    tried one by one on the second half of the finite prefix of the record."""
-    pts = np.asarray(points, dtype=float)
-    good = np.all(np.isfinite(pts), axis=1)
-    if not good.all():
-        pts = pts[: np.argmin(good)] if not good[0] or good.any() else pts[:0]
-    m = len(pts)
-    if m < 2:
-        return 0
-    scale = tol * (1.0 + float(np.max(np.abs(pts))))
-    start = m // 2
-    for k in range(1, max_period + 1):
-        if m - start - k < k:
+    """The period rule of ``period_estimate`` written as its definition, point by point: the
+    record up to its first non-finite row; the smallest shift k with at least k pairs
+    (j, j + k) in the second half, all within the tolerance in every component."""
+    rows = []
+    for row in np.asarray(points, dtype=float):
+        if not all(math.isfinite(v) for v in row):
             break
-        if np.all(np.abs(pts[start + k:] - pts[start:m - k]) <= scale):
+        rows.append(row)
+    if len(rows) < 2:
+        return 0
+    scale = tol * (1.0 + max(abs(v) for row in rows for v in row))
+    half = len(rows) // 2
+    for k in range(1, max_period + 1):
+        pairs = [(rows[j], rows[j + k]) for j in range(half, len(rows) - k)]
+        if len(pairs) < k:
+            break
+        if all(abs(a - b) <= scale for ra, rb in pairs for a, b in zip(ra, rb)):
             return k
     return 0
 
