@@ -208,7 +208,7 @@ def state_times(t, after, chatter, t_lo: float, t_hi: float, initial: int = 0
     last = np.where(np.asarray(chatter, dtype=bool), -1, np.arange(len(t)))
     if len(t):
         last = np.maximum.accumulate(last)
-    st_after = np.where(last >= 0, np.asarray(after)[np.maximum(last, 0)], initial)
+    st_after = np.where(last >= 0, after[np.maximum(last, 0)], initial)
     during = np.concatenate(([initial], st_after))
     d = np.diff(np.concatenate(([t_lo], np.clip(t, t_lo, t_hi), [t_hi])))
     return float(d[during == 1].sum()), float(d[during == 2].sum())

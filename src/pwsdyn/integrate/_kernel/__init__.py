@@ -127,8 +127,8 @@ product with a propagator made once per mode and run (:func:`_exact_propagator`)
 step sums the Taylor series of the vector (:func:`_exact_step`), whose terms are the step's
 dense output -- the exact flow, so the event search runs on it and the landing on an event
 is its evaluation, the terms then rescaled to the shortened interval. Their error estimate
-is zero, and they need no field at their end (the watch functions give their own rates): it
-is made only where a later step reads it. Their event search skips the sample at an extremum
+is zero, and they make no field at their end (the watch functions give their own rates;
+nothing on the exact path reads it). Their event search skips the sample at an extremum
 of the Hermite fit that lies beyond both ends of the step on the far side of the surface (the
 bottom of a flight below a wall), where within the step bound no crossing can hide.
 Sticking, sliding, non-affine modes and the variational equations stay on the Runge-Kutta

@@ -202,9 +202,11 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
         order = float(opts.order)
 
     # work arrays
+    # K[0]: the field at (t, y), made at every restart and carried by Runge-Kutta steps
+    # (FSAL). Exact steps leave it behind: nothing on their path reads it (their surface
+    # rates are the model's hdot, their landing is the dense output), and a mode turns
+    # exact or stops being so only at a restart, which makes it again.
     K = np.zeros((s_ext, nY))
-    # K[0] is the field at (t, y) unless k_stale: after an exact step it is made where read
-    k_stale = False
     kst = np.zeros(nY)
     ytmp = np.zeros(nY)
     ynew = np.zeros(nY)
@@ -575,7 +577,6 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                      w1, w2, gx, hdx, jac, xt, ft)
                 for i in range(nY):
                     K[0, i] = kst[i]
-                k_stale = False
                 stats[2] += 1
                 # at the start and after every event (a reset, a chattering jump in time, a new
                 # mode): time, state and field must be finite. A NaN field here would make the
@@ -637,10 +638,6 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
             else:
                 # the Runge-Kutta step, written out here: as a call it would pass ~20 arrays
                 # per step, measured 10-15% of an RK45 step on a two-state model
-                if k_stale:
-                    ev(W_F, mode, t, y, p, K[0])
-                    stats[2] += 1
-                    k_stale = False
                 q_made = False
                 nf = s_fsal
                 fast = dkind == REGULAR and nvar == 0
@@ -713,10 +710,6 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                     else:
                         v0 = _watch_value(ev, p, wtype[w], widx[w], wmode[w], nm, t, y, n, buf,
                                           fbuf, hdx)
-                        if k_stale:
-                            ev(W_F, mode, t, y, p, K[0])
-                            stats[2] += 1
-                            k_stale = False
                         r0 = _surface_rate(ev, p, dkind, widx[w], mode, nm, t, y, K[0], n, buf,
                                            hdx)
                         if ((wact[w] == ACT_EVENT or wact[w] == ACT_SWITCH)
@@ -1046,11 +1039,8 @@ def run_kernel(ev, t0, t_end, x0, p, etab, eactive, stab, options, A, C, E, P, s
                 t = t_new
                 for i in range(nY):
                     y[i] = ynew[i]
-                if exact_now:
-                    # the exact step did not evaluate the field at its end (no step needs it:
-                    # it is made here where K[0] is read)
-                    k_stale = True
-                else:
+                if not exact_now:
+                    # (an exact step makes no field at its end: see K above)
                     for i in range(nY):
                         K[0, i] = K[s_fsal, i]
                 for ww in range(nw):

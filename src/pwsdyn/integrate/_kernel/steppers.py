@@ -438,9 +438,8 @@ def _dense_eval(y0, Q, theta, nY, deg, out):
 def _exact_stepper(mode, t, y, h, ynew, Q, aff, aff_P, aff_ph, aff_full, nz, T1, T2):
     """One exact step of affine mode ``mode`` (see "Exact propagation" in the module
     docstring), with the outputs of the Runge-Kutta step of run_kernel except its FSAL stage:
-    the new state into ``ynew``. The field at the step's end is not evaluated here: an exact
-    step needs none (its rates come from the watch functions), and run_kernel evaluates it
-    where a later step or event reads ``K[0]``. The error is zero (the step is limited only by
+    the new state into ``ynew``. The field at the step's end is not evaluated: nothing on the
+    exact path reads it (see ``K`` in run_kernel). The error is zero (the step is limited only by
     the convergence of the Taylor sum, the largest step and the events). A full step
     (``h == aff_full``) is one product with the propagator made once per mode and length; a
     shorter one sums the Taylor series of the vector, whose terms are the dense output in
